@@ -1,0 +1,257 @@
+"""Time-varying on-orbit scenarios: functions of time only.
+
+A scenario maps time t (s) to a :class:`Configuration`: the paddle rotation
+angle and the modules docked so far. The truth model turns a configuration
+into ``M(t)``, ``(A, B, C)``; because configurations are hashable, the model
+caches its matrices on them, which makes piecewise-constant scenarios
+(docking) cost one matrix exponential per segment.
+
+Scenarios
+---------
+``constant``
+    LTI plant (for checks against closed forms).
+``docking``
+    Paper Case 1: two 600 kg, 2.35 x 2.45 x 3 m cuboids dock on the yaw axis
+    at t = 100 s and t = 180 s (hub mass 2400 -> 3000 -> 3600 kg), the
+    system mass centre unchanged.
+``solar_rotation``
+    Paper Case 2: both paddles turn about pitch at 0.2 deg/s.
+``docking_solar_rotation``
+    Both at once.
+
+Every scenario also has :meth:`Scenario.randomized`, which draws a concrete
+variant (docking times and masses, rotation rate) from a seeded
+``np.random.Generator`` for domain randomization.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from spacecraft_env.parameters import DockingModule
+
+__all__ = [
+    "SCENARIOS",
+    "CombinedScenario",
+    "Configuration",
+    "ConstantScenario",
+    "DockingScenario",
+    "Scenario",
+    "SolarRotationScenario",
+    "make_scenario",
+]
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """Instantaneous configuration of the spacecraft.
+
+    Attributes
+    ----------
+    paddle_angle : float
+        Rotation of the solar paddles about pitch, rad (``theta`` in
+        ``T_s(t)``).
+    modules : tuple of DockingModule
+        Modules docked so far.
+    """
+
+    paddle_angle: float = 0.0
+    modules: tuple = ()
+
+
+class Scenario(ABC):
+    """A time-varying scenario: configuration as a function of time only."""
+
+    #: Registry name.
+    name: str = "scenario"
+    #: True if the configuration is piecewise constant in time.
+    piecewise_constant: bool = True
+
+    @abstractmethod
+    def configuration(self, t: float) -> Configuration:
+        """Configuration at time ``t`` (s)."""
+
+    def event_times(self) -> tuple[float, ...]:
+        """Instants (s) at which the dynamics jump (docking events)."""
+        return ()
+
+    def randomized(self, rng: np.random.Generator) -> Scenario:
+        """A concrete random variant drawn from ``rng`` (default: self)."""
+        return self
+
+
+@dataclass(frozen=True)
+class ConstantScenario(Scenario):
+    """No change: the LTI plant at a fixed paddle angle.
+
+    Parameters
+    ----------
+    paddle_angle_deg : float
+        Fixed paddle rotation, deg.
+    """
+
+    paddle_angle_deg: float = 0.0
+    name = "constant"
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.paddle_angle_deg):
+            raise ValueError("paddle_angle_deg must be finite")
+
+    def configuration(self, t: float) -> Configuration:
+        return Configuration(paddle_angle=float(np.deg2rad(self.paddle_angle_deg)))
+
+
+def _default_modules() -> tuple[DockingModule, ...]:
+    return (
+        DockingModule(time=100.0, position=(0.0, 0.0, 3.0)),
+        DockingModule(time=180.0, position=(0.0, 0.0, -3.0)),
+    )
+
+
+@dataclass(frozen=True)
+class DockingScenario(Scenario):
+    """Modules dock with the hub at given instants (paper Case 1).
+
+    Parameters
+    ----------
+    modules : tuple of DockingModule
+        Default: the paper's two 600 kg cuboids at +-3 m on the yaw axis,
+        docking at t = 100 s and 180 s.
+    mass_range : (float, float)
+        Module mass range (kg) for :meth:`randomized`.
+    first_window, second_window : (float, float)
+        Docking-time windows (s) for :meth:`randomized`; the second module
+        docks at least 20 s after the first.
+    """
+
+    modules: tuple = field(default_factory=_default_modules)
+    mass_range: tuple = (400.0, 800.0)
+    first_window: tuple = (60.0, 140.0)
+    second_window: tuple = (140.0, 220.0)
+    name = "docking"
+
+    def __post_init__(self) -> None:
+        mods = tuple(self.modules)
+        if not all(isinstance(m, DockingModule) for m in mods):
+            raise TypeError("modules must be DockingModule instances")
+        object.__setattr__(self, "modules", tuple(sorted(mods, key=lambda m: m.time)))
+        for name in ("mass_range", "first_window", "second_window"):
+            lo, hi = getattr(self, name)
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                raise ValueError(f"{name} must be (low, high) with 0 <= low <= high")
+
+    def configuration(self, t: float) -> Configuration:
+        return Configuration(modules=tuple(m for m in self.modules if t >= m.time))
+
+    def event_times(self) -> tuple[float, ...]:
+        return tuple(m.time for m in self.modules)
+
+    def randomized(self, rng: np.random.Generator) -> DockingScenario:
+        """Draw docking times and module masses (two modules, +-z)."""
+        t1 = rng.uniform(*self.first_window)
+        t2 = max(rng.uniform(*self.second_window), t1 + 20.0)
+        m1, m2 = rng.uniform(*self.mass_range, size=2)
+        base = self.modules if len(self.modules) >= 2 else _default_modules()
+        return DockingScenario(
+            modules=(
+                DockingModule(mass=m1, dimensions=base[0].dimensions,
+                              position=base[0].position, time=t1),
+                DockingModule(mass=m2, dimensions=base[1].dimensions,
+                              position=base[1].position, time=t2),
+            ),
+            mass_range=self.mass_range,
+            first_window=self.first_window,
+            second_window=self.second_window,
+        )
+
+
+@dataclass(frozen=True)
+class SolarRotationScenario(Scenario):
+    """Both solar paddles rotate about pitch at a constant rate (paper Case 2).
+
+    Parameters
+    ----------
+    rate_deg_s : float
+        Rotation rate, deg/s (paper: 0.2).
+    initial_angle_deg : float
+        Paddle angle at t = 0, deg.
+    rate_range : (float, float)
+        Rate range (deg/s) for :meth:`randomized`.
+    """
+
+    rate_deg_s: float = 0.2
+    initial_angle_deg: float = 0.0
+    rate_range: tuple = (0.1, 0.4)
+    name = "solar_rotation"
+    piecewise_constant = False
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.rate_deg_s) and np.isfinite(self.initial_angle_deg)):
+            raise ValueError("rate_deg_s and initial_angle_deg must be finite")
+        lo, hi = self.rate_range
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            raise ValueError("rate_range must be (low, high) with low <= high")
+
+    def configuration(self, t: float) -> Configuration:
+        angle = np.deg2rad(self.initial_angle_deg + self.rate_deg_s * t)
+        return Configuration(paddle_angle=float(angle))
+
+    def randomized(self, rng: np.random.Generator) -> SolarRotationScenario:
+        """Draw the rotation rate uniformly from ``rate_range``."""
+        return SolarRotationScenario(rate_deg_s=float(rng.uniform(*self.rate_range)),
+                                     initial_angle_deg=self.initial_angle_deg,
+                                     rate_range=self.rate_range)
+
+
+@dataclass(frozen=True)
+class CombinedScenario(Scenario):
+    """Docking and paddle rotation at the same time."""
+
+    docking: DockingScenario = field(default_factory=DockingScenario)
+    rotation: SolarRotationScenario = field(default_factory=SolarRotationScenario)
+    name = "docking_solar_rotation"
+    piecewise_constant = False
+
+    def configuration(self, t: float) -> Configuration:
+        return Configuration(paddle_angle=self.rotation.configuration(t).paddle_angle,
+                             modules=self.docking.configuration(t).modules)
+
+    def event_times(self) -> tuple[float, ...]:
+        return self.docking.event_times()
+
+    def randomized(self, rng: np.random.Generator) -> CombinedScenario:
+        return CombinedScenario(self.docking.randomized(rng), self.rotation.randomized(rng))
+
+
+#: Scenario names accepted by :func:`make_scenario` and the environments.
+SCENARIOS: dict[str, type[Scenario]] = {
+    "constant": ConstantScenario,
+    "docking": DockingScenario,
+    "solar_rotation": SolarRotationScenario,
+    "docking_solar_rotation": CombinedScenario,
+}
+
+
+def make_scenario(scenario: str | Scenario) -> Scenario:
+    """Return a scenario instance from its name (or pass one through).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name; the message lists the valid ones.
+    TypeError
+        For anything that is neither a name nor a :class:`Scenario`.
+    """
+    if isinstance(scenario, Scenario):
+        return scenario
+    if not isinstance(scenario, str):
+        raise TypeError(f"scenario must be a name or a Scenario, got {type(scenario).__name__}")
+    try:
+        return SCENARIOS[scenario]()
+    except KeyError:
+        raise ValueError(
+            f"unknown scenario {scenario!r}; expected one of {sorted(SCENARIOS)}"
+        ) from None

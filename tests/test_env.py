@@ -1,0 +1,242 @@
+"""Gymnasium environment: API conformance, determinism, pickling, bad input."""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import spacecraft_env
+from spacecraft_env import ENV_IDS, FlexibleSpacecraftEnv
+
+IDS = sorted(ENV_IDS)
+
+
+def _rollout(env, seed, n=100):
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = [obs]
+    rewards, states = [], []
+    for _ in range(n):
+        obs, reward, terminated, truncated, info = env.step(
+            rng.uniform(-1, 1, 3).astype(np.float32))
+        out.append(obs)
+        rewards.append(reward)
+        states.append(info["state"])
+        if terminated or truncated:
+            break
+    return np.array(out), np.array(rewards), np.array(states)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_gymnasium_check_env_without_warnings(env_id):
+    env = gym.make(env_id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_sb3_check_env_without_warnings(env_id):
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    env = gym.make(env_id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(env, warn=True)
+    env.close()
+
+
+def test_render_rgb_array_passes_check_env():
+    env = gym.make("FlexibleSpacecraftDocking-v0", render_mode="rgb_array").unwrapped
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.shape == (400, 720, 3)
+    assert frame.std() > 5  # something is drawn
+
+
+def test_make_without_prior_import_in_fresh_interpreter():
+    code = ("import gymnasium as gym\n"
+            "env = gym.make('spacecraft_env:FlexibleSpacecraftDocking-v0')\n"
+            "obs, info = env.reset(seed=0)\n"
+            "print(env.spec.max_episode_steps, obs.shape, info['time'])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.split() == ["2500", "(10,)", "0.0"]
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_make_vec(mode):
+    envs = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v0", num_envs=2,
+                        vectorization_mode=mode)
+    obs, _ = envs.reset(seed=[1, 2])
+    assert obs.shape == (2, 10) and not np.allclose(obs[0], obs[1])
+    for _ in range(5):
+        obs, reward, _term, _trunc, _info = envs.step(np.zeros((2, 3), dtype=np.float32))
+    assert reward.shape == (2,) and np.all(np.isfinite(reward))
+    envs.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_same_seed_same_rollout(env_id):
+    a = _rollout(gym.make(env_id), seed=7)
+    b = _rollout(gym.make(env_id), seed=7)
+    c = _rollout(gym.make(env_id), seed=8)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_pickled_env_reproduces_reset_and_steps():
+    env = FlexibleSpacecraftEnv("solar_rotation", randomize=True)
+    env.reset(seed=3)
+    for _ in range(10):
+        env.step(np.array([0.3, -0.2, 0.1]))
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(20):
+        a = np.array([0.5, 0.1, -0.4])
+        o1, r1, *_ , i1 = env.step(a)
+        o2, r2, *_ , i2 = clone.step(a)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+        np.testing.assert_array_equal(i1["state"], i2["state"])
+    # and a fresh reset with the same seed agrees too
+    np.testing.assert_array_equal(env.reset(seed=11)[0], clone.reset(seed=11)[0])
+
+
+def test_info_and_time_and_torque_scaling():
+    env = FlexibleSpacecraftEnv("docking", max_torque=5.0)
+    _, info = env.reset(seed=0)
+    assert info["time"] == 0.0 and info["state"].dtype == np.float64
+    _, _, _, _, info = env.step(np.array([2.0, -0.5, 0.0]))  # clipped to [1, -0.5, 0]
+    np.testing.assert_allclose(info["torque"], [5.0, -2.5, 0.0])
+    assert info["time"] == pytest.approx(0.1)
+    assert info["state"].shape == (env.model.n,)
+
+
+def test_noise_follows_snr_and_none_is_noiseless():
+    quiet = FlexibleSpacecraftEnv("constant", snr_db=None, outputs=("attitude",))
+    obs, info = quiet.reset(seed=0)
+    np.testing.assert_allclose(obs, info["state"][:3].astype(np.float32))
+    env = FlexibleSpacecraftEnv("constant", snr_db=40.0, outputs=("attitude",))
+    samples = np.array([env.reset(seed=s)[0] - env.state[:3] for s in range(400)])
+    expected = np.deg2rad(1.0) * 10 ** (-40 / 20)
+    assert samples.std() == pytest.approx(expected, rel=0.1)
+
+
+def test_reset_options_and_slew_observation():
+    env = FlexibleSpacecraftEnv("constant", outputs=("attitude_error", "reference"),
+                                snr_db=None)
+    obs, _ = env.reset(seed=0, options={"initial_attitude": [0.01, 0.0, -0.02],
+                                        "reference_attitude": [0.05, 0.0, 0.0]})
+    np.testing.assert_allclose(obs, np.float32([-0.04, 0, -0.02, 0.05, 0, 0]), atol=1e-7)
+    slew = FlexibleSpacecraftEnv("constant", task="slew")
+    _, info = slew.reset(seed=1)
+    assert np.any(info["reference"] != 0) and np.all(info["state"][:3] == 0)
+
+
+def test_reward_is_negative_quadratic_cost():
+    env = FlexibleSpacecraftEnv("constant", snr_db=None)
+    env.reset(seed=0, options={"initial_attitude": [np.deg2rad(2.0), 0.0, 0.0]})
+    _, reward, *_ = env.step(np.zeros(3))
+    assert reward == pytest.approx(-4.0, rel=1e-9)  # (2 deg / 1 deg)^2, all else zero
+    env.reset(seed=0, options={"initial_attitude": [0.0, 0.0, 0.0]})
+    _, reward, *_ = env.step(np.array([1.0, 0.0, 0.0]))
+    assert reward == pytest.approx(-0.01, rel=1e-9)  # torque weight * |a|^2
+
+
+def test_terminates_when_attitude_leaves_small_angle_range():
+    env = FlexibleSpacecraftEnv("constant", max_attitude_deg=5.0, initial_attitude_deg=1.0)
+    env.reset(seed=0, options={"initial_attitude": [np.deg2rad(4.9), 0, 0],
+                               "initial_rate": [np.deg2rad(1.0), 0, 0]})
+    terminated = False
+    for _ in range(10):
+        *_, terminated, truncated, _ = env.step(np.zeros(3))
+        assert not truncated
+        if terminated:
+            break
+    assert terminated
+
+
+def test_time_limit_truncates():
+    env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=5)
+    env.reset(seed=0)
+    for _ in range(5):
+        *_, terminated, truncated, _ = env.step(np.zeros(3, dtype=np.float32))
+    assert truncated and not terminated
+
+
+def test_randomized_scenario_drawn_from_env_seed():
+    env = FlexibleSpacecraftEnv("docking", randomize=True)
+    env.reset(seed=4)
+    first = env.scenario
+    env.reset(seed=4)
+    assert env.scenario == first
+    env.reset(seed=5)
+    assert env.scenario != first
+
+
+@pytest.mark.parametrize(
+    ("action", "error"),
+    [
+        (np.zeros(2), ValueError),
+        (np.zeros((1, 3)), ValueError),
+        (np.array([0.0, np.nan, 0.0]), ValueError),
+        (np.array([np.inf, 0.0, 0.0]), ValueError),
+        (np.array(["a", "b", "c"]), TypeError),
+        (np.array([True, False, True]), TypeError),
+        (None, TypeError),
+    ],
+)
+def test_bad_actions_raise_and_change_nothing(action, error):
+    env = FlexibleSpacecraftEnv("docking")
+    env.reset(seed=0)
+    before = env.state, env.time
+    with pytest.raises(error):
+        env.step(action)
+    np.testing.assert_array_equal(env.state, before[0])
+    assert env.time == before[1]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error"),
+    [
+        ({"scenario": "orbit"}, ValueError),
+        ({"outputs": ("attitude", "gps")}, ValueError),
+        ({"outputs": ("rate", "rate")}, ValueError),
+        ({"snr_db": float("nan")}, ValueError),
+        ({"max_torque": 0.0}, ValueError),
+        ({"n_modes": 0}, ValueError),
+        ({"task": "dance"}, ValueError),
+        ({"render_mode": "ascii"}, ValueError),
+        ({"disturbance_torque": [1.0, 2.0]}, ValueError),
+        ({"reward_weights": {"attitude": 1.0}}, TypeError),
+    ],
+)
+def test_bad_constructor_arguments(kwargs, error):
+    with pytest.raises(error):
+        FlexibleSpacecraftEnv(**kwargs)
+
+
+def test_bad_reset_options():
+    env = FlexibleSpacecraftEnv("constant")
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(seed=0, options={"attitude": [0, 0, 0]})
+    with pytest.raises(ValueError):
+        env.reset(seed=0, options={"initial_attitude": [0.0, 0.0]})
+    with pytest.raises(ValueError):
+        env.reset(seed=0, options={"reference_attitude": [1.0, 0.0, 0.0]})  # > 20 deg
+
+
+def test_public_api_exports():
+    for name in spacecraft_env.__all__:
+        assert hasattr(spacecraft_env, name)
