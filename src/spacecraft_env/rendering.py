@@ -34,7 +34,7 @@ class SpacecraftRenderer:
         Exaggeration of appendage deflections in the drawing.
     """
 
-    def __init__(self, model: FlexibleSpacecraftModel, deflection_gain: float = 100.0) -> None:
+    def __init__(self, model: FlexibleSpacecraftModel, deflection_gain: float = 300.0) -> None:
         self.gain = float(deflection_gain)
         self._xi = np.linspace(0.0, 1.0, 16)
         self._shapes = [cantilever_mode_shape(self._xi, a.n_modes) / np.sqrt(a.mass)

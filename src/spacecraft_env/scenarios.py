@@ -26,6 +26,7 @@ variant (docking times and masses, rotation rate) from a seeded
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -196,8 +197,8 @@ class SolarRotationScenario(Scenario):
             raise ValueError("rate_range must be (low, high) with low <= high")
 
     def configuration(self, t: float) -> Configuration:
-        angle = np.deg2rad(self.initial_angle_deg + self.rate_deg_s * t)
-        return Configuration(paddle_angle=float(angle))
+        return Configuration(paddle_angle=math.radians(self.initial_angle_deg
+                                                       + self.rate_deg_s * t))
 
     def randomized(self, rng: np.random.Generator) -> SolarRotationScenario:
         """Draw the rotation rate uniformly from ``rate_range``."""
