@@ -316,6 +316,7 @@ class SpacecraftParameters:
 # ---------------------------------------------------------------------------
 _Z0 = 0.4827  # height of every mass centre above the system mass centre (Appendix A), m
 _HUB_HALF_WIDTH_Y = 1.225  # hub half-width along pitch (2.45 m module face), m
+_SIN_CANT, _COS_CANT = 0.5, float(np.sqrt(3.0) / 2.0)  # antenna cant of 30 deg about roll
 
 
 def _paddle_normal() -> tuple[float, float, float]:
@@ -347,10 +348,15 @@ def ets8_parameters(n_modes: int = 2, *, coupling: bool = True, damping: float =
       the paddle about pitch.
     * Antenna reflectors a1/a2: cantilevers along +-x from the hub's y-z
       mid-plane (the reflector tower root), length 2.35 m, mass centre at
-      |x| = 1.175 m, height 0.4827 m; out-of-plane bending along yaw (z).
+      |x| = 1.175 m, height 0.4827 m. The two reflectors serve different
+      areas and are canted by +-30 deg about roll, so their out-of-plane
+      bending directions are (0, +-sin 30, cos 30).
 
-    With this geometry the paddles couple with roll and yaw and the antennas
-    with pitch, so all three axes see flexible dynamics.
+    With this geometry the paddles couple with roll and yaw (their symmetric
+    mode weakly with pitch) and the antennas with pitch and yaw. Without the
+    cant the antennas' symmetric modes would be exactly uncontrollable from
+    the hub torque (mirror symmetry), and an n = 2 (3 + 4 k) model would
+    over-parameterize the input-output behaviour.
 
     Parameters
     ----------
@@ -388,12 +394,13 @@ def ets8_parameters(n_modes: int = 2, *, coupling: bool = True, damping: float =
         ),
         AppendageParameters(
             "a1", 165.0, antenna_inertia, (1.175, 0.0, _Z0), (0.0, 0.0, _Z0),
-            (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), antenna_length, ANTENNA_FREQUENCIES_HZ[:k],
-            **common,
+            (1.0, 0.0, 0.0), (0.0, _SIN_CANT, _COS_CANT), antenna_length,
+            ANTENNA_FREQUENCIES_HZ[:k], **common,
         ),
         AppendageParameters(
             "a2", 165.0, antenna_inertia, (-1.175, 0.0, _Z0), (0.0, 0.0, _Z0),
-            (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0), antenna_length, ANTENNA_FREQUENCIES_HZ[:k],
+            (-1.0, 0.0, 0.0), (0.0, -_SIN_CANT, _COS_CANT), antenna_length,
+            ANTENNA_FREQUENCIES_HZ[:k],
             **common,
         ),
     )

@@ -1,0 +1,318 @@
+"""The paper's identification experiment (Sec. 4), run for every method.
+
+``spacecraft identify --scenario docking --seeds 10 --out DIR`` calls
+:func:`run_identification`: for each noise seed it simulates the ETS-VIII
+truth model under identification torques (random-phase multisines, our
+stand-in for the paper's Fig. 2), adds white measurement noise at the given
+SNR per channel (paper: 40 dB), runs every identifier on the record, and
+scores the identified time-varying sequence:
+
+* test-response normalized error (%) per attitude and rate channel, the
+  paper's Tables 3/4 metric (DESIGN.md 2.5): the paper's test torques from
+  zero state through the true plant and through ``{A_k, B_k, C_k}``;
+* one-step-ahead prediction VAF (%) on a held-out noisy record (new input
+  and noise realization, same scenario), after convergence (t >= 50 s);
+* wall time of the identification run.
+
+It writes ``metrics.json``, ``table.md`` (our numbers beside the paper's),
+``responses.png`` (true vs identified test responses, seed 0) and
+``modal.png`` (identified vs true natural frequencies over time, seed 0).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+from tqdm import tqdm
+
+from identifiers.base import OnlineIdentifier
+from identifiers.classical import ClassicalRPBSID
+from identifiers.evaluation import (
+    add_measurement_noise,
+    identification_inputs,
+    normalized_error,
+    paper_test_inputs,
+    vaf,
+)
+from identifiers.improved import ImprovedRPBSID
+from identifiers.model import ModelSequence
+from identifiers.windowed import WindowedPBSID
+
+__all__ = ["METHODS", "PAPER_TABLES", "format_table", "make_identifier", "run_identification"]
+
+#: Method name -> factory ``(n, p, forgetting) -> identifier``.
+METHODS: dict[str, Callable[[int, int, float], OnlineIdentifier]] = {
+    "improved": lambda n, p, lam: ImprovedRPBSID(n, p, lam),
+    "improved-apsa": lambda n, p, lam: ImprovedRPBSID(n, p, lam, variant="apsa"),
+    "classical": lambda n, p, lam: ClassicalRPBSID(n, p, lam),
+    "windowed-svd": lambda n, p, lam: WindowedPBSID(n, p, window=500),
+}
+
+#: The paper's average relative errors (%), Tables 3 (docking, attitude
+#: only) and 4 (solar rotation). Keys: paper method names.
+PAPER_TABLES = {
+    "docking": {
+        "classical RPBSID": {"psi": [3.0835, 2.3342, 2.7766]},
+        "SVD-based": {"psi": [2.6808, 2.4893, 3.6031]},
+        "improved RPBSID": {"psi": [3.4380, 3.2092, 2.9923]},
+    },
+    "solar_rotation": {
+        "classical RPBSID": {"psi": [3.4729, 1.6783, 2.9235],
+                             "omega": [5.8796, 6.6838, 7.4765]},
+        "SVD-based": {"psi": [1.9646, 1.2601, 2.6480], "omega": [5.0194, 6.8414, 8.6877]},
+        "improved RPBSID": {"psi": [2.9664, 1.6217, 3.5811],
+                            "omega": [5.7382, 8.9119, 7.7325]},
+    },
+}
+_PAPER_NAME = {"improved": "improved RPBSID", "classical": "classical RPBSID",
+               "windowed-svd": "SVD-based"}
+
+
+def make_identifier(name: str, n: int, p: int, forgetting: float) -> OnlineIdentifier:
+    """Build a method of :data:`METHODS` by name."""
+    try:
+        return METHODS[name](n, p, forgetting)
+    except KeyError:
+        raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}") from None
+
+
+def _finite(values: np.ndarray) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in np.asarray(values, dtype=float)]
+
+
+def _summary(values: np.ndarray) -> dict:
+    """Mean, std, median over seeds (axis 0) with divergent runs counted."""
+    arr = np.asarray(values, dtype=float)
+    ok = np.all(np.isfinite(arr), axis=tuple(range(1, arr.ndim)))
+    good = arr[ok]
+    nan = np.full(arr.shape[1:], np.nan)
+    return {
+        "mean": _finite(good.mean(axis=0)) if good.size else _finite(nan),
+        "std": _finite(good.std(axis=0)) if good.size else _finite(nan),
+        "median": _finite(np.median(arr, axis=0)),
+        "diverged_runs": int((~ok).sum()),
+    }
+
+
+def _true_frequencies(truth, times: np.ndarray, count: int) -> np.ndarray:
+    out = np.empty((times.size, count))
+    for i, t in enumerate(times):
+        ev = np.linalg.eigvals(truth.continuous(float(t)).A)
+        f = np.sort(np.abs(ev.imag[ev.imag > 1e-9])) / (2 * np.pi)
+        out[i] = f[:count]
+    return out
+
+
+def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Path = "results",
+                       *, methods: Sequence[str] | None = None, snr_db: float | None = 40.0,
+                       n_modes: int = 2, p: int = 15, forgetting: float = 0.98,
+                       n_samples: int = 2500, convergence_s: float = 50.0,
+                       progress: bool = True) -> dict:
+    """Run the identification experiment and write its artefacts.
+
+    Parameters
+    ----------
+    scenario : str
+        Truth-model scenario (``"docking"``, ``"solar_rotation"``, ...).
+    seeds : int
+        Noise/input seeds 0 .. seeds-1.
+    out : path
+        Output directory.
+    methods : sequence of str, optional
+        Subset of :data:`METHODS` (default all).
+    snr_db : float or None
+        Measurement SNR per channel (paper: 40 dB); None for noiseless.
+    n_modes : int
+        Modes per appendage (order n = 2 (3 + 4 n_modes)).
+    p, forgetting : int, float
+        Past window and forgetting factor (paper: 15 and 0.98).
+    n_samples : int
+        Record length (paper: 2500 = 250 s).
+    convergence_s : float
+        Start of the held-out VAF window, s.
+
+    Returns
+    -------
+    dict
+        The content of ``metrics.json``.
+    """
+    from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
+
+    methods = list(methods or METHODS)
+    for name in methods:
+        if name not in METHODS:
+            raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    truth = FlexibleSpacecraftModel(ets8_parameters(n_modes), scenario=scenario)
+    n = truth.n
+    dt = truth.dt
+    u_test = paper_test_inputs(n_samples, dt)
+    _, y_test = truth.simulate(u_test)
+    k_conv = round(convergence_s / dt)
+
+    err = {m: [] for m in methods}
+    vafs = {m: [] for m in methods}
+    times = {m: [] for m in methods}
+    seed0: dict[str, ModelSequence] = {}
+    bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
+    with threadpool_limits(limits=1, user_api="blas"):
+        for seed in range(seeds):
+            rng = np.random.default_rng(seed)
+            u_id = identification_inputs(n_samples, rng, dt)
+            y_id = add_measurement_noise(truth.simulate(u_id)[1], snr_db, rng)
+            u_ho = identification_inputs(n_samples, rng, dt)
+            y_ho = add_measurement_noise(truth.simulate(u_ho)[1], snr_db, rng)
+            for name in methods:
+                ident = make_identifier(name, n, p, forgetting)
+                start = time.perf_counter()
+                seq = ident.fit(u_id, y_id)
+                times[name].append(time.perf_counter() - start)
+                with np.errstate(all="ignore"):
+                    e = normalized_error(seq.simulate(u_test), y_test)
+                    yhat = seq.predict(u_ho, y_ho, start=k_conv)
+                    v = vaf(y_ho[k_conv:], yhat[k_conv:])
+                err[name].append(np.where(np.isfinite(e), e, np.inf))
+                vafs[name].append(np.where(np.isfinite(v), v, -np.inf))
+                if seed == 0:
+                    seed0[name] = seq
+                bar.update()
+    bar.close()
+
+    labels = truth.output_labels
+    results = {}
+    for name in methods:
+        e = np.array(err[name])
+        v = np.array(vafs[name])
+        results[name] = {
+            "test_error_pct": {"attitude": _summary(e[:, :3]), "rate": _summary(e[:, 3:6])},
+            "one_step_vaf_pct": {
+                "attitude": _summary(v[:, :3]), "rate": _summary(v[:, 3:6]),
+                "deflection": _summary(v[:, 6:]),
+            },
+            "run_time_s": {"mean": float(np.mean(times[name])),
+                           "std": float(np.std(times[name]))},
+        }
+    metrics = {
+        "scenario": scenario, "seeds": seeds, "snr_db": snr_db, "order_n": n, "p": p,
+        "forgetting": forgetting, "n_samples": n_samples, "dt": dt,
+        "convergence_s": convergence_s, "output_labels": list(labels),
+        "methods": results, "paper": PAPER_TABLES.get(scenario),
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    (out / "table.md").write_text(format_table(metrics))
+    _plot_responses(out / "responses.png", u_test, y_test, seed0, scenario, dt)
+    _plot_modal(out / "modal.png", truth, seed0, scenario, dt)
+    return metrics
+
+
+def _fmt(mean, std) -> str:
+    if mean is None:
+        return "diverged"
+    if abs(mean) >= 1e4:
+        return f"{mean:.1e}"
+    return f"{mean:.2f} ± {std:.2f}"
+
+
+def format_table(metrics: dict) -> str:
+    """Markdown tables like the paper's Tables 3/4, our figures beside the paper's."""
+    scen = metrics["scenario"]
+    lines = [f"### {scen}: test-response normalized error (%), mean ± std over "
+             f"{metrics['seeds']} seeds (runs that diverged excluded and counted), "
+             f"SNR {metrics['snr_db']} dB, n = {metrics['order_n']}, p = {metrics['p']}, "
+             f"forgetting {metrics['forgetting']}", ""]
+    head = ("| method | psi_x | psi_y | psi_z | omega_x | omega_y | omega_z | diverged "
+            "| paper psi (x, y, z) | paper omega (x, y, z) |")
+    lines += [head, "|" + "---|" * 10]
+    paper = metrics.get("paper") or {}
+    for name, res in metrics["methods"].items():
+        att, rate = res["test_error_pct"]["attitude"], res["test_error_pct"]["rate"]
+        cells = [_fmt(m, s) for m, s in zip(att["mean"], att["std"], strict=True)]
+        cells += [_fmt(m, s) for m, s in zip(rate["mean"], rate["std"], strict=True)]
+        ref = paper.get(_PAPER_NAME.get(name, ""), {})
+        pp = ", ".join(f"{x:.2f}" for x in ref.get("psi", [])) or "-"
+        po = ", ".join(f"{x:.2f}" for x in ref.get("omega", [])) or "-"
+        div = max(att["diverged_runs"], rate["diverged_runs"])
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {div} | {pp} | {po} |")
+    lines += ["", f"### {scen}: one-step-ahead prediction VAF (%) on held-out data, "
+              f"t >= {metrics['convergence_s']:.0f} s (mean over channels, median over seeds)",
+              "", "| method | attitude | rate | deflection | run time (s) |",
+              "|---|---|---|---|---|"]
+    for name, res in metrics["methods"].items():
+        v = res["one_step_vaf_pct"]
+        cells = []
+        for grp in ("attitude", "rate", "deflection"):
+            med = [x for x in v[grp]["median"] if x is not None]
+            cells.append(f"{np.mean(med):.1f}" if med and np.all(np.isfinite(med))
+                         and np.mean(med) > -1e4 else "diverged")
+        t = res["run_time_s"]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {t['mean']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _plot_responses(path: Path, u_test, y_test, seqs: dict, scenario: str, dt: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.arange(y_test.shape[0]) * dt
+    names = ["psi_x (deg)", "psi_y (deg)", "psi_z (deg)",
+             "omega_x (deg/s)", "omega_y (deg/s)", "omega_z (deg/s)"]
+    fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)
+    for ch in range(6):
+        ax = axes[ch % 3, ch // 3]
+        truth = np.rad2deg(y_test[:, ch])
+        ax.plot(t, truth, "k", lw=2.0, label="true")
+        lim = 3 * np.abs(truth).max() + 1e-12
+        for name, seq in seqs.items():
+            with np.errstate(all="ignore"):
+                y = np.rad2deg(seq.simulate(u_test)[:, ch])
+            ax.plot(t, np.clip(y, -lim, lim), lw=1.0, label=name)
+        ax.set_ylim(-lim, lim)
+        ax.set_ylabel(names[ch])
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"{scenario}: test responses, true vs identified (seed 0; "
+                 "identified curves clipped at 3x the true peak)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _plot_modal(path: Path, truth, seqs: dict, scenario: str, dt: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n_samples = len(next(iter(seqs.values())))
+    steps = np.arange(0, n_samples, 10)
+    t = steps * dt
+    true_f = _true_frequencies(truth, t, 4)
+    fig, axes = plt.subplots(1, len(seqs), figsize=(4.5 * len(seqs), 4), sharey=True,
+                             squeeze=False)
+    for ax, (name, seq) in zip(axes[0], seqs.items(), strict=True):
+        for k in steps:
+            if seq.valid[k]:
+                f, z = seq[k].modal()
+                keep = (f < 1.0) & (z > -0.2) & (z < 1.0)
+                ax.plot(np.full(keep.sum(), k * dt), f[keep], ".", color="tab:blue", ms=2)
+        ax.plot(t, true_f, "k-", lw=1.2)
+        ax.set_title(name)
+        ax.set_xlabel("time (s)")
+        ax.set_ylim(0, 1.0)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("natural frequency (Hz)")
+    fig.suptitle(f"{scenario}: identified modal frequencies (dots) vs true (lines), seed 0")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
