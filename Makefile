@@ -29,6 +29,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_env.py
+	$(BIN)/python benchmarks/bench_identifiers.py
 
 clean:
 	rm -rf $(VENV) results build *.egg-info src/*.egg-info

@@ -346,10 +346,19 @@ class RecursivePBSIDBase(OnlineIdentifier):
         alpha_1, alpha_2, alpha_3; initial covariances are ``I / alpha``.
     feedthrough : bool
         Estimate D (default False: strictly proper, D = 0).
+    regularization : float
+        Tikhonov floor of the VARX as a fraction c of its effective memory:
+        ``delta = c / (1 - beta_1)`` in normalized units (see
+        :class:`~identifiers.rls.RecursiveLeastSquares`). A VARX with
+        p (r + m) regressors on an order-n plant has many weakly excited
+        directions in which noise is fitted with huge cancelling
+        coefficients; the floor keeps its Markov parameters sane. 0 turns it
+        off (the paper's algorithm).
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
                  warmup: int | None = None, f: int | None = None, basis: str = "svd",
+                 regularization: float = 0.0,
                  varx_forgetting: float | None = None,
                  output_forgetting: float | None = None,
                  system_forgetting: float | None = None, varx_init: float = 0.9,
@@ -359,6 +368,9 @@ class RecursivePBSIDBase(OnlineIdentifier):
             raise ValueError(f"basis must be 'svd' or 'selection', got {basis!r}")
         self.basis = basis
         self.f = None if f is None else _positive_int("f", f)
+        if not (np.isfinite(regularization) and regularization >= 0):
+            raise ValueError(f"regularization must be >= 0, got {regularization}")
+        self.regularization = float(regularization)
         self.varx_forgetting = _forgetting("varx_forgetting", varx_forgetting or forgetting)
         self.output_forgetting = _forgetting("output_forgetting", output_forgetting or forgetting)
         self.system_forgetting = _forgetting("system_forgetting", system_forgetting or forgetting)
@@ -390,8 +402,10 @@ class RecursivePBSIDBase(OnlineIdentifier):
             self._horizon = self.f
         if self._horizon * m < n:
             raise ValueError(f"f * m = {self._horizon * m} must be >= n = {n}; increase f")
+        floor = (self.regularization / (1.0 - self.varx_forgetting)
+                 if self.varx_forgetting < 1.0 else 0.0)
         self._varx = RecursiveLeastSquares(m, self.p * (r + m), self.varx_forgetting,
-                                           1.0 / self.varx_init)
+                                           1.0 / self.varx_init, regularization=floor)
         self._output_rls = RecursiveLeastSquares(m, n + (r if self.feedthrough else 0),
                                                  self.output_forgetting, 1.0 / self.output_init)
         self._system_rls = RecursiveLeastSquares(n, n + r + m, self.system_forgetting,

@@ -14,10 +14,22 @@ rank-1 update) and no d x d temporaries.
 
 Anti-windup: when the regressor carries no new information the division by
 ``lambda`` would inflate ``P`` without bound (``P / lambda^k``), and later
-gains along those directions would explode. The trace of ``P`` is tracked in
-O(d) and forgetting is suspended while it exceeds ``max_trace`` (default:
+gains along those directions would explode. The trace of ``P`` (an O(d)
+diagonal sum) is checked every step and forgetting is suspended while it
+exceeds ``max_trace`` (default:
 the trace of ``P_0``), so the covariance never grows past the prior's and
 stays bounded under zero excitation.
+
+Regularization: with ``lambda < 1`` the prior ``P_0`` is forgotten like any
+other data, and a regression with many weakly excited directions (a VARX
+with p (r + m) = 195 regressors on a plant of order 22) then fits noise with
+huge cancelling coefficients. ``regularization = delta > 0`` keeps a
+constant information floor, ``P^-1 >= delta I`` in steady state (Tikhonov
+regularized forgetting): each step adds one pseudo-observation
+``0 = Theta (w e_i)`` along a coordinate ``e_i`` cycling through all d, with
+``w^2 = d (1 - lambda) delta``, which over d steps adds ``(1 - lambda) delta I``
+per step to the information and pulls unexcited coefficients to zero.
+It costs one more O(d^2) rank-1 update per step.
 """
 
 from __future__ import annotations
@@ -44,6 +56,8 @@ class RecursiveLeastSquares:
     max_trace : float, optional
         Forgetting is suspended while ``trace(P)`` exceeds this; default
         ``trace(P_0) = d * initial_covariance``.
+    regularization : float
+        Information floor delta (0: none), see the module docstring.
 
     Attributes
     ----------
@@ -54,7 +68,8 @@ class RecursiveLeastSquares:
     """
 
     def __init__(self, n_outputs: int, n_regressors: int, forgetting: float = 1.0,
-                 initial_covariance: float = 1.0, max_trace: float | None = None) -> None:
+                 initial_covariance: float = 1.0, max_trace: float | None = None,
+                 regularization: float = 0.0) -> None:
         if n_outputs < 1 or n_regressors < 1:
             raise ValueError("n_outputs and n_regressors must be >= 1")
         if not 0.0 < forgetting <= 1.0:
@@ -65,6 +80,11 @@ class RecursiveLeastSquares:
         self.initial_covariance = float(initial_covariance)
         self.max_trace = (n_regressors * self.initial_covariance if max_trace is None
                           else float(max_trace))
+        if not np.isfinite(regularization) or regularization < 0:
+            raise ValueError(f"regularization must be >= 0, got {regularization}")
+        self.regularization = float(regularization)
+        self._pseudo_weight = float(np.sqrt(n_regressors * (1.0 - self.forgetting)
+                                            * self.regularization))
         self.theta = np.zeros((n_outputs, n_regressors), order="F")
         self.reset()
 
@@ -101,13 +121,25 @@ class RecursiveLeastSquares:
         self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
         # P <- P - g (P phi)^T, i.e. Q <- Q - g (P phi)^T / s, in place
         self._q = dger(-1.0 / scale, gain, p_phi, a=self._q, overwrite_a=True)
-        self._trace -= gain @ p_phi
-        if self._trace < self.max_trace and self.forgetting < 1.0:
-            self._scale = scale / self.forgetting
-            self._trace /= self.forgetting
-            if self._scale > 1e150:
+        if self._pseudo_weight > 0.0:
+            self._pseudo_update()
+        if self.forgetting < 1.0 and self._scale * self._q.trace() < self.max_trace:
+            self._scale /= self.forgetting
+            if self._scale > 1e6:
                 self._renormalize()
         return err
+
+    def _pseudo_update(self) -> None:
+        """Rank-1 pseudo-observation ``0 = Theta (w e_i)`` (regularized forgetting)."""
+        i = self._cycle
+        self._cycle = (i + 1) % self.theta.shape[1]
+        w = self._pseudo_weight
+        p_phi = self._q[:, i] * (self._scale * w)        # P (w e_i), no matvec needed
+        denom = 1.0 + w * p_phi[i]
+        gain = p_phi / denom
+        err = -w * self.theta[:, i]
+        self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
+        self._q = dger(-1.0 / self._scale, gain, p_phi, a=self._q, overwrite_a=True)
 
     def _renormalize(self) -> None:
         self._q *= self._scale
@@ -117,7 +149,6 @@ class RecursiveLeastSquares:
         """Restore exact symmetry of ``P`` (round-off drifts it slowly)."""
         self._renormalize()
         self._q = np.asfortranarray(0.5 * (self._q + self._q.T))
-        self._trace = float(np.trace(self._q))
 
     def reset(self) -> None:
         """Back to ``Theta = 0``, ``P = P_0``."""
@@ -125,4 +156,4 @@ class RecursiveLeastSquares:
         self.theta[:] = 0.0
         self._q = np.asfortranarray(np.eye(d) * self.initial_covariance)
         self._scale = 1.0
-        self._trace = d * self.initial_covariance
+        self._cycle = 0

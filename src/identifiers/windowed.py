@@ -36,20 +36,21 @@ class WindowedPBSID(OnlineIdentifier):
         Refit period in samples (1: every step, the paper's comparator).
     f : int, optional
         Future window of LK (default ``p``).
-    dt, warmup
+    dt, warmup, input_scale, output_scale
         See :class:`~identifiers.base.OnlineIdentifier`; warm-up defaults to
-        the smallest window the VARX can be solved on.
+        the window length.
     """
 
     consistent_basis = False
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 1.0, *, window: int = 500,
                  refit_every: int = 1, f: int | None = None, dt: float = 0.1,
-                 warmup: int | None = None) -> None:
+                 warmup: int | None = None, input_scale=None, output_scale=None) -> None:
         self.window = _positive_int("window", window)
         self.refit_every = _positive_int("refit_every", refit_every)
         self.f = f
-        super().__init__(n, p, forgetting, dt=dt, warmup=warmup or window)
+        super().__init__(n, p, forgetting, dt=dt, warmup=warmup or window,
+                         input_scale=input_scale, output_scale=output_scale)
 
     def reset(self) -> None:
         super().reset()

@@ -1,0 +1,80 @@
+"""Identifier run time for a 2500-sample record at n = 22, 30, 38, 46.
+
+Every method runs on the same data (docking scenario, 40 dB SNR, p = 15,
+forgetting 0.98) in one process, BLAS limited to one thread; the ratios
+improved/classical and improved/SVD are printed beside the paper's MATLAB
+Table 5 ratios.
+
+Goals (issue 3): the default improved identifier finishes the n = 22 run in
+<= 0.25 s; improved/classical <= 0.5 at n = 46; improved/SVD <= 0.1; its
+per-step cost grows from n = 22 to 46 by no more than (46/22)^2 = 4.37.
+
+Usage: ``python benchmarks/bench_identifiers.py [--orders 22 30 38 46] [--json out.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from identifiers import add_measurement_noise, identification_inputs
+from identifiers.experiment import make_identifier, nominal_scales
+from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
+
+#: Paper Table 5, MATLAB seconds per run: classical, improved, SVD-based.
+PAPER = {22: (14.64, 12.27, 26.15), 30: (23.35, 19.56, 37.01),
+         38: (34.23, 28.99, 50.51), 46: (46.96, 39.22, 68.10)}
+METHODS = ("improved", "improved-apsa", "classical", "windowed-svd")
+
+
+def run(orders, n_samples: int = 2500, repeats: int = 3) -> dict:
+    out = {}
+    for n in orders:
+        modes = (n // 2 - 3) // 4
+        truth = FlexibleSpacecraftModel(ets8_parameters(modes), scenario="docking")
+        rng = np.random.default_rng(0)
+        u = identification_inputs(n_samples, rng)
+        y = add_measurement_noise(truth.simulate(u)[1], 40.0, rng)
+        out[n] = {}
+        for name in METHODS:
+            reps = 1 if name == "windowed-svd" else repeats
+            best = np.inf
+            for _ in range(reps):
+                ident = make_identifier(name, n, 15, 0.98, **nominal_scales(truth))
+                start = time.perf_counter()
+                for k in range(n_samples):
+                    ident.update(u[k], y[k])
+                best = min(best, time.perf_counter() - start)
+            out[n][name] = best
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--orders", type=int, nargs="+", default=[22, 30, 38, 46])
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    with threadpool_limits(limits=1, user_api="blas"):
+        times = run(args.orders)
+    print(f"{'n':>4}" + "".join(f"{m:>15}" for m in METHODS)
+          + f"{'imp/cls':>10}{'paper':>8}{'imp/SVD':>10}{'paper':>8}")
+    for n, row in times.items():
+        c, i, s = PAPER.get(n, (np.nan,) * 3)
+        print(f"{n:>4}" + "".join(f"{row[m]:>14.3f}s" for m in METHODS)
+              + f"{row['improved'] / row['classical']:>10.3f}{i / c:>8.2f}"
+              + f"{row['improved'] / row['windowed-svd']:>10.4f}{i / s:>8.2f}")
+    first, last = args.orders[0], args.orders[-1]
+    growth = times[last]["improved"] / times[first]["improved"]
+    print(f"improved per-step cost growth n={first} -> n={last}: {growth:.2f}x "
+          f"(bound (n ratio)^2 = {(last / first) ** 2:.2f}x)")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"seconds": times, "paper_table5": PAPER}, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+"""Attitude controllers for the flexible spacecraft and the closed-loop harness.
+
+* :class:`AdaptiveLQR`: LQR re-designed every step from an online identifier.
+* :class:`LQR` (fixed LQG, t = 0 design), :class:`OracleLQR` (true
+  time-varying model and state), :class:`PD`.
+* :class:`PolicyController`: any SB3 policy behind the same interface.
+* :func:`run_episode`, :func:`compare`: the closed-loop harness.
+"""
+
+from controllers.adaptive import AdaptiveLQR
+from controllers.base import Controller, PolicyController
+from controllers.baselines import LQR, PD, LQRWeights, OracleLQR, equilibrium_state
+from controllers.harness import (
+    Trajectory,
+    compare,
+    episode_metrics,
+    format_table,
+    plot_comparison,
+    run_episode,
+)
+from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
+
+__all__ = [
+    "LQR",
+    "PD",
+    "AdaptiveLQR",
+    "Controller",
+    "LQRWeights",
+    "OracleLQR",
+    "PolicyController",
+    "RiccatiTracker",
+    "Trajectory",
+    "check_weights",
+    "compare",
+    "dlqr",
+    "episode_metrics",
+    "equilibrium_state",
+    "format_table",
+    "plot_comparison",
+    "run_episode",
+    "spectral_radius",
+]

@@ -1,0 +1,305 @@
+"""Closed-loop harness: run controllers (or RL policies) on the environments.
+
+:func:`run_episode` rolls one episode and returns a :class:`Trajectory`;
+:func:`episode_metrics` scores it; :func:`compare` runs several controllers
+on the same seeds and tabulates mean and spread; :func:`plot_comparison`
+draws attitude error, torque, tip deflection and (for identifier-based
+controllers) identified vs true modal frequencies.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+from tqdm import tqdm
+
+from controllers.base import Controller
+
+__all__ = ["Trajectory", "compare", "episode_metrics", "format_table", "plot_comparison",
+           "run_episode"]
+
+_DEG = 180.0 / np.pi
+
+
+@dataclass
+class Trajectory:
+    """One closed-loop episode.
+
+    Attributes
+    ----------
+    time : (N,) ndarray
+        Time of each observation after a step, s.
+    observations : (N + 1, o) ndarray
+    actions : (N, 3) ndarray
+        Normalized actions.
+    torque : (N, 3) ndarray
+        Applied torque, N m.
+    states : (N + 1, n) ndarray
+        True states (``info["state"]``), starting with the reset state.
+    reference : (N + 1, 3) ndarray
+        Reference attitude, rad.
+    rewards : (N,) ndarray
+    terminated : bool
+    events : tuple of float
+        Scenario event times (docking), s.
+    identified_frequencies : (K, f) ndarray or None
+        First identified natural frequencies (Hz) every ``freq_every`` steps
+        (controllers with an ``identifier``), NaN before warm-up.
+    true_frequencies : (K, f) ndarray or None
+    frequency_time : (K,) ndarray or None
+    controller_stats : dict
+    """
+
+    time: np.ndarray
+    observations: np.ndarray
+    actions: np.ndarray
+    torque: np.ndarray
+    states: np.ndarray
+    reference: np.ndarray
+    rewards: np.ndarray
+    terminated: bool
+    events: tuple = ()
+    identified_frequencies: np.ndarray | None = None
+    true_frequencies: np.ndarray | None = None
+    frequency_time: np.ndarray | None = None
+    controller_stats: dict = field(default_factory=dict)
+
+
+def _first_frequencies(a: np.ndarray, dt: float | None, count: int) -> np.ndarray:
+    ev = np.linalg.eigvals(a)
+    if dt is not None:
+        ev = ev[np.abs(ev) > 1e-12]
+        ev = np.log(ev.astype(complex)) / dt
+    f = np.sort(np.abs(ev[ev.imag > 1e-9])) / (2 * np.pi)
+    out = np.full(count, np.nan)
+    out[:min(count, f.size)] = f[:count]
+    return out
+
+
+def run_episode(env, controller: Controller, seed: int | None = None,
+                options: dict[str, Any] | None = None, max_steps: int | None = None,
+                freq_every: int = 25, n_freq: int = 4) -> Trajectory:
+    """Roll one episode of ``controller`` on ``env``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A registered environment (wrappers allowed).
+    controller : Controller
+        Called as ``act(obs, info)``.
+    seed : int, optional
+        Seeds the env reset and the controller's dither.
+    options : dict, optional
+        Passed to ``env.reset``.
+    max_steps : int, optional
+        Step budget; default the spec's ``max_episode_steps`` (2500 for the
+        registered ids), or 2500 for an env built without ``gym.make``, so an
+        unwrapped env (no time limit) still ends.
+    freq_every, n_freq : int
+        Sampling of identified/true modal frequencies.
+    """
+    base = env.unwrapped
+    if max_steps is None:
+        spec = getattr(env, "spec", None)
+        max_steps = (spec.max_episode_steps if spec is not None and spec.max_episode_steps
+                     else 2500)
+    obs, info = env.reset(seed=seed, options=options)
+    controller.reset(seed)
+    observations, actions, torques, states, refs, rewards = [obs], [], [], [info["state"]], \
+        [info["reference"]], []
+    ident = getattr(controller, "identifier", None)
+    freq_t, freq_id, freq_true = [], [], []
+    terminated = truncated = False
+    k = 0
+    with threadpool_limits(limits=1, user_api="blas"):
+        while not (terminated or truncated) and k < max_steps:
+            action = controller.act(obs, info)
+            obs, reward, terminated, truncated, info = env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            torques.append(info["torque"])
+            states.append(info["state"])
+            refs.append(info["reference"])
+            rewards.append(reward)
+            if ident is not None and k % freq_every == 0:
+                freq_t.append(info["time"])
+                model = ident.model
+                freq_id.append(np.full(n_freq, np.nan) if model is None
+                               else _first_frequencies(model.A, model.dt, n_freq))
+                freq_true.append(_first_frequencies(base.model.continuous(info["time"]).A,
+                                                    None, n_freq))
+            k += 1
+    dt = base.model.dt
+    return Trajectory(
+        time=np.arange(1, k + 1) * dt,
+        observations=np.array(observations), actions=np.array(actions),
+        torque=np.array(torques), states=np.array(states), reference=np.array(refs),
+        rewards=np.array(rewards), terminated=bool(terminated),
+        events=tuple(base.scenario.event_times()),
+        identified_frequencies=np.array(freq_id) if freq_id else None,
+        true_frequencies=np.array(freq_true) if freq_true else None,
+        frequency_time=np.array(freq_t) if freq_t else None,
+        controller_stats=dict(getattr(controller, "stats", {})),
+    )
+
+
+def episode_metrics(traj: Trajectory, model, settle_tol_deg: float = 0.05,
+                    stable_bound_deg: float = 1.0) -> dict[str, Any]:
+    """Scores of one episode.
+
+    Returns
+    -------
+    dict
+        ``attitude_rms_deg`` and ``attitude_peak_deg`` (true attitude error,
+        all axes, after the first step), ``settling_s`` (per scenario event:
+        time after the event until the error stays below ``settle_tol_deg``;
+        None if it never does), ``vibration_rms_mm`` (true tip deflections),
+        ``torque_rms_Nm`` and ``effort_N2m2s`` (integral of |u|^2),
+        ``return``, ``stable`` (not terminated, finite, and the error over the
+        last 10 % of the episode below ``stable_bound_deg``).
+    """
+    err = (traj.states[1:, :3] - traj.reference[1:]) * _DEG
+    err_norm = np.abs(err).max(axis=1)
+    defl = traj.states[1:] @ model.C[6:].T * 1e3
+    dt = model.dt
+    settling = []
+    for event in traj.events or ():
+        after = traj.time >= event
+        if not after.any():
+            settling.append(None)
+            continue
+        outside = np.flatnonzero(after & (err_norm > settle_tol_deg))
+        if outside.size == 0:
+            settling.append(0.0)
+        elif outside[-1] == len(err_norm) - 1:
+            settling.append(None)
+        else:
+            settling.append(float(traj.time[outside[-1] + 1] - event))
+    tail = err_norm[-max(1, len(err_norm) // 10):]
+    finite = bool(np.all(np.isfinite(traj.states)))
+    return {
+        "attitude_rms_deg": float(np.sqrt(np.mean(err**2))),
+        "attitude_peak_deg": float(err_norm.max()),
+        "settling_s": settling,
+        "vibration_rms_mm": float(np.sqrt(np.mean(defl**2))),
+        "torque_rms_Nm": float(np.sqrt(np.mean(traj.torque**2))),
+        "effort_N2m2s": float(np.sum(traj.torque**2) * dt),
+        "return": float(traj.rewards.sum()),
+        "stable": bool(finite and not traj.terminated and tail.max() < stable_bound_deg),
+    }
+
+
+def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
+            seeds: Sequence[int], options: dict[str, Any] | None = None,
+            progress: bool = True) -> tuple[dict[str, dict], dict[str, Trajectory]]:
+    """Run every controller on the same seeds.
+
+    Parameters
+    ----------
+    controllers : dict
+        Name -> factory ``env -> Controller``.
+    make_env : callable
+        Returns a fresh environment.
+    seeds : sequence of int
+    options : dict, optional
+        ``env.reset`` options.
+
+    Returns
+    -------
+    table : dict
+        Name -> {"per_seed": [metrics...], "mean": {...}, "std": {...},
+        "stable_runs": int, "runs": int}.
+    first : dict
+        Name -> trajectory of the first seed (for plots).
+    """
+    table, first = {}, {}
+    bar = tqdm(total=len(controllers) * len(seeds), desc="closed loop", disable=not progress)
+    for name, factory in controllers.items():
+        env = make_env()
+        ctrl = factory(env)
+        per_seed = []
+        for i, seed in enumerate(seeds):
+            traj = run_episode(env, ctrl, seed=seed, options=options)
+            m = episode_metrics(traj, env.unwrapped.model)
+            m["seed"] = int(seed)
+            m["controller_stats"] = traj.controller_stats
+            per_seed.append(m)
+            if i == 0:
+                first[name] = traj
+            bar.update()
+        env.close()
+        keys = ["attitude_rms_deg", "attitude_peak_deg", "vibration_rms_mm", "torque_rms_Nm",
+                "effort_N2m2s", "return"]
+        arr = {k: np.array([m[k] for m in per_seed]) for k in keys}
+        table[name] = {
+            "per_seed": per_seed,
+            "mean": {k: float(np.mean(v)) for k, v in arr.items()},
+            "std": {k: float(np.std(v)) for k, v in arr.items()},
+            "stable_runs": int(sum(m["stable"] for m in per_seed)),
+            "runs": len(per_seed),
+        }
+    bar.close()
+    return table, first
+
+
+def format_table(table: dict[str, dict], oracle: str | None = None) -> str:
+    """Markdown table of :func:`compare` results (mean ± std over seeds)."""
+    head = ("| controller | stable | attitude RMS (deg) | peak (deg) | vibration RMS (mm) "
+            "| torque RMS (N m) | return |" + (" RMS / oracle |" if oracle else ""))
+    lines = [head, "|" + "---|" * (7 + (1 if oracle else 0))]
+    ref = table[oracle]["mean"]["attitude_rms_deg"] if oracle in table else None
+    for name, row in table.items():
+        mu, sd = row["mean"], row["std"]
+        cells = [f"{row['stable_runs']}/{row['runs']}",
+                 f"{mu['attitude_rms_deg']:.4f} ± {sd['attitude_rms_deg']:.4f}",
+                 f"{mu['attitude_peak_deg']:.3f} ± {sd['attitude_peak_deg']:.3f}",
+                 f"{mu['vibration_rms_mm']:.3f} ± {sd['vibration_rms_mm']:.3f}",
+                 f"{mu['torque_rms_Nm']:.3f} ± {sd['torque_rms_Nm']:.3f}",
+                 f"{mu['return']:.4g}"]
+        if ref:
+            cells.append(f"{mu['attitude_rms_deg'] / ref:.2f}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_comparison(first: dict[str, Trajectory], model, path, title: str = "") -> None:
+    """Attitude error, torque, tip deflection and identified frequencies (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    has_freq = any(t.identified_frequencies is not None for t in first.values())
+    rows = 4 if has_freq else 3
+    fig, axes = plt.subplots(rows, 1, figsize=(10, 2.6 * rows), sharex=True)
+    for name, traj in first.items():
+        err = np.abs((traj.states[1:, :3] - traj.reference[1:]) * _DEG).max(axis=1)
+        axes[0].semilogy(traj.time, np.maximum(err, 1e-5), label=name, lw=1)
+        axes[1].plot(traj.time, np.linalg.norm(traj.torque, axis=1), lw=0.8, label=name)
+        defl = np.abs(traj.states[1:] @ model.C[6:].T).max(axis=1) * 1e3
+        axes[2].plot(traj.time, defl, lw=0.8, label=name)
+        if has_freq and traj.identified_frequencies is not None:
+            axes[3].plot(traj.frequency_time, traj.identified_frequencies, ".", ms=2,
+                         color="tab:blue")
+            axes[3].plot(traj.frequency_time, traj.true_frequencies, "k-", lw=1)
+    axes[0].set_ylabel("max |attitude error| (deg)")
+    axes[1].set_ylabel("|torque| (N m)")
+    axes[2].set_ylabel("max |tip deflection| (mm)")
+    if has_freq:
+        axes[3].set_ylabel("frequency (Hz)")
+        axes[3].set_ylim(0, 1.0)
+        axes[3].set_title("identified (dots) vs true (lines) modal frequencies", fontsize=9)
+    axes[-1].set_xlabel("time (s)")
+    for ax in axes:
+        for ev in next(iter(first.values())).events:
+            ax.axvline(ev, color="k", ls="--", lw=0.8)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=4)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -1,0 +1,138 @@
+"""Discrete-time LQR design: validated weights, exact and warm-started Riccati.
+
+``u_k = -G x_k`` minimizing ``sum x^T Q x + u^T R u`` for
+``x_{k+1} = A x_k + B u_k``::
+
+    P = A^T P A - A^T P B (R + B^T P B)^-1 B^T P A + Q
+    G = (R + B^T P B)^-1 B^T P A
+
+:func:`dlqr` solves it from scratch (``scipy.linalg.solve_discrete_are``).
+:class:`RiccatiTracker` re-designs every step for a slowly varying model by
+a few Riccati (value) iterations warm-started from the last solution,
+O(n^3) with small constants, falling back to the exact solver when the
+iteration has not converged or the model jumped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+
+__all__ = ["RiccatiTracker", "check_weights", "dlqr", "spectral_radius"]
+
+
+def check_weights(q: np.ndarray, r: np.ndarray, n: int | None = None,
+                  m: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Validate LQR weights: Q symmetric positive semidefinite, R positive definite.
+
+    Raises
+    ------
+    ValueError
+        Naming the violated condition and the expected shapes.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    r = np.atleast_2d(np.asarray(r, dtype=float))
+    for name, mat, size in (("Q", q, n), ("R", r, m)):
+        if mat.ndim != 2 or mat.shape[0] != mat.shape[1]:
+            raise ValueError(f"{name} must be a square matrix, got shape {mat.shape}")
+        if size is not None and mat.shape[0] != size:
+            raise ValueError(f"{name} must have shape ({size}, {size}), got {mat.shape}")
+        if not np.all(np.isfinite(mat)):
+            raise ValueError(f"{name} must be finite")
+        if not np.allclose(mat, mat.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(mat).max())):
+            raise ValueError(f"{name} must be symmetric")
+    if np.linalg.eigvalsh(q).min() < -1e-10 * max(1.0, np.abs(q).max()):
+        raise ValueError("Q must be positive semidefinite")
+    if np.linalg.eigvalsh(r).min() <= 0:
+        raise ValueError("R must be positive definite")
+    return q, r
+
+
+def spectral_radius(a: np.ndarray) -> float:
+    """Largest eigenvalue modulus."""
+    return float(np.abs(np.linalg.eigvals(a)).max())
+
+
+def _gain(a, b, r, p):
+    btp = b.T @ p
+    return np.linalg.solve(r + btp @ b, btp @ a)
+
+
+def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray,
+         r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Discrete LQR gain and Riccati solution from scratch.
+
+    Parameters
+    ----------
+    a : (n, n) ndarray
+    b : (n, m) ndarray
+    q : (n, n) ndarray
+        Symmetric positive semidefinite.
+    r : (m, m) ndarray
+        Symmetric positive definite.
+
+    Returns
+    -------
+    G : (m, n) ndarray
+        Gain, ``u = -G x``.
+    P : (n, n) ndarray
+        Stabilizing solution of the discrete algebraic Riccati equation.
+
+    Raises
+    ------
+    ValueError
+        Invalid weights, or no stabilizing solution ((A, B) not
+        stabilizable or (A, Q) with unobservable modes on the unit circle).
+    """
+    q, r = check_weights(q, r, a.shape[0], b.shape[1])
+    try:
+        p = solve_discrete_are(a, b, q, r)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ValueError(f"no stabilizing Riccati solution: {exc}") from None
+    return _gain(a, b, r, p), p
+
+
+class RiccatiTracker:
+    """Warm-started Riccati re-design for a time-varying model.
+
+    Parameters
+    ----------
+    q, r : ndarray
+        LQR weights (validated).
+    iterations : int
+        Riccati iterations per re-design, each O(n^3).
+    tol : float
+        Relative change of P below which the iteration has converged.
+    """
+
+    def __init__(self, q: np.ndarray, r: np.ndarray, iterations: int = 4,
+                 tol: float = 1e-6) -> None:
+        self.q, self.r = check_weights(q, r)
+        self.iterations = int(iterations)
+        self.tol = float(tol)
+        self.p: np.ndarray | None = None
+        self.n_exact = 0
+
+    def design(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Gain for the model ``(a, b)``, warm-started from the last solution."""
+        if self.p is None or self.p.shape != a.shape:
+            gain, self.p = dlqr(a, b, self.q, self.r)
+            self.n_exact += 1
+            return gain
+        p = self.p
+        change = np.inf
+        for _ in range(self.iterations):
+            btp = b.T @ p
+            k = np.linalg.solve(self.r + btp @ b, btp @ a)
+            p_new = a.T @ p @ (a - b @ k) + self.q
+            p_new = 0.5 * (p_new + p_new.T)
+            change = np.abs(p_new - p).max() / max(np.abs(p_new).max(), 1e-300)
+            p = p_new
+            if change < self.tol:
+                break
+        if not np.all(np.isfinite(p)) or change > 0.1:
+            gain, self.p = dlqr(a, b, self.q, self.r)
+            self.n_exact += 1
+            return gain
+        self.p = p
+        return _gain(a, b, self.r, p)
