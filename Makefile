@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml constraints.txt
 
 demo: $(STAMP)
 	$(BIN)/spacecraft demo --scenario docking --out results/demo
+	OPENBLAS_NUM_THREADS=1 $(BIN)/spacecraft control --scenario docking --seeds 10 --out results/control
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples
@@ -30,6 +31,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_env.py
 	$(BIN)/python benchmarks/bench_identifiers.py
+	$(BIN)/python benchmarks/bench_control.py
 
 clean:
 	rm -rf $(VENV) results build *.egg-info src/*.egg-info

@@ -38,14 +38,16 @@ import math
 
 import numpy as np
 
+from scipy.linalg.blas import dger
+
 from identifiers.base import RecursivePBSIDBase
 from identifiers.rls import RecursiveLeastSquares
-from identifiers.varx import free_response, toeplitz_windows
+from identifiers.varx import free_response, predictor_product, toeplitz_windows
 
 __all__ = ["VARIANTS", "ImprovedRPBSID"]
 
 #: State-update variants of :class:`ImprovedRPBSID`.
-VARIANTS = ("predictor", "apsa")
+VARIANTS = ("predictor", "consistent", "apsa")
 
 
 class ImprovedRPBSID(RecursivePBSIDBase):
@@ -72,12 +74,17 @@ class ImprovedRPBSID(RecursivePBSIDBase):
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
                  variant: str = "predictor", mu: float = 0.01, nu: float = 1.0,
-                 state_forgetting: float | None = None, **kwargs) -> None:
+                 state_forgetting: float | None = None, refit_every: int = 10,
+                 **kwargs) -> None:
         if variant not in VARIANTS:
             raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
         if not (np.isfinite(mu) and mu > 0 and np.isfinite(nu) and nu >= 0):
             raise ValueError(f"mu must be > 0 and nu >= 0, got mu={mu}, nu={nu}")
         self.variant = variant
+        if isinstance(refit_every, bool) or not isinstance(refit_every, (int, np.integer)) \
+                or refit_every < 1:
+            raise ValueError(f"refit_every must be a positive int, got {refit_every!r}")
+        self.refit_every = int(refit_every)
         self.mu, self.nu = float(mu), float(nu)
         self.state_forgetting = float(state_forgetting or forgetting)
         if not 0 < self.state_forgetting <= 1:
@@ -90,9 +97,16 @@ class ImprovedRPBSID(RecursivePBSIDBase):
         self._gamma = None
         self._future = None
         self._tau = None
+        self._moments = None
+        self._mats = None
 
     def _allocate(self, r: int, m: int) -> None:
         super()._allocate(r, m)
+        if self.variant == "consistent":
+            dim = (self.p + 1) * (r + m)
+            self._moments = np.zeros((dim, dim), order="F")   # R = scale * moments
+            self._moment_scale = 1.0
+            self._ext = np.zeros(dim)                         # [z_k; phi_k]
         if self.variant == "apsa":
             q = (self.p + 1) * m
             self._gamma = RecursiveLeastSquares(q, self.n, self.state_forgetting, 1.0)
@@ -109,6 +123,9 @@ class ImprovedRPBSID(RecursivePBSIDBase):
         if self.variant == "predictor":
             super()._step(u, y, learn)
             return
+        if self.variant == "consistent":
+            self._consistent_step(u, y, learn)
+            return
         if learn:
             self._varx.update(self._phi, y)
         self._push(u, y)
@@ -117,7 +134,89 @@ class ImprovedRPBSID(RecursivePBSIDBase):
     def _matrices(self) -> tuple[np.ndarray, ...] | None:
         if self.variant == "apsa" and self._k < self.warmup:
             return None
+        if self.variant == "consistent":
+            return self._mats
         return super()._matrices()
+
+    # ------------------------------------------------------------ consistent
+    def _consistent_step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        """VARX step, data moments, and a batch-equivalent refit every few samples.
+
+        ``x_k = M phi_k`` with ``M = W LK(Xi)`` is linear in the extended
+        window ``phi~_k = [z_k; phi_k]``, and so are ``x_{k+1}`` (``M`` applied
+        to the shifted window), ``u_k``, ``y_k`` and ``e_k = y_k - C x_k``.
+        The least-squares ``C`` and ``[A B K]`` over the exponentially weighted
+        window therefore follow from the second moments ``R`` of ``phi~``
+        alone, with every state defined by the *current* VARX (the batch
+        PBSID solution on the forgetting window): no drifting state basis,
+        no Hankel matrix, no SVD per step.
+        """
+        zr = self._zr
+        ext = self._ext
+        ext[zr:] = self._phi
+        ext[:self.n_inputs] = u
+        ext[self.n_inputs:zr] = y
+        if learn:
+            self._varx.update(self._phi, y)
+            lam = self.varx_forgetting
+            self._moment_scale *= lam
+            self._moments = dger(1.0 / self._moment_scale, ext, ext, a=self._moments,
+                                 overwrite_a=True)
+            if self._moment_scale < 1e-6:
+                self._moments *= self._moment_scale
+                self._moment_scale = 1.0
+        self._push(u, y)
+        if self._w is None:
+            if self._k + 1 >= self.warmup:
+                self._fix_basis_from_moments()
+            else:
+                return
+        if learn and (self._k + 1 - self.warmup) % self.refit_every == 0:
+            self._refit()
+        self._x = self._m_state @ self._phi if self._mats is not None else None
+
+    def _state_map(self) -> np.ndarray:
+        lk = predictor_product(self._varx.theta, self.n_inputs, self._horizon)
+        return lk
+
+    def _fix_basis_from_moments(self) -> None:
+        """W: leading eigenvectors of the prediction covariance LK R_phi LK^T (once)."""
+        zr = self._zr
+        lk = self._state_map()
+        r_phi = self._moments[zr:, zr:]
+        cov = lk @ r_phi @ lk.T
+        w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+        self._w = v[:, np.argsort(w)[::-1][:self.n]].T.copy()
+
+    def _refit(self) -> None:
+        n, r, m, zr = self.n, self.n_inputs, self.n_outputs, self._zr
+        d = self._phi.shape[0]
+        m_state = self._w @ self._state_map()                      # (n, d)
+        rr = self._moments                                          # scale cancels
+        dim = rr.shape[0]
+        mx = np.zeros((n, dim))
+        mx[:, zr:] = m_state                                        # x_k from phi_k
+        mx1 = np.zeros((n, dim))
+        mx1[:, :d] = m_state                                        # x_{k+1} from [z_k; phi_k]
+        su = np.zeros((r, dim))
+        su[:, :r] = np.eye(r)
+        sy = np.zeros((m, dim))
+        sy[:, r:zr] = np.eye(m)
+        r_mx = rr @ mx.T                                            # (dim, n)
+        gram_x = mx @ r_mx
+        ridge = 1e-9 * np.trace(gram_x) / n * np.eye(n)
+        c = np.linalg.solve(gram_x + ridge, (sy @ r_mx).T).T        # (m, n)
+        me = sy - c @ mx
+        g = np.vstack([mx, su, me])                                 # regressor map
+        r_g = rr @ g.T
+        gram = g @ r_g
+        gram += 1e-9 * np.trace(gram) / gram.shape[0] * np.eye(gram.shape[0])
+        theta = np.linalg.solve(gram, (mx1 @ r_g).T).T              # (n, n + r + m)
+        a, b, k = theta[:, :n], theta[:, n:n + r], theta[:, n + r:]
+        if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(c))):
+            return
+        self._m_state = m_state
+        self._mats = (a, b, c, np.zeros((m, r)), k)
 
     def _apsa_step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         fut = self._future

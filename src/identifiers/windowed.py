@@ -36,6 +36,8 @@ class WindowedPBSID(OnlineIdentifier):
         Refit period in samples (1: every step, the paper's comparator).
     f : int, optional
         Future window of LK (default ``p``).
+    regularization : float
+        VARX Tikhonov term as a fraction of the window length (0: plain LS).
     dt, warmup, input_scale, output_scale
         See :class:`~identifiers.base.OnlineIdentifier`; warm-up defaults to
         the window length.
@@ -45,10 +47,14 @@ class WindowedPBSID(OnlineIdentifier):
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 1.0, *, window: int = 500,
                  refit_every: int = 1, f: int | None = None, dt: float = 0.1,
-                 warmup: int | None = None, input_scale=None, output_scale=None) -> None:
+                 warmup: int | None = None, input_scale=None, output_scale=None,
+                 regularization: float = 0.0) -> None:
         self.window = _positive_int("window", window)
         self.refit_every = _positive_int("refit_every", refit_every)
         self.f = f
+        if not (np.isfinite(regularization) and regularization >= 0):
+            raise ValueError(f"regularization must be >= 0, got {regularization}")
+        self.regularization = float(regularization)
         super().__init__(n, p, forgetting, dt=dt, warmup=warmup or window,
                          input_scale=input_scale, output_scale=output_scale)
 
@@ -81,7 +87,8 @@ class WindowedPBSID(OnlineIdentifier):
             if self.forgetting < 1.0:
                 weights = self.forgetting ** np.arange(self.window)[::-1]
             self._result = pbsid(self._u, self._y, self.n, self.p, self.f, dt=self.dt,
-                                 weights=weights, full_output=True)
+                                 weights=weights, full_output=True,
+                                 regularization=self.regularization * self.window)
             self._state = self._result.next_state
 
     def _matrices(self):

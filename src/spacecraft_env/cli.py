@@ -7,6 +7,9 @@ Commands
 ``identify``
     The paper's identification experiment for every method
     (:func:`identifiers.experiment.run_identification`).
+``control``
+    Fixed LQR, PD, adaptive LQR and oracle LQR compared in closed loop
+    (:func:`controllers.experiment.run_control`).
 """
 
 from __future__ import annotations
@@ -38,12 +41,28 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--seeds", type=int, default=10, help="noise seeds 0..N-1")
     ident.add_argument("--out", default="results/identify", help="output directory")
     ident.add_argument("--methods", nargs="+", default=None,
-                       help="subset of: improved improved-apsa classical windowed-svd")
+                       help="subset of: improved improved-consistent improved-apsa "
+                            "classical windowed-svd")
     ident.add_argument("--snr-db", type=_snr, default=40.0,
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
     ident.add_argument("--modes", type=int, default=2, help="modes per appendage (n = 6 + 8 k)")
     ident.add_argument("--p", type=int, default=15, help="past window (paper: 15)")
     ident.add_argument("--forgetting", type=float, default=0.98, help="paper: 0.98")
+    ident.add_argument("--regularization", type=float, default=0.0,
+                       help="VARX Tikhonov floor, fraction of the effective memory (paper: 0)")
+
+    ctl = sub.add_parser("control", help="closed-loop comparison of the controllers")
+    ctl.add_argument("--scenario", choices=["constant", "docking", "solar_rotation"],
+                     default="docking")
+    ctl.add_argument("--seeds", type=int, default=10)
+    ctl.add_argument("--out", default="results/control")
+    ctl.add_argument("--module-mass", type=float, default=None,
+                     help="mass of each docking module, kg (paper: 600)")
+    ctl.add_argument("--rotation-rate", type=float, default=None,
+                     help="paddle rotation rate, deg/s (paper: 0.2)")
+    ctl.add_argument("--torque-weight", type=float, default=None,
+                     help="LQR torque weight per (N m)^2; smaller = more aggressive (0.3)")
+    ctl.add_argument("--max-torque", type=float, default=None, help="N m per unit action (10)")
     return parser
 
 
@@ -60,12 +79,36 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps)
         print(json.dumps(summary, indent=2))
         print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
+    elif args.command == "control":
+        from controllers.baselines import LQRWeights
+        from controllers.experiment import run_control
+
+        env_kwargs = {}
+        if args.module_mass is not None:
+            from spacecraft_env import DockingModule, DockingScenario
+
+            env_kwargs["scenario"] = DockingScenario(modules=(
+                DockingModule(mass=args.module_mass, time=100.0, position=(0.0, 0.0, 3.0)),
+                DockingModule(mass=args.module_mass, time=180.0, position=(0.0, 0.0, -3.0))))
+        if args.rotation_rate is not None:
+            from spacecraft_env import SolarRotationScenario
+
+            env_kwargs["scenario"] = SolarRotationScenario(rate_deg_s=args.rotation_rate)
+        if args.max_torque is not None:
+            env_kwargs["max_torque"] = args.max_torque
+        weights = (LQRWeights(torque=args.torque_weight) if args.torque_weight is not None
+                   else None)
+        run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
+                    weights=weights)
+        print((Path(args.out) / "table.md").read_text())
+        print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
     elif args.command == "identify":
         from identifiers.experiment import run_identification
 
         metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
                                      snr_db=args.snr_db, n_modes=args.modes, p=args.p,
-                                     forgetting=args.forgetting)
+                                     forgetting=args.forgetting,
+                                     regularization=args.regularization)
         print((Path(args.out) / "table.md").read_text())
         print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
               f"({len(metrics['methods'])} methods, {args.seeds} seeds)")

@@ -1,0 +1,70 @@
+"""One adaptive control step at n = 22: identifier update + re-design + act.
+
+Runs the adaptive LQR in closed loop on the docking environment and times
+each ``act`` call (which feeds the identifier, re-designs the gain by the
+warm-started Riccati iteration and computes the torque), then, on the same
+identified models, times a from-scratch ``scipy.linalg.solve_discrete_are``
+per step: both medians are printed side by side.
+
+Goal (issue 4): median <= 1 ms, i.e. >= 100x faster than real time at
+dt = 0.1 s.
+
+Usage: ``python benchmarks/bench_control.py [--steps 1500]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+from scipy.linalg import solve_discrete_are
+from threadpoolctl import threadpool_limits
+
+from controllers import AdaptiveLQR
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=1500)
+    args = parser.parse_args()
+    env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v0")
+    ctrl = AdaptiveLQR(env.unwrapped)
+    obs, info = env.reset(seed=0)
+    ctrl.reset(0)
+    step_times, models = [], []
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in range(args.steps):
+            start = time.perf_counter()
+            action = ctrl.act(obs, info)
+            step_times.append(time.perf_counter() - start)
+            if ctrl.gain is not None and ctrl.identifier.model is not None:
+                models.append(ctrl.identifier.model)
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                obs, info = env.reset()
+        adaptive = np.array(step_times[ctrl.identifier.warmup:])
+        dare = []
+        qy = ctrl._qy
+        for model in models[:500]:
+            q = model.C.T @ qy @ model.C + 1e-6 * np.eye(model.n)
+            start = time.perf_counter()
+            try:
+                solve_discrete_are(model.A, model.B, q, ctrl._r)
+            except (np.linalg.LinAlgError, ValueError):
+                pass
+            dare.append(time.perf_counter() - start)
+    dare = np.array(dare)
+    med = np.median(adaptive) * 1e3
+    print(f"adaptive LQR step (identifier + warm-started re-design + act), n = "
+          f"{env.unwrapped.model.n}: median {med:.3f} ms, p90 "
+          f"{np.percentile(adaptive, 90) * 1e3:.3f} ms -> {100 / med:.0f}x faster than real "
+          f"time at dt = 0.1 s")
+    print(f"scipy solve_discrete_are from scratch on the same models: median "
+          f"{np.median(dare) * 1e3:.3f} ms (DARE alone, without the identifier)")
+    print(f"warm-started step / from-scratch DARE: {med / (np.median(dare) * 1e3):.2f}")
+
+
+if __name__ == "__main__":
+    main()
