@@ -315,8 +315,8 @@ def test_pbsid_peer_check_against_nfoursid():
     from scipy.linalg import solve_discrete_are
 
     nfoursid = pytest.importorskip("nfoursid.nfoursid")
-    from spacecraft_env import FlexibleSpacecraftModel
     from identifiers import add_measurement_noise, identification_inputs
+    from spacecraft_env import FlexibleSpacecraftModel
 
     truth = FlexibleSpacecraftModel(scenario="constant")
     rng = np.random.default_rng(0)

@@ -29,7 +29,7 @@ ENV_IDS = {"constant": "spacecraft_env:FlexibleSpacecraft-v0",
            "solar_rotation": "spacecraft_env:FlexibleSpacecraftSolarRotation-v0"}
 
 
-def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:  # noqa: N802  (a table, not a class)
+def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
     """Name -> factory ``env -> Controller`` for the comparison."""
     return {
         "LQR (fixed)": lambda env: LQR(env, weights),

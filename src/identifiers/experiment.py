@@ -222,7 +222,8 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
         }
     metrics = {
         "scenario": scenario, "seeds": seeds, "snr_db": snr_db, "order_n": n, "p": p,
-        "forgetting": forgetting, "regularization": regularization, "n_samples": n_samples, "dt": dt,
+        "forgetting": forgetting, "regularization": regularization, "n_samples": n_samples,
+        "dt": dt,
         "convergence_s": convergence_s, "output_labels": list(labels),
         "methods": results, "paper": PAPER_TABLES.get(scenario),
     }

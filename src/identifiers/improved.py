@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from scipy.linalg.blas import dger
 
 from identifiers.base import RecursivePBSIDBase
