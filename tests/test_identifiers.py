@@ -118,6 +118,7 @@ def test_pbsid_exact_on_noise_free_spacecraft():
 # ------------------------------------------------------------------ recursive identifiers
 @pytest.mark.parametrize("make", [
     lambda: ImprovedRPBSID(4, 8, 0.999),
+    lambda: ImprovedRPBSID(4, 8, 0.999, variant="predictor"),
     lambda: ClassicalRPBSID(4, 8, 0.999),
     lambda: WindowedPBSID(4, 8, window=600, refit_every=100),
 ])
@@ -125,7 +126,8 @@ def test_online_identifiers_converge_on_well_posed_system(make):
     true, u, y = _innovation_system()
     seq = make().fit(u, y)
     final = seq[len(seq) - 1]
-    np.testing.assert_allclose(np.sort(np.abs(final.poles())), TRUE_POLES, atol=0.02)
+    # forgetting 0.999 keeps ~1000 of the 3000 samples: a looser pole band than batch
+    np.testing.assert_allclose(np.sort(np.abs(final.poles())), TRUE_POLES, atol=0.03)
     u_test = np.random.default_rng(5).normal(size=(300, 2))
     assert normalized_error(final.simulate(u_test), true.simulate(u_test)).max() < 3.0
 
@@ -133,7 +135,8 @@ def test_online_identifiers_converge_on_well_posed_system(make):
 def test_improved_state_equals_classical_state():
     """The forward-prediction state is the classical W LK phi without LK."""
     _, u, y = _innovation_system(n_samples=400)
-    imp, cls = ImprovedRPBSID(4, 8, 0.99, f=8), ClassicalRPBSID(4, 8, 0.99, f=8)
+    imp = ImprovedRPBSID(4, 8, 0.99, f=8, variant="predictor")
+    cls = ClassicalRPBSID(4, 8, 0.99, f=8)
     for k in range(400):
         imp.update(u[k], y[k])
         cls.update(u[k], y[k])

@@ -1,16 +1,28 @@
 """Improved recursive PBSID: no Hankel matrix and no SVD per step.
 
-Two state updates share the recursive VARX (paper Eq. 20-24) and the RLS
-stage for the system matrices (Eq. 47-55):
+Three variants share the recursive VARX (paper Eq. 20-24); none forms a
+Hankel matrix or computes an SVD per step.
 
-``variant="predictor"`` (default)
+``variant="consistent"`` (default)
+    The state is ``x_k = M phi_k`` with ``M = W LK(Xi)``, computed as in the
+    predictor variant. Instead of a second and third RLS on a sequence of
+    states that were each computed with a different, older VARX (whose
+    basis therefore drifts), it keeps the exponentially weighted second
+    moments of the extended window ``[z_k; phi_k]`` (one in-place rank-1
+    update per sample) and every ``refit_every`` samples solves ``C`` and
+    ``[A B K]`` by least squares over the forgetting window with every state
+    defined by the *current* VARX: the batch PBSID solution on that window.
+    O(p (r + m)^2) per sample plus O(n p^2 (r + m)^2) per refit. Measured the
+    most accurate recursive method here (README).
+
+``variant="predictor"``
     The state is the first n entries of the VARX predictor run forward
     ``ceil(n / m)`` steps from the past window, with future inputs set to
     zero and each future output replaced by its own prediction. This equals
     the classical RPBSID state ``x = [I_n 0] LK phi`` exactly (DESIGN.md 2.4)
     without ever forming LK: O(ceil(n/m) m p (r + m)) per step instead of
-    O(p^2 m^2 p (r + m)). Same accuracy as the classical method, lower cost
-    than the APSA form.
+    O(p^2 m^2 p (r + m)); then RLS for C and [A B K] (Eq. 47-55) as in the
+    classical method, whose accuracy it shares (same ``f``, same ``W``).
 
 ``variant="apsa"`` (the paper's algorithm, Eq. 25-46)
     The future window ``ybar_k = Gamma_k x_k + H_k zbar_k`` is treated as a
@@ -46,7 +58,7 @@ from identifiers.varx import free_response, predictor_product, toeplitz_windows
 __all__ = ["VARIANTS", "ImprovedRPBSID"]
 
 #: State-update variants of :class:`ImprovedRPBSID`.
-VARIANTS = ("predictor", "consistent", "apsa")
+VARIANTS = ("consistent", "predictor", "apsa")
 
 
 class ImprovedRPBSID(RecursivePBSIDBase):
@@ -60,8 +72,11 @@ class ImprovedRPBSID(RecursivePBSIDBase):
         Past window; the paper uses 15.
     forgetting : float
         Default for every forgetting factor beta_1..beta_4 (paper: 0.98).
-    variant : {"predictor", "apsa"}
-        State update, see the module docstring; default "predictor".
+    variant : {"consistent", "predictor", "apsa"}
+        See the module docstring; default "consistent".
+    refit_every : int
+        Samples between least-squares refits of the system matrices
+        (``"consistent"`` only).
     mu, nu : float
         APSA step size and regularization (paper: 0.01 and 1).
     state_forgetting : float, optional
@@ -72,7 +87,7 @@ class ImprovedRPBSID(RecursivePBSIDBase):
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
-                 variant: str = "predictor", mu: float = 0.01, nu: float = 1.0,
+                 variant: str = "consistent", mu: float = 0.01, nu: float = 1.0,
                  state_forgetting: float | None = None, refit_every: int = 10,
                  **kwargs) -> None:
         if variant not in VARIANTS:
@@ -242,7 +257,7 @@ class ImprovedRPBSID(RecursivePBSIDBase):
         self._tau = tau
 
     def _current_state(self) -> np.ndarray | None:
-        if self.variant == "predictor" or self._x is None:
+        if self.variant != "apsa" or self._x is None:
             return self._x
         # propagate x_{K-p} to K + 1 with the identified predictor and stored z's
         a, b, c, d, k = self._matrices()

@@ -21,8 +21,10 @@ __all__ = ["WindowedPBSID"]
 class WindowedPBSID(OnlineIdentifier):
     """Batch PBSID refitted on a sliding window at every step.
 
-    Every refit returns its model in a new SVD basis (``consistent_basis``
-    is False); :class:`~identifiers.model.ModelSequence` re-bases them.
+    Every refit returns its model in a new SVD basis; the refit is aligned to
+    the previous one by the least-squares similarity ``T`` that maps the new
+    state estimates onto the previous ones over the samples both windows
+    share, so successive models use one state basis (``consistent_basis``).
 
     Parameters
     ----------
@@ -43,7 +45,7 @@ class WindowedPBSID(OnlineIdentifier):
         the window length.
     """
 
-    consistent_basis = False
+    consistent_basis = True
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 1.0, *, window: int = 500,
                  refit_every: int = 1, f: int | None = None, dt: float = 0.1,
@@ -63,6 +65,7 @@ class WindowedPBSID(OnlineIdentifier):
         self._u = self._y = None
         self._result = None
         self._state = None
+        self._last_refit = 0
 
     def _allocate(self, r: int, m: int) -> None:
         if self.window - self.p <= self.p * (r + m):
@@ -86,10 +89,29 @@ class WindowedPBSID(OnlineIdentifier):
             weights = None
             if self.forgetting < 1.0:
                 weights = self.forgetting ** np.arange(self.window)[::-1]
-            self._result = pbsid(self._u, self._y, self.n, self.p, self.f, dt=self.dt,
-                                 weights=weights, full_output=True,
-                                 regularization=self.regularization * self.window)
-            self._state = self._result.next_state
+            result = pbsid(self._u, self._y, self.n, self.p, self.f, dt=self.dt,
+                           weights=weights, full_output=True,
+                           regularization=self.regularization * self.window)
+            self._align(result)
+            self._result = result
+            self._last_refit = self._k + 1
+            self._state = result.next_state
+
+    def _align(self, result) -> None:
+        """Express ``result`` in the previous refit's state basis (in place)."""
+        prev = self._result
+        if prev is None:
+            return
+        shift = self._k + 1 - self._last_refit
+        old, new = prev.states[shift:], result.states[:len(prev.states) - shift]
+        if len(new) < 2 * self.n:
+            return
+        t_mat = np.linalg.lstsq(new, old, rcond=None)[0].T          # x_old ~ T x_new
+        if not np.all(np.isfinite(t_mat)) or np.linalg.cond(t_mat) > 1e8:
+            return
+        result.model = result.model.transform(t_mat)
+        result.states = result.states @ t_mat.T
+        result.next_state = t_mat @ result.next_state
 
     def _matrices(self):
         if self._result is None:

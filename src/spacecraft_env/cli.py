@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--seeds", type=int, default=10, help="noise seeds 0..N-1")
     ident.add_argument("--out", default="results/identify", help="output directory")
     ident.add_argument("--methods", nargs="+", default=None,
-                       help="subset of: improved improved-consistent improved-apsa "
+                       help="subset of: improved improved-predictor improved-apsa "
                             "classical windowed-svd")
     ident.add_argument("--snr-db", type=_snr, default=40.0,
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--forgetting", type=float, default=0.98, help="paper: 0.98")
     ident.add_argument("--regularization", type=float, default=0.0,
                        help="VARX Tikhonov floor, fraction of the effective memory (paper: 0)")
+    ident.add_argument("--warmup", type=int, default=None,
+                       help="warm-up samples of the recursive methods (default: theirs)")
 
     ctl = sub.add_parser("control", help="closed-loop comparison of the controllers")
     ctl.add_argument("--scenario", choices=["constant", "docking", "solar_rotation"],
@@ -108,7 +110,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
                                      snr_db=args.snr_db, n_modes=args.modes, p=args.p,
                                      forgetting=args.forgetting,
-                                     regularization=args.regularization)
+                                     regularization=args.regularization,
+                                     warmup=args.warmup)
         print((Path(args.out) / "table.md").read_text())
         print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
               f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
