@@ -132,9 +132,9 @@ def test_settling_time_metric_on_synthetic_trajectory():
 def test_adaptive_lqr_runs_and_counts_its_safeguards():
     env = gym.make("FlexibleSpacecraftDocking-v0")
     ctrl = AdaptiveLQR(env.unwrapped)
-    traj = run_episode(env, ctrl, seed=0, max_steps=300)
+    traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
-    assert stats["steps"] == 300
+    assert stats["steps"] == 650
     assert stats["fallback_steps"] >= ctrl.identifier.warmup - 1   # PD until warmed up
     assert stats["redesigns"] + stats["rejected_unstable"] + stats["failed_redesigns"] > 0
     assert np.all(np.isfinite(traj.actions))

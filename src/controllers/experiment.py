@@ -78,8 +78,8 @@ def run_control(scenario: str = "docking", seeds: int = 10, out: str | Path = "r
     (out / "table.md").write_text(text)
     with open(out / "results.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
-        cols = ["attitude_rms_deg", "attitude_peak_deg", "vibration_rms_mm", "torque_rms_Nm",
-                "effort_N2m2s", "return", "stable"]
+        cols = ["attitude_rms_deg", "attitude_rms_after_deg", "attitude_peak_deg",
+                "vibration_rms_mm", "torque_rms_Nm", "effort_N2m2s", "return", "stable"]
         writer.writerow(["controller", "seed", *cols, "settling_s"])
         for name, row in table.items():
             for m in row["per_seed"]:

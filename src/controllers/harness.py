@@ -148,15 +148,17 @@ def run_episode(env, controller: Controller, seed: int | None = None,
 
 
 def episode_metrics(traj: Trajectory, model, settle_tol_deg: float = 0.05,
-                    stable_bound_deg: float = 1.0) -> dict[str, Any]:
+                    stable_bound_deg: float = 1.0, after_s: float = 50.0) -> dict[str, Any]:
     """Scores of one episode.
 
     Returns
     -------
     dict
         ``attitude_rms_deg`` and ``attitude_peak_deg`` (true attitude error,
-        all axes, after the first step), ``settling_s`` (per scenario event:
-        time after the event until the error stays below ``settle_tol_deg``;
+        all axes, after the first step), ``attitude_rms_after_deg`` (the same
+        RMS from ``after_s`` on, e.g. once an identifier has warmed up),
+        ``settling_s`` (per scenario event: time after the event until the
+        error stays below ``settle_tol_deg``;
         None if it never does), ``vibration_rms_mm`` (true tip deflections),
         ``torque_rms_Nm`` and ``effort_N2m2s`` (integral of |u|^2),
         ``return``, ``stable`` (not terminated, finite, and the error over the
@@ -181,8 +183,11 @@ def episode_metrics(traj: Trajectory, model, settle_tol_deg: float = 0.05,
             settling.append(float(traj.time[outside[-1] + 1] - event))
     tail = err_norm[-max(1, len(err_norm) // 10):]
     finite = bool(np.all(np.isfinite(traj.states)))
+    late = traj.time >= after_s
     return {
         "attitude_rms_deg": float(np.sqrt(np.mean(err**2))),
+        "attitude_rms_after_deg": (float(np.sqrt(np.mean(err[late] ** 2))) if late.any()
+                                   else float("nan")),
         "attitude_peak_deg": float(err_norm.max()),
         "settling_s": settling,
         "vibration_rms_mm": float(np.sqrt(np.mean(defl**2))),
@@ -232,8 +237,8 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
                 first[name] = traj
             bar.update()
         env.close()
-        keys = ["attitude_rms_deg", "attitude_peak_deg", "vibration_rms_mm", "torque_rms_Nm",
-                "effort_N2m2s", "return"]
+        keys = ["attitude_rms_deg", "attitude_rms_after_deg", "attitude_peak_deg",
+                "vibration_rms_mm", "torque_rms_Nm", "effort_N2m2s", "return"]
         arr = {k: np.array([m[k] for m in per_seed]) for k in keys}
         table[name] = {
             "per_seed": per_seed,
@@ -248,20 +253,24 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
 
 def format_table(table: dict[str, dict], oracle: str | None = None) -> str:
     """Markdown table of :func:`compare` results (mean ± std over seeds)."""
-    head = ("| controller | stable | attitude RMS (deg) | peak (deg) | vibration RMS (mm) "
-            "| torque RMS (N m) | return |" + (" RMS / oracle |" if oracle else ""))
-    lines = [head, "|" + "---|" * (7 + (1 if oracle else 0))]
+    head = ("| controller | stable | attitude RMS (deg) | RMS t >= 50 s (deg) | peak (deg) "
+            "| vibration RMS (mm) | torque RMS (N m) | return |"
+            + (" RMS / oracle | RMS t >= 50 s / oracle |" if oracle else ""))
+    lines = [head, "|" + "---|" * (8 + (2 if oracle else 0))]
     ref = table[oracle]["mean"]["attitude_rms_deg"] if oracle in table else None
+    ref_late = table[oracle]["mean"]["attitude_rms_after_deg"] if oracle in table else None
     for name, row in table.items():
         mu, sd = row["mean"], row["std"]
         cells = [f"{row['stable_runs']}/{row['runs']}",
                  f"{mu['attitude_rms_deg']:.4f} ± {sd['attitude_rms_deg']:.4f}",
+                 f"{mu['attitude_rms_after_deg']:.4f} ± {sd['attitude_rms_after_deg']:.4f}",
                  f"{mu['attitude_peak_deg']:.3f} ± {sd['attitude_peak_deg']:.3f}",
                  f"{mu['vibration_rms_mm']:.3f} ± {sd['vibration_rms_mm']:.3f}",
                  f"{mu['torque_rms_Nm']:.3f} ± {sd['torque_rms_Nm']:.3f}",
                  f"{mu['return']:.4g}"]
         if ref:
             cells.append(f"{mu['attitude_rms_deg'] / ref:.2f}")
+            cells.append(f"{mu['attitude_rms_after_deg'] / ref_late:.2f}")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
