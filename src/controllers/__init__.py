@@ -5,11 +5,14 @@
   time-varying model and state), :class:`PD`.
 * :class:`PolicyController`: any SB3 policy behind the same interface.
 * :func:`run_episode`, :func:`compare`: the closed-loop harness.
+* :class:`IdentifiedModelFeatures`: the identifier as a model-learning
+  component for RL agents (``controllers.rl`` trains SB3 agents).
 """
 
 from controllers.adaptive import AdaptiveLQR
 from controllers.base import Controller, PolicyController
 from controllers.baselines import LQR, PD, LQRWeights, OracleLQR, equilibrium_state
+from controllers.features import IdentifiedModelFeatures
 from controllers.harness import (
     Trajectory,
     compare,
@@ -25,6 +28,7 @@ __all__ = [
     "PD",
     "AdaptiveLQR",
     "Controller",
+    "IdentifiedModelFeatures",
     "LQRWeights",
     "OracleLQR",
     "PolicyController",

@@ -10,6 +10,9 @@ Commands
 ``control``
     Fixed LQR, PD, adaptive LQR and oracle LQR compared in closed loop
     (:func:`controllers.experiment.run_control`).
+``train``
+    stable-baselines3 agents with or without identified-model features
+    (:func:`controllers.rl.run_training`).
 """
 
 from __future__ import annotations
@@ -65,6 +68,17 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--torque-weight", type=float, default=None,
                      help="LQR torque weight per (N m)^2; smaller = more aggressive (0.3)")
     ctl.add_argument("--max-torque", type=float, default=None, help="N m per unit action (10)")
+
+    train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)")
+    train.add_argument("--algo", choices=["ppo", "sac"], default="ppo")
+    train.add_argument("--features", choices=["none", "identified"], default="none")
+    train.add_argument("--timesteps", type=int, default=100_000)
+    train.add_argument("--seeds", type=int, default=1)
+    train.add_argument("--scenario", choices=["constant", "docking", "solar_rotation"],
+                       default="docking")
+    train.add_argument("--eval-every", type=int, default=20_000)
+    train.add_argument("--out", default="results/train")
+    train.add_argument("--tensorboard", default=None, help="TensorBoard log directory")
     return parser
 
 
@@ -104,6 +118,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                     weights=weights)
         print((Path(args.out) / "table.md").read_text())
         print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
+    elif args.command == "train":
+        from controllers.rl import run_training
+
+        m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
+                         scenario=args.scenario, eval_every=args.eval_every,
+                         tensorboard=args.tensorboard)
+        print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps",
+                                           "final_attitude_rms_deg", "final_return",
+                                           "adaptive_lqr")}, indent=2))
+        print("steps to 2x adaptive LQR RMS:",
+              [r["steps_to_2x_adaptive"] for r in m["runs"]])
+        print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
     elif args.command == "identify":
         from identifiers.experiment import run_identification
 
