@@ -53,6 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--forgetting", type=float, default=0.98, help="paper: 0.98")
     ident.add_argument("--regularization", type=float, default=0.0,
                        help="VARX Tikhonov floor, fraction of the effective memory (paper: 0)")
+    ident.add_argument("--convergence", type=float, default=50.0,
+                       help="start of the held-out VAF window, s (default 50)")
     ident.add_argument("--warmup", type=int, default=None,
                        help="warm-up samples of the recursive methods (default: theirs)")
 
@@ -137,7 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      snr_db=args.snr_db, n_modes=args.modes, p=args.p,
                                      forgetting=args.forgetting,
                                      regularization=args.regularization,
-                                     warmup=args.warmup)
+                                     warmup=args.warmup, convergence_s=args.convergence)
         print((Path(args.out) / "table.md").read_text())
         print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
               f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
