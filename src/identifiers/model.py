@@ -235,21 +235,7 @@ class ModelSequence(Sequence):
         inputs : (N, r) ndarray
             Input sequence aligned with the models.
         """
-        u = np.asarray(inputs, dtype=float)
-        n_steps = min(len(self), u.shape[0])
-        k0 = self.first_valid() if start is None else int(start)
-        x = np.zeros(self.A.shape[1])
-        y = np.empty((n_steps, self.C.shape[1]))
-        cache: dict[int, StateSpaceModel] = {}
-        for k in range(n_steps):
-            j = self._index(k, k0)
-            mod = cache.get(j)
-            if mod is None:
-                cache = {j: self.chained(j)}
-                mod = cache[j]
-            y[k] = mod.C @ x + mod.D @ u[k]
-            x = mod.A @ x + mod.B @ u[k]
-        return y
+        return self._run(inputs, None, start)
 
     def predict(self, inputs: np.ndarray, outputs: np.ndarray,
                 start: int | None = None) -> np.ndarray:
@@ -257,21 +243,29 @@ class ModelSequence(Sequence):
 
         ``x_{k+1} = A_k x_k + B_k u_k + K_k (y_k - C_k x_k - D_k u_k)``.
         """
+        return self._run(inputs, outputs, start)
+
+    def _run(self, inputs: np.ndarray, outputs: np.ndarray | None,
+             start: int | None) -> np.ndarray:
+        """Chain the models over a record: simulation, or prediction if ``outputs``."""
         u = np.asarray(inputs, dtype=float)
-        y = np.asarray(outputs, dtype=float)
+        y = None if outputs is None else np.asarray(outputs, dtype=float)
+        n_steps = min(len(self), u.shape[0]) if y is None else y.shape[0]
         k0 = self.first_valid() if start is None else int(start)
         x = np.zeros(self.A.shape[1])
-        yhat = np.empty_like(y)
+        out = np.empty((n_steps, self.C.shape[1]))
         cache: dict[int, StateSpaceModel] = {}
-        for k in range(y.shape[0]):
+        for k in range(n_steps):
             j = self._index(k, k0)
             mod = cache.get(j)
             if mod is None:
                 cache = {j: self.chained(j)}
                 mod = cache[j]
-            yhat[k] = mod.C @ x + mod.D @ u[k]
-            x = mod.A @ x + mod.B @ u[k] + mod.K @ (y[k] - yhat[k])
-        return yhat
+            out[k] = mod.C @ x + mod.D @ u[k]
+            x = mod.A @ x + mod.B @ u[k]
+            if y is not None:
+                x += mod.K @ (y[k] - out[k])
+        return out
 
     def modal(self, n_freq: int | None = None) -> np.ndarray:
         """Identified natural frequencies (Hz) per step, NaN-padded, (N, n_freq)."""
