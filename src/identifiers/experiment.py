@@ -326,21 +326,26 @@ def _plot_modal(path: Path, truth, seqs: dict, scenario: str, dt: float) -> None
     n_samples = len(next(iter(seqs.values())))
     steps = np.arange(0, n_samples, 10)
     t = steps * dt
-    true_f = _true_frequencies(truth, t, 4)
-    fig, axes = plt.subplots(1, len(seqs), figsize=(4.5 * len(seqs), 4), sharey=True,
+    true_f = _true_frequencies(truth, t, truth.n // 2 - 3)
+    cols = min(3, len(seqs))
+    rows = -(-len(seqs) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.6 * rows), sharey=True,
                              squeeze=False)
-    for ax, (name, seq) in zip(axes[0], seqs.items(), strict=True):
+    for ax in axes.flat[len(seqs):]:
+        ax.set_visible(False)
+    for ax, (name, seq) in zip(axes.flat, seqs.items(), strict=False):
         for k in steps:
             if seq.valid[k]:
                 f, z = seq[k].modal()
                 keep = (f < 1.0) & (z > -0.2) & (z < 1.0)
                 ax.plot(np.full(keep.sum(), k * dt), f[keep], ".", color="tab:blue", ms=2)
-        ax.plot(t, true_f, "k-", lw=1.2)
+        ax.plot(t, true_f, "k-", lw=1.0)
         ax.set_title(name)
         ax.set_xlabel("time (s)")
-        ax.set_ylim(0, 1.0)
+        ax.set_ylim(0, 0.7)
         ax.grid(alpha=0.3)
-    axes[0, 0].set_ylabel("natural frequency (Hz)")
+    for row in axes:
+        row[0].set_ylabel("natural frequency (Hz)")
     fig.suptitle(f"{scenario}: identified modal frequencies (dots) vs true (lines), seed 0")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
