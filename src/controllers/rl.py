@@ -29,7 +29,7 @@ from controllers.experiment import ENV_IDS
 from controllers.features import IdentifiedModelFeatures
 from controllers.harness import episode_metrics, run_episode
 
-__all__ = ["NormalizedPolicy", "run_training"]
+__all__ = ["NormalizedPolicy", "comparison_table", "run_training"]
 
 EVAL_SEEDS = (1000, 1001, 1002)
 
@@ -153,6 +153,24 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             self.bar.close()
 
     return EvalCallback()
+
+
+def comparison_table(directories) -> str:
+    """Markdown table of several ``spacecraft train`` output directories."""
+    rows, baseline = [], None
+    for directory in directories:
+        m = json.loads((Path(directory) / "metrics.json").read_text())
+        baseline = m["adaptive_lqr"]
+        reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
+        rows.append(f"| {m['algo'].upper()} | {m['features']} | {m['timesteps']:,} "
+                    f"| {m['final_attitude_rms_deg']:.3f} | {m['final_return']:.4g} "
+                    f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
+    head = ["| agent | features | env steps | final attitude RMS (deg) | final return "
+            "| env steps to <= 2x adaptive LQR RMS |", "|---|---|---|---|---|---|"]
+    if baseline is not None:
+        rows.append(f"| adaptive LQR | - | - | {baseline['attitude_rms_deg']:.3f} "
+                    f"| {baseline['return']:.4g} | - |")
+    return "\n".join(head + rows) + "\n"
 
 
 def _plot_curves(path: Path, metrics: dict) -> None:

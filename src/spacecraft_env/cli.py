@@ -12,7 +12,7 @@ Commands
     (:func:`controllers.experiment.run_control`).
 ``train``
     stable-baselines3 agents with or without identified-model features
-    (:func:`controllers.rl.run_training`).
+    (:func:`controllers.rl.run_training`); ``rl-table`` tabulates runs.
 """
 
 from __future__ import annotations
@@ -81,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--eval-every", type=int, default=20_000)
     train.add_argument("--out", default="results/train")
     train.add_argument("--tensorboard", default=None, help="TensorBoard log directory")
+
+    table = sub.add_parser("rl-table", help="comparison table of 'train' output directories")
+    table.add_argument("dirs", nargs="+")
     return parser
 
 
@@ -132,6 +135,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("steps to 2x adaptive LQR RMS:",
               [r["steps_to_2x_adaptive"] for r in m["runs"]])
         print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
+    elif args.command == "rl-table":
+        from controllers.rl import comparison_table
+
+        print(comparison_table(args.dirs))
     elif args.command == "identify":
         from identifiers.experiment import run_identification
 
