@@ -262,7 +262,7 @@ class OnlineIdentifier(ABC):
             raise ValueError(f"U and Y must have shapes (N, r) and (N, m), got {u.shape} and "
                              f"{y.shape}")
         # Per-sample BLAS calls are tiny: threads only add synchronization
-        # (5x slower matrix-vector products with 2 OpenBLAS threads).
+        # (matrix-vector products several times slower with 2 OpenBLAS threads).
         with threadpool_limits(limits=1, user_api="blas"):
             return self._fit(u, y)
 
