@@ -231,3 +231,12 @@ def test_model_bad_input(kwargs, error):
 def test_parameter_validation(call):
     with pytest.raises((ValueError, TypeError)):
         call()
+
+
+def test_modal_matches_eigenvalues_and_table2_without_coupling():
+    model = FlexibleSpacecraftModel(ets8_parameters(2, coupling=False))
+    freq, zeta = model.modal(0.0)
+    expected = np.sort(np.concatenate([PADDLE_FREQUENCIES_HZ[:2]] * 2
+                                      + [ANTENNA_FREQUENCIES_HZ[:2]] * 2))
+    np.testing.assert_allclose(freq, expected, rtol=1e-10)
+    np.testing.assert_allclose(zeta, 0.01, rtol=1e-10)

@@ -69,14 +69,10 @@ class Trajectory:
     controller_stats: dict = field(default_factory=dict)
 
 
-def _first_frequencies(a: np.ndarray, dt: float | None, count: int) -> np.ndarray:
-    ev = np.linalg.eigvals(a)
-    if dt is not None:
-        ev = ev[np.abs(ev) > 1e-12]
-        ev = np.log(ev.astype(complex)) / dt
-    f = np.sort(np.abs(ev[ev.imag > 1e-9])) / (2 * np.pi)
+def _first(freqs: np.ndarray, count: int) -> np.ndarray:
+    """The ``count`` lowest frequencies, NaN-padded."""
     out = np.full(count, np.nan)
-    out[:min(count, f.size)] = f[:count]
+    out[:min(count, freqs.size)] = freqs[:count]
     return out
 
 
@@ -129,9 +125,8 @@ def run_episode(env, controller: Controller, seed: int | None = None,
                 freq_t.append(info["time"])
                 model = ident.model
                 freq_id.append(np.full(n_freq, np.nan) if model is None
-                               else _first_frequencies(model.A, model.dt, n_freq))
-                freq_true.append(_first_frequencies(base.model.continuous(info["time"]).A,
-                                                    None, n_freq))
+                               else _first(model.modal()[0], n_freq))
+                freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
             k += 1
     dt = base.model.dt
     return Trajectory(

@@ -117,15 +117,6 @@ def _summary(values: np.ndarray) -> dict:
     }
 
 
-def _true_frequencies(truth, times: np.ndarray, count: int) -> np.ndarray:
-    out = np.empty((times.size, count))
-    for i, t in enumerate(times):
-        ev = np.linalg.eigvals(truth.continuous(float(t)).A)
-        f = np.sort(np.abs(ev.imag[ev.imag > 1e-9])) / (2 * np.pi)
-        out[i] = f[:count]
-    return out
-
-
 def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Path = "results",
                        *, methods: Sequence[str] | None = None, snr_db: float | None = 40.0,
                        n_modes: int = 2, p: int = 15, forgetting: float = 0.98,
@@ -326,7 +317,7 @@ def _plot_modal(path: Path, truth, seqs: dict, scenario: str, dt: float) -> None
     n_samples = len(next(iter(seqs.values())))
     steps = np.arange(0, n_samples, 10)
     t = steps * dt
-    true_f = _true_frequencies(truth, t, truth.n // 2 - 3)
+    true_f = np.array([truth.modal(float(tk))[0] for tk in t])
     cols = min(3, len(seqs))
     rows = -(-len(seqs) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.6 * rows), sharey=True,

@@ -190,8 +190,8 @@ class ImprovedRPBSID(RecursivePBSIDBase):
         self._x = self._m_state @ self._phi if self._mats is not None else None
 
     def _state_map(self) -> np.ndarray:
-        lk = predictor_product(self._varx.theta, self.n_inputs, self._horizon)
-        return lk
+        """LK of the current VARX over the state horizon, (f m, p (r + m))."""
+        return predictor_product(self._varx.theta, self.n_inputs, self._horizon)
 
     def _fix_basis_from_moments(self) -> None:
         """W: leading eigenvectors of the prediction covariance LK R_phi LK^T (once)."""

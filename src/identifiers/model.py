@@ -130,24 +130,23 @@ class StateSpaceModel:
         u = np.asarray(inputs, dtype=float)
         if u.ndim != 2 or u.shape[1] != self.n_inputs:
             raise ValueError(f"inputs must have shape (N, {self.n_inputs}), got {u.shape}")
-        x = np.zeros(self.n) if x0 is None else np.asarray(x0, dtype=float)
-        y = np.empty((u.shape[0], self.n_outputs))
-        for k in range(u.shape[0]):
-            y[k] = self.C @ x + self.D @ u[k]
-            x = self.A @ x + self.B @ u[k]
-        return y
+        return self._run(u, None, x0)
 
     def predict(self, inputs: np.ndarray, outputs: np.ndarray,
                 x0: np.ndarray | None = None) -> np.ndarray:
         """One-step-ahead predictions ``yhat_{k|k-1}`` with the innovation gain K."""
-        u = np.asarray(inputs, dtype=float)
-        y = np.asarray(outputs, dtype=float)
+        return self._run(np.asarray(inputs, dtype=float), np.asarray(outputs, dtype=float), x0)
+
+    def _run(self, u: np.ndarray, y: np.ndarray | None, x0: np.ndarray | None) -> np.ndarray:
+        """Simulation, or one-step prediction when measured outputs ``y`` are given."""
         x = np.zeros(self.n) if x0 is None else np.asarray(x0, dtype=float)
-        yhat = np.empty_like(y)
+        out = np.empty((u.shape[0], self.n_outputs))
         for k in range(u.shape[0]):
-            yhat[k] = self.C @ x + self.D @ u[k]
-            x = self.A @ x + self.B @ u[k] + self.K @ (y[k] - yhat[k])
-        return yhat
+            out[k] = self.C @ x + self.D @ u[k]
+            x = self.A @ x + self.B @ u[k]
+            if y is not None:
+                x += self.K @ (y[k] - out[k])
+        return out
 
 
 class ModelSequence(Sequence):

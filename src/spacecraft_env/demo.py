@@ -77,8 +77,7 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
         if k % gif_every == 0:
             frames.append(Image.fromarray(env.render()))
             inertia.append(np.diag(env.model.inertia(env.time)))
-            ev = np.linalg.eigvals(env.model.continuous(env.time).A)
-            freqs.append(np.sort(np.abs(ev.imag[ev.imag > 1e-9]))[:3] / (2 * np.pi))
+            freqs.append(env.model.modal(env.time)[0][:3])
         if terminated or truncated:
             break
     t = np.array(times)

@@ -398,6 +398,21 @@ class FlexibleSpacecraftModel:
         a, b = self._continuous(self.configuration(t), t)
         return StateSpaceMatrices(a, b, self.C.copy(), self.D.copy(), None)
 
+    def modal(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequencies (Hz) and damping ratios of the true plant at ``t``.
+
+        From the eigenvalues ``s`` of ``A_c(t)`` with positive imaginary part:
+        ``|s| / 2 pi`` and ``-Re(s) / |s|``, sorted by frequency (the rigid-body
+        poles at 0 are left out). The same definitions as
+        ``identifiers.StateSpaceModel.modal`` uses for identified models.
+        """
+        a, _ = self._continuous(self.configuration(t), t)
+        s = np.linalg.eigvals(a)
+        s = s[s.imag > 1e-9]
+        wn = np.abs(s)
+        order = np.argsort(wn)
+        return wn[order] / (2 * np.pi), -s.real[order] / wn[order]
+
     def _discrete_ab(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Cached zero-order-hold ``(A_d, B_d)`` at time ``t`` (read-only arrays)."""
         key = self._key(t)
