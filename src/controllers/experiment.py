@@ -21,7 +21,8 @@ from controllers.adaptive import AdaptiveLQR
 from controllers.baselines import LQR, PD, LQRWeights, OracleLQR
 from controllers.harness import compare, format_table, plot_comparison
 
-__all__ = ["CONTROLLERS", "ENV_IDS", "run_control"]
+__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "ENV_IDS", "control_task", "run_control",
+           "scenario_override"]
 
 #: Scenario name -> registered environment id.
 ENV_IDS = {"constant": "spacecraft_env:FlexibleSpacecraft-v0",
@@ -37,6 +38,102 @@ def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
         "adaptive LQR": lambda env: AdaptiveLQR(env, weights=weights),
         "oracle LQR": lambda env: OracleLQR(env, weights),
     }
+
+
+#: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
+CONTROLLER_KEYS = {"lqr": "LQR (fixed)", "pd": "PD", "adaptive-lqr": "adaptive LQR",
+                   "oracle-lqr": "oracle LQR"}
+
+
+def scenario_override(module_mass: float | None = None,
+                      rotation_rate: float | None = None) -> dict[str, Any]:
+    """``gym.make`` keywords for a variant of the paper's scenarios.
+
+    Parameters
+    ----------
+    module_mass : float, optional
+        Mass of each of the two docking modules, kg (paper: 600); they dock
+        at 100 s and 180 s on the yaw axis as in the paper.
+    rotation_rate : float, optional
+        Solar-paddle rotation rate, deg/s (paper: 0.2).
+
+    Returns
+    -------
+    dict
+        ``{"scenario": Scenario}`` or empty when neither is given.
+    """
+    from spacecraft_env import DockingModule, DockingScenario, SolarRotationScenario
+
+    if module_mass is not None and rotation_rate is not None:
+        raise ValueError("give module_mass (docking) or rotation_rate (solar rotation), not both")
+    if module_mass is not None:
+        return {"scenario": DockingScenario(modules=(
+            DockingModule(mass=float(module_mass), time=100.0, position=(0.0, 0.0, 3.0)),
+            DockingModule(mass=float(module_mass), time=180.0, position=(0.0, 0.0, -3.0))))}
+    if rotation_rate is not None:
+        return {"scenario": SolarRotationScenario(rate_deg_s=float(rotation_rate))}
+    return {}
+
+
+def control_task(*, controller: str, seed: int, scenario: str = "docking", task: str = "slew",
+                 module_mass: float | None = None, rotation_rate: float | None = None,
+                 max_torque: float | None = None, snr_db: float | None = 40.0,
+                 torque_weight: float | None = None, max_steps: int | None = None) -> dict:
+    """One closed-loop episode: one controller on one seed (a sweep task).
+
+    A fresh environment and controller are built, so the result is a
+    function of the arguments alone.
+
+    Parameters
+    ----------
+    controller : {"lqr", "pd", "adaptive-lqr", "oracle-lqr"}
+        See :data:`CONTROLLER_KEYS`.
+    seed : int
+        Episode seed (reference, noise, dither).
+    scenario : {"constant", "docking", "solar_rotation"}
+    task : {"slew", "regulation"}
+    module_mass, rotation_rate : float, optional
+        Scenario variants (:func:`scenario_override`).
+    max_torque : float, optional
+        N m per unit action (environment default 10).
+    snr_db : float or None
+        Measurement SNR (environment default 40 dB).
+    torque_weight : float, optional
+        LQR torque weight per (N m)^2 (:class:`LQRWeights`, default 0.3).
+    max_steps : int, optional
+        Episode length in steps (default: the registered 2500 = 250 s).
+
+    Returns
+    -------
+    dict
+        ``{"metrics": the episode metrics of :func:`episode_metrics`,
+        "timings": {"episode_s": wall time of the episode}}``.
+    """
+    import time
+
+    from controllers.harness import episode_metrics, run_episode
+
+    if scenario not in ENV_IDS:
+        raise ValueError(f"scenario must be one of {sorted(ENV_IDS)}, got {scenario!r}")
+    if controller not in CONTROLLER_KEYS:
+        raise ValueError(f"controller must be one of {sorted(CONTROLLER_KEYS)}, "
+                         f"got {controller!r}")
+    kwargs: dict[str, Any] = {"task": task, "snr_db": snr_db,
+                              **scenario_override(module_mass, rotation_rate)}
+    if max_torque is not None:
+        kwargs["max_torque"] = float(max_torque)
+    weights = LQRWeights() if torque_weight is None else LQRWeights(torque=float(torque_weight))
+    env = gym.make(ENV_IDS[scenario], **kwargs)
+    try:
+        ctrl = CONTROLLERS(weights)[CONTROLLER_KEYS[controller]](env)
+        start = time.perf_counter()
+        traj = run_episode(env, ctrl, seed=int(seed),
+                           max_steps=None if max_steps is None else int(max_steps))
+        elapsed = time.perf_counter() - start
+        metrics = episode_metrics(traj, env.unwrapped.model)
+    finally:
+        env.close()
+    return {"metrics": metrics, "timings": {"episode_s": elapsed}}
 
 
 def run_control(scenario: str = "docking", seeds: int = 10, out: str | Path = "results/control",

@@ -25,10 +25,12 @@ It writes ``metrics.json``, ``table.md`` (our numbers beside the paper's),
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -47,8 +49,20 @@ from identifiers.improved import ImprovedRPBSID
 from identifiers.model import ModelSequence
 from identifiers.windowed import WindowedPBSID
 
-__all__ = ["METHODS", "PAPER_TABLES", "format_table", "make_identifier", "nominal_scales",
-           "run_identification"]
+__all__ = [
+    "METHODS",
+    "PAPER_TABLE5",
+    "PAPER_TABLES",
+    "IdentificationScore",
+    "format_table",
+    "identification_records",
+    "identify_task",
+    "make_identifier",
+    "nominal_scales",
+    "paper_test_response",
+    "run_identification",
+    "score_identifier",
+]
 
 #: Method name -> factory ``(n, p, forgetting, **scales) -> identifier``.
 METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
@@ -86,6 +100,13 @@ PAPER_TABLES = {
                             "omega": [5.7382, 8.9119, 7.7325]},
     },
 }
+#: The paper's Table 5: average MATLAB computation time (s) per run over
+#: 30 Monte-Carlo runs, by system order n. Keys: our method names.
+PAPER_TABLE5 = {
+    "classical": {22: 14.64, 30: 23.35, 38: 34.23, 46: 46.96},
+    "improved-apsa": {22: 12.27, 30: 19.56, 38: 28.99, 46: 39.22},
+    "windowed-svd": {22: 26.15, 30: 37.01, 38: 50.51, 46: 68.10},
+}
 _PAPER_NAME = {"improved": "improved RPBSID", "classical": "classical RPBSID",
                "windowed-svd": "SVD-based"}
 
@@ -97,6 +118,86 @@ def make_identifier(name: str, n: int, p: int, forgetting: float,
         return METHODS[name](n, p, forgetting, **kwargs)
     except KeyError:
         raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}") from None
+
+
+class IdentificationScore(NamedTuple):
+    """One identifier scored on one seed (:func:`score_identifier`).
+
+    Attributes
+    ----------
+    models : ModelSequence
+        The identified sequence ``{A_k, B_k, C_k}``.
+    test_error_pct : ndarray, shape (6,)
+        Test-response normalized error per attitude and rate channel, %;
+        ``inf`` where the identified response diverged.
+    vaf_pct : ndarray, shape (n_outputs,)
+        Held-out one-step-ahead VAF per output channel, %; ``-inf`` where
+        the prediction diverged.
+    time_s : float
+        Wall time of the identification run (``fit``), s.
+    """
+
+    models: ModelSequence
+    test_error_pct: np.ndarray
+    vaf_pct: np.ndarray
+    time_s: float
+
+
+def identification_records(truth, seed: int, n_samples: int = 2500,
+                           snr_db: float | None = 40.0) -> tuple[np.ndarray, ...]:
+    """The identification and held-out records of one seed.
+
+    Both are the truth model driven by random-phase multisine torques with
+    white measurement noise at ``snr_db`` per channel, drawn in this order
+    from ``np.random.default_rng(seed)``; the same seed gives the same
+    records in any process.
+
+    Returns
+    -------
+    u_id, y_id, u_ho, y_ho : ndarray
+        Inputs ``(n_samples, 3)`` and noisy outputs ``(n_samples, n_outputs)``.
+    """
+    rng = np.random.default_rng(seed)
+    u_id = identification_inputs(n_samples, rng, truth.dt)
+    y_id = add_measurement_noise(truth.simulate(u_id)[1], snr_db, rng)
+    u_ho = identification_inputs(n_samples, rng, truth.dt)
+    y_ho = add_measurement_noise(truth.simulate(u_ho)[1], snr_db, rng)
+    return u_id, y_id, u_ho, y_ho
+
+
+def paper_test_response(truth, n_samples: int = 2500) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's test torques and the true plant's noise-free response
+    from rest, ``(n_samples, 3)`` and ``(n_samples, n_outputs)``."""
+    u_test = paper_test_inputs(n_samples, truth.dt)
+    return u_test, truth.simulate(u_test)[1]
+
+
+def score_identifier(ident: OnlineIdentifier, records: Sequence[np.ndarray],
+                     test: tuple[np.ndarray, np.ndarray], k_conv: int) -> IdentificationScore:
+    """Run ``ident`` on an identification record and score it.
+
+    Parameters
+    ----------
+    ident : OnlineIdentifier
+        A fresh identifier.
+    records : (u_id, y_id, u_ho, y_ho)
+        From :func:`identification_records`.
+    test : (u_test, y_test)
+        From :func:`paper_test_response`.
+    k_conv : int
+        First sample of the held-out VAF window (convergence time / dt).
+    """
+    u_id, y_id, u_ho, y_ho = records
+    u_test, y_test = test
+    start = time.perf_counter()
+    seq = ident.fit(u_id, y_id)
+    elapsed = time.perf_counter() - start
+    with np.errstate(all="ignore"):
+        e = normalized_error(seq.simulate(u_test), y_test)
+        yhat = seq.predict(u_ho, y_ho, start=k_conv)
+        v = vaf(y_ho[k_conv:], yhat[k_conv:])
+    return IdentificationScore(seq, np.where(np.isfinite(e), e, np.inf),
+                               np.where(np.isfinite(v), v, -np.inf), elapsed)
 
 
 def _finite(values: np.ndarray) -> list[float | None]:
@@ -167,8 +268,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
     truth = FlexibleSpacecraftModel(ets8_parameters(n_modes), scenario=scenario)
     n = truth.n
     dt = truth.dt
-    u_test = paper_test_inputs(n_samples, dt)
-    _, y_test = truth.simulate(u_test)
+    u_test, y_test = paper_test_response(truth, n_samples)
     k_conv = round(convergence_s / dt)
     scales = {**nominal_scales(truth), "regularization": regularization}
     recursive_extra = {} if warmup is None else {"warmup": warmup}
@@ -180,25 +280,16 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
     bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
     with threadpool_limits(limits=1, user_api="blas"):
         for seed in range(seeds):
-            rng = np.random.default_rng(seed)
-            u_id = identification_inputs(n_samples, rng, dt)
-            y_id = add_measurement_noise(truth.simulate(u_id)[1], snr_db, rng)
-            u_ho = identification_inputs(n_samples, rng, dt)
-            y_ho = add_measurement_noise(truth.simulate(u_ho)[1], snr_db, rng)
+            records = identification_records(truth, seed, n_samples, snr_db)
             for name in methods:
                 extra = recursive_extra if name != "windowed-svd" else {}
                 ident = make_identifier(name, n, p, forgetting, **scales, **extra)
-                start = time.perf_counter()
-                seq = ident.fit(u_id, y_id)
-                times[name].append(time.perf_counter() - start)
-                with np.errstate(all="ignore"):
-                    e = normalized_error(seq.simulate(u_test), y_test)
-                    yhat = seq.predict(u_ho, y_ho, start=k_conv)
-                    v = vaf(y_ho[k_conv:], yhat[k_conv:])
-                err[name].append(np.where(np.isfinite(e), e, np.inf))
-                vafs[name].append(np.where(np.isfinite(v), v, -np.inf))
+                score = score_identifier(ident, records, (u_test, y_test), k_conv)
+                err[name].append(score.test_error_pct)
+                vafs[name].append(score.vaf_pct)
+                times[name].append(score.time_s)
                 if seed == 0:
-                    seed0[name] = seq
+                    seed0[name] = score.models
                 bar.update()
     bar.close()
 
@@ -229,6 +320,95 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
     _plot_responses(out / "responses.png", u_test, y_test, seed0, scenario, dt)
     _plot_modal(out / "modal.png", truth, seed0, scenario, dt)
     return metrics
+
+
+@functools.lru_cache(maxsize=4)
+def _truth(scenario: str, n_modes: int):
+    from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
+
+    return FlexibleSpacecraftModel(ets8_parameters(n_modes), scenario=scenario)
+
+
+@functools.lru_cache(maxsize=8)
+def _records(scenario: str, n_modes: int, seed: int, n_samples: int,
+             snr_db: float | None) -> tuple[np.ndarray, ...]:
+    truth = _truth(scenario, n_modes)
+    out = (*identification_records(truth, seed, n_samples, snr_db),
+           *paper_test_response(truth, n_samples))
+    for arr in out:
+        arr.setflags(write=False)
+    return out
+
+
+def identify_task(*, method: str, seed: int, scenario: str = "docking",
+                  order: int | None = None, n_modes: int = 2, p: int = 15,
+                  forgetting: float = 0.98, snr_db: float | None = 40.0,
+                  n_samples: int = 2500, convergence_s: float = 50.0,
+                  regularization: float = 0.0, warmup: int | None = None) -> dict:
+    """One identification run: one method on one seed (a sweep task).
+
+    The same keywords as :func:`run_identification`, for a single method and
+    seed; the records are those of :func:`identification_records`, so the
+    result is a function of the arguments alone (bit-identical in any
+    process when BLAS runs single-threaded). The truth model and records are
+    cached per process, so tasks sharing a seed share the simulation.
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`METHODS`.
+    seed : int
+        Input and noise seed.
+    order : int, optional
+        System order n = 22, 30, 38, 46, ... (``6 + 8 k``); overrides
+        ``n_modes`` (k modes per appendage) when given.
+
+    Returns
+    -------
+    dict
+        ``{"metrics": {...}, "timings": {"time_s": ...}}``. Metrics:
+        ``order_n``; ``test_error_attitude_pct`` / ``test_error_rate_pct``
+        (channel means of the test-response error, None if diverged);
+        ``vaf_attitude_pct`` / ``vaf_rate_pct`` / ``vaf_deflection_pct``
+        (channel means of the held-out one-step VAF, None if diverged);
+        ``diverged``; and the per-channel lists ``test_error_pct``,
+        ``vaf_pct``. ``time_s`` is the wall time of ``fit``.
+    """
+    if order is not None:
+        k, rem = divmod(int(order) - 6, 8)
+        if rem or k < 1 or int(order) != order:
+            raise ValueError(f"order must be 6 + 8 k for k >= 1 (14, 22, 30, 38, 46, ...), "
+                             f"got {order!r}")
+        n_modes = k
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {sorted(METHODS)}")
+    truth = _truth(scenario, int(n_modes))
+    *records, u_test, y_test = _records(scenario, int(n_modes), int(seed), int(n_samples),
+                                        None if snr_db is None else float(snr_db))
+    extra = {} if warmup is None or method == "windowed-svd" else {"warmup": int(warmup)}
+    ident = make_identifier(method, truth.n, int(p), float(forgetting), **nominal_scales(truth),
+                            regularization=float(regularization), **extra)
+    with threadpool_limits(limits=1, user_api="blas"):
+        score = score_identifier(ident, records, (u_test, y_test),
+                                 round(convergence_s / truth.dt))
+    e, v = score.test_error_pct, score.vaf_pct
+
+    def channel_mean(x: np.ndarray) -> float | None:
+        m = float(np.mean(x))
+        return m if np.isfinite(m) else None
+
+    metrics = {
+        "order_n": truth.n,
+        "test_error_attitude_pct": channel_mean(e[:3]),
+        "test_error_rate_pct": channel_mean(e[3:6]),
+        "vaf_attitude_pct": channel_mean(v[:3]),
+        "vaf_rate_pct": channel_mean(v[3:6]),
+        "vaf_deflection_pct": channel_mean(v[6:]),
+        "diverged": bool(not (np.all(np.isfinite(e)) and np.all(np.isfinite(v)))),
+        "test_error_pct": _finite(e),
+        "vaf_pct": _finite(v),
+    }
+    return {"metrics": metrics, "timings": {"time_s": score.time_s}}
 
 
 def _fmt(mean, std) -> str:

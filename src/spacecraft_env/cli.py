@@ -13,6 +13,10 @@ Commands
 ``train``
     stable-baselines3 agents with or without identified-model features
     (:func:`controllers.rl.run_training`); ``rl-table`` tabulates runs.
+``sweep``
+    A grid of identify/control tasks from a TOML/YAML file, on this
+    machine's cores or a Ray cluster, resumable (:func:`sweeps.run_sweep`);
+    ``sweep-summary`` re-tabulates a sweep directory.
 """
 
 from __future__ import annotations
@@ -84,6 +88,26 @@ def build_parser() -> argparse.ArgumentParser:
 
     table = sub.add_parser("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+")
+
+    sweep = sub.add_parser("sweep", help="Monte-Carlo grid of identify/control tasks")
+    sweep.add_argument("--config", required=True, help="sweep file (.toml, .yaml, .json)")
+    sweep.add_argument("--backend", choices=["local", "ray", "serial"], default="local")
+    sweep.add_argument("--out", required=True,
+                       help="output directory; an existing one is resumed")
+    sweep.add_argument("--workers", type=int, default=None,
+                       help="local processes, or CPUs of a new local Ray instance "
+                            "(default: all cores)")
+    sweep.add_argument("--address", default=None,
+                       help="Ray cluster address (default: start a local instance)")
+    sweep.add_argument("--ship-code", action="store_true",
+                       help="upload this package to the Ray cluster with the job")
+    sweep.add_argument("--retry-errors", action="store_true",
+                       help="run again the tasks recorded as failed")
+    sweep.add_argument("--dry-run", action="store_true",
+                       help="list the tasks (and how many are done) without running")
+
+    summ = sub.add_parser("sweep-summary", help="tables and plots of a sweep directory")
+    summ.add_argument("dir")
     return parser
 
 
@@ -102,19 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
     elif args.command == "control":
         from controllers.baselines import LQRWeights
-        from controllers.experiment import run_control
+        from controllers.experiment import run_control, scenario_override
 
-        env_kwargs = {}
-        if args.module_mass is not None:
-            from spacecraft_env import DockingModule, DockingScenario
-
-            env_kwargs["scenario"] = DockingScenario(modules=(
-                DockingModule(mass=args.module_mass, time=100.0, position=(0.0, 0.0, 3.0)),
-                DockingModule(mass=args.module_mass, time=180.0, position=(0.0, 0.0, -3.0))))
-        if args.rotation_rate is not None:
-            from spacecraft_env import SolarRotationScenario
-
-            env_kwargs["scenario"] = SolarRotationScenario(rate_deg_s=args.rotation_rate)
+        env_kwargs = scenario_override(args.module_mass, args.rotation_rate)
         if args.max_torque is not None:
             env_kwargs["max_torque"] = args.max_torque
         weights = (LQRWeights(torque=args.torque_weight) if args.torque_weight is not None
@@ -139,6 +153,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from controllers.rl import comparison_table
 
         print(comparison_table(args.dirs))
+    elif args.command == "sweep":
+        return _sweep(args)
+    elif args.command == "sweep-summary":
+        from sweeps import summarize
+
+        summarize(args.dir)
+        print((Path(args.dir) / "summary.md").read_text())
+        print(f"wrote {args.dir}/summary.md, summary.csv, summary.json, summary.png")
     elif args.command == "identify":
         from identifiers.experiment import run_identification
 
@@ -151,6 +173,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
               f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
     return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from sweeps import ResultStore, load_config, pending_tasks, run_sweep
+
+    config = load_config(args.config)
+    if args.dry_run:
+        tasks = config.tasks()
+        todo = pending_tasks(tasks, ResultStore(Path(args.out) / "results.jsonl"),
+                             args.retry_errors)
+        for task in todo:
+            print(task.task_id, task.kind, task.label or "", json.dumps(task.params))
+        print(f"{len(tasks)} tasks, {len(tasks) - len(todo)} done, {len(todo)} to run")
+        return 0
+    report = run_sweep(config, args.out, args.backend, workers=args.workers,
+                       address=args.address, retry_errors=args.retry_errors,
+                       ship_code=args.ship_code)
+    print((Path(args.out) / "summary.md").read_text())
+    print(f"{report.ran} tasks run ({report.ok} ok, {report.errors} failed), {report.skipped} "
+          f"already done, {report.wall_s:.1f} s on {report.workers} {report.backend} workers")
+    print(f"wrote {args.out}/results.jsonl, summary.md, summary.csv, summary.json, summary.png")
+    return 1 if report.errors else 0
 
 
 if __name__ == "__main__":
