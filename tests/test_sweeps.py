@@ -379,3 +379,13 @@ def test_make_backend_validates():
         make_backend("slurm")
     with pytest.raises(ValueError, match="workers must be a positive integer"):
         make_backend("local", workers=0)
+
+
+def test_summary_of_diverged_magnitudes_stays_strict_json(tmp_path):
+    """Diverged identifiers report errors near 1e300: no overflow warning, no
+    Infinity in the JSON."""
+    run_sweep(_affine(grid={"slope": [1e300]}), tmp_path, "serial", progress=False)
+    text = (tmp_path / "summary.json").read_text()
+    (row,) = json.loads(text)["table"]["value"].values()  # one group: one cell
+    (cell,) = row.values()
+    assert "Infinity" not in text and cell["std"] is None and cell["max"] == 3e300

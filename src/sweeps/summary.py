@@ -54,9 +54,10 @@ def _stats(values: list[float | None], errors: int, section: str = "metrics") ->
     res: dict[str, Any] = {"count": int(arr.size), "finite": int(good.size), "errors": errors,
                            "timing": section == "timings"}
     if good.size:
-        res.update(mean=float(good.mean()),
-                   std=float(good.std(ddof=1)) if good.size > 1 else 0.0,
-                   median=float(np.median(good)), min=float(good.min()), max=float(good.max()))
+        with np.errstate(over="ignore", invalid="ignore"):  # diverged runs near 1e300
+            stats = {"mean": good.mean(), "std": good.std(ddof=1) if good.size > 1 else 0.0,
+                     "median": np.median(good), "min": good.min(), "max": good.max()}
+        res.update({k: float(v) if np.isfinite(v) else None for k, v in stats.items()})
     else:
         res.update(mean=None, std=None, median=None, min=None, max=None)
     return res
@@ -226,7 +227,7 @@ def summarize(out: str | Path, spec: SummarySpec | None = None) -> dict[str, Any
                "errors": sum(g["errors"] for g in groups), "rows": rows, "columns": columns,
                "row_names": row_names, "column_names": col_names, "metrics": metric_names,
                "table": table, "groups": groups, "spec": spec.to_dict()}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
     _write_csv(out / "summary.csv", groups, metric_names)
     (out / "summary.md").write_text(_markdown(summary, spec))
     _plot(out / "summary.png", summary, spec)
