@@ -175,6 +175,7 @@ def test_identify_task_is_a_pure_function_and_checks_the_order():
           "convergence_s": 20.0, "warmup": 200}
     a, b = identify_task(**kw), identify_task(**kw)
     assert a["metrics"] == b["metrics"] and a["metrics"]["order_n"] == 22
+    assert a["metrics"]["within_5pct"] is False  # 40 s of data: far from the paper's 5 %
     assert len(a["metrics"]["vaf_pct"]) == 6 + 4  # attitude, rate, one tip sensor x 4
     other = identify_task(**{**kw, "seed": 4})
     assert other["metrics"]["vaf_pct"] != a["metrics"]["vaf_pct"]

@@ -25,6 +25,11 @@ grid, e.g. one per method with its own settings) and the seeds. Example
     columns = "order"
     metrics = ["time_s", "test_error_attitude_pct"]
 
+Inside ``[[cases]]`` two keys are not parameters: ``label`` (the series name
+in summaries) and ``task`` (a different task kind for that case). A task
+function's own ``task`` argument (the control environment's "slew" or
+"regulation") is set in ``[params]`` or ``[grid]``.
+
 Every task is ``function(**params, seed=seed)`` for the kind's function
 (:data:`sweeps.tasks.TASKS`); parameter names are checked against its
 signature when the file is loaded, before anything runs. A task's identity
