@@ -22,12 +22,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from identifiers import add_measurement_noise, identification_inputs
-from identifiers.experiment import make_identifier, nominal_scales
+from identifiers.experiment import PAPER_TABLE5, make_identifier, nominal_scales
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 
 #: Paper Table 5, MATLAB seconds per run: classical, improved, SVD-based.
-PAPER = {22: (14.64, 12.27, 26.15), 30: (23.35, 19.56, 37.01),
-         38: (34.23, 28.99, 50.51), 46: (46.96, 39.22, 68.10)}
+PAPER = {n: (PAPER_TABLE5["classical"][n], PAPER_TABLE5["improved-apsa"][n],
+             PAPER_TABLE5["windowed-svd"][n]) for n in PAPER_TABLE5["classical"]}
 METHODS = ("improved", "improved-predictor", "improved-apsa", "classical", "windowed-svd")
 
 

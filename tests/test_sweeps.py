@@ -60,6 +60,12 @@ def test_shipped_sweep_files_parse():
     table5 = load_config(ROOT / "configs" / "table5.toml")
     assert len(table5.tasks()) == 5 * 4 * 30  # cases x orders x runs
     assert {t.params["order"] for t in table5.tasks()} == {22, 30, 38, 46}
+    # the references in the file are the paper's Table 5 as the code records it
+    from identifiers.experiment import PAPER_TABLE5
+
+    refs = {r.row: {int(k): v for k, v in r.values.items()} for r in table5.summary.reference}
+    assert refs == PAPER_TABLE5
+    assert len(load_config(ROOT / "configs" / "docking_mass.toml").tasks()) == 120
     assert len(load_config(ROOT / "configs" / "smoke.toml").tasks()) == 8
 
 

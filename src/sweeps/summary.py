@@ -324,6 +324,7 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import SymmetricalLogLocator
 
     metrics = summary["metrics"][:9]
     if not metrics:
@@ -369,8 +370,15 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
         mags = np.abs(vals)
         if vals.size and np.all(vals > 0) and vals.max() / vals.min() > 50:
             ax.set_yscale("log")
-        elif vals.size and mags.max() > 1e3 * max(float(np.median(mags)), 1e-12):
-            ax.set_yscale("symlog", linthresh=max(float(np.median(mags)), 1e-12))
+        elif vals.size and mags.max() > 1e3 * max(float(np.median(mags)), 1.0):
+            # orders of magnitude apart (diverged runs): linear near the
+            # typical small values, logarithmic beyond
+            small = mags[mags > 0].min() if np.any(mags > 0) else 1.0
+            linthresh = 10.0 ** np.floor(np.log10(max(small, 1.0)))
+            ax.set_yscale("symlog", linthresh=linthresh)
+            locator = SymmetricalLogLocator(base=10, linthresh=linthresh)
+            locator.set_params(numticks=7)
+            ax.yaxis.set_major_locator(locator)
         m = f"{m} (median: diverged runs)" if heavy else m
         ax.set_title(m)
         ax.set_xlabel(summary["columns"] or "")
