@@ -396,3 +396,26 @@ def test_summary_of_diverged_magnitudes_stays_strict_json(tmp_path):
     (row,) = json.loads(text)["table"]["value"].values()  # one group: one cell
     (cell,) = row.values()
     assert "Infinity" not in text and cell["std"] is None and cell["max"] == 3e300
+
+
+@pytest.mark.slow
+def test_ray_cluster_address_with_shipped_code(tmp_path):
+    """A separately started cluster (``ray start --head``), joined by address
+    with the code uploaded, gives the local pool's numbers."""
+    pytest.importorskip("ray")
+    ray_cli = Path(sys.executable).with_name("ray")
+    env = {**os.environ, "RAY_ADDRESS": ""}
+    subprocess.run([str(ray_cli), "start", "--head", "--num-cpus", "2",
+                    "--include-dashboard", "false", "--disable-usage-stats"],
+                   check=True, env=env, capture_output=True, timeout=120)
+    try:
+        config = SweepConfig.from_dict(TINY_IDENTIFY)
+        run_sweep(config, tmp_path / "local", "local", workers=2, progress=False,
+                  summarize=False)
+        report = run_sweep(config, tmp_path / "cluster", "ray", address="auto",
+                           ship_code=True, progress=False, summarize=False)
+        assert report.ok == 4 and report.workers == 2
+        assert _metrics(tmp_path / "local") == _metrics(tmp_path / "cluster")
+    finally:
+        subprocess.run([str(ray_cli), "stop", "--force"], env=env, capture_output=True,
+                       timeout=120)
