@@ -419,3 +419,23 @@ def test_ray_cluster_address_with_shipped_code(tmp_path):
     finally:
         subprocess.run([str(ray_cli), "stop", "--force"], env=env, capture_output=True,
                        timeout=120)
+
+
+@pytest.mark.parametrize("backend", ["serial", "local"])
+def test_a_task_over_its_time_limit_is_recorded_and_the_sweep_goes_on(tmp_path, backend):
+    config = SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 2, "timeout_s": 0.5,
+                                    "grid": {"duration": [0.05, 30.0]}})
+    start = time.monotonic()
+    report = run_sweep(config, tmp_path, backend, workers=2, progress=False, summarize=False)
+    assert time.monotonic() - start < 20  # the 30 s tasks were cut at 0.5 s
+    records = ResultStore(tmp_path / "results.jsonl").load().values()
+    slow = [r for r in records if r["params"]["duration"] == 30.0]
+    assert report.ok == 2 and report.errors == 2
+    assert all("TimeoutError: task exceeded its 0.5 s limit" in r["error"] for r in slow)
+    assert all(r["wall_s"] < 5 for r in slow)
+    # the limit is not part of a task's identity: same ids with another limit
+    relaxed = SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 2,
+                                     "grid": {"duration": [0.05, 30.0]}})
+    assert [t.task_id for t in relaxed.tasks()] == [t.task_id for t in config.tasks()]
+    with pytest.raises(ValueError, match="timeout_s"):
+        SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 1, "timeout_s": 0})

@@ -22,6 +22,7 @@ Commands
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
@@ -101,6 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="Ray cluster address (default: start a local instance)")
     sweep.add_argument("--ship-code", action="store_true",
                        help="upload this package to the Ray cluster with the job")
+    sweep.add_argument("--timeout", type=float, default=None,
+                       help="per-task wall-clock limit, s (overrides the file's timeout_s)")
     sweep.add_argument("--retry-errors", action="store_true",
                        help="run again the tasks recorded as failed")
     sweep.add_argument("--dry-run", action="store_true",
@@ -179,6 +182,10 @@ def _sweep(args: argparse.Namespace) -> int:
     from sweeps import ResultStore, load_config, pending_tasks, run_sweep
 
     config = load_config(args.config)
+    if args.timeout is not None:
+        if not args.timeout > 0:
+            raise SystemExit(f"--timeout must be positive, got {args.timeout}")
+        config = dataclasses.replace(config, timeout_s=float(args.timeout))
     if args.dry_run:
         tasks = config.tasks()
         todo = pending_tasks(tasks, ResultStore(Path(args.out) / "results.jsonl"),

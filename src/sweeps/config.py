@@ -8,6 +8,7 @@ grid, e.g. one per method with its own settings) and the seeds. Example
     name = "table5"
     task = "identify"          # or "control", or "package.module:function"
     seeds = 30                 # 0..29; or a list; or {start = 100, count = 30}
+    timeout_s = 600            # optional: per-task wall-clock limit
 
     [params]                   # shared by every task
     scenario = "docking"
@@ -50,7 +51,8 @@ from typing import Any
 
 __all__ = ["Reference", "SummarySpec", "SweepConfig", "Task", "load_config"]
 
-_TOP_KEYS = {"name", "task", "seeds", "params", "grid", "cases", "summary", "description"}
+_TOP_KEYS = {"name", "task", "seeds", "params", "grid", "cases", "summary", "description",
+             "timeout_s"}
 _SUMMARY_KEYS = {"rows", "columns", "metrics", "ratio_to", "reference"}
 _SCALAR = (str, int, float, bool, type(None))
 
@@ -85,11 +87,15 @@ class Task:
     label : str, optional
         Series name for summaries (a case's ``label``); not part of the
         identity.
+    timeout_s : float, optional
+        Wall-clock limit of one run, s (:func:`sweeps.tasks.execute`); not
+        part of the identity.
     """
 
     kind: str
     params: dict[str, Any]
     label: str | None = None
+    timeout_s: float | None = None
 
     @property
     def task_id(self) -> str:
@@ -101,7 +107,7 @@ class Task:
     def to_dict(self) -> dict[str, Any]:
         """JSON form (what a worker receives)."""
         return {"task_id": self.task_id, "kind": self.kind, "params": self.params,
-                "label": self.label}
+                "label": self.label, "timeout_s": self.timeout_s}
 
 
 @dataclass(frozen=True)
@@ -185,6 +191,15 @@ class SummarySpec:
                 "reference": [ref.__dict__ for ref in self.reference]}
 
 
+def _timeout(value: Any) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not value > 0 or value == float("inf"):
+        raise ValueError(f"timeout_s must be a positive number of seconds, got {value!r}")
+    return float(value)
+
+
 def _seeds(value: Any) -> tuple[int, ...]:
     if isinstance(value, bool):
         raise TypeError("seeds must be a count, a list of integers or {start, count}")
@@ -228,6 +243,9 @@ class SweepConfig:
         Parameter sets crossed with the grid; may hold ``label`` and ``task``.
     summary : SummarySpec
     description : str
+    timeout_s : float, optional
+        Per-task wall-clock limit, s: a task that runs longer is recorded as
+        a ``TimeoutError`` and the sweep goes on.
     """
 
     name: str
@@ -238,6 +256,7 @@ class SweepConfig:
     cases: tuple[dict[str, Any], ...] = ({},)
     summary: SummarySpec = field(default_factory=SummarySpec)
     description: str = ""
+    timeout_s: float | None = None
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], name: str | None = None) -> SweepConfig:
@@ -270,7 +289,8 @@ class SweepConfig:
         config = cls(name=str(data.get("name") or name or "sweep"), task=str(data["task"]),
                      seeds=_seeds(data["seeds"]), params=params, grid=grid, cases=cases,
                      summary=SummarySpec.from_dict(data.get("summary")),
-                     description=str(data.get("description", "")))
+                     description=str(data.get("description", "")),
+                     timeout_s=_timeout(data.get("timeout_s")))
         config._validate()
         return config
 
@@ -319,12 +339,14 @@ class SweepConfig:
                 base = {**self.params, **own, **dict(zip(axes, point, strict=True))}
                 for seed in self.seeds:
                     params = dict(sorted({**base, "seed": seed}.items()))
-                    out.append(Task(kind, params, None if label is None else str(label)))
+                    out.append(Task(kind, params, None if label is None else str(label),
+                                    self.timeout_s))
         return out
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form, written next to the results (``sweep.json``)."""
         return {"name": self.name, "task": self.task, "description": self.description,
+                "timeout_s": self.timeout_s,
                 "seeds": list(self.seeds), "params": self.params,
                 "grid": {k: list(v) for k, v in self.grid.items()},
                 "cases": list(self.cases), "summary": self.summary.to_dict()}

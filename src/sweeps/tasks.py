@@ -15,6 +15,9 @@ too; it must be importable on every worker.
 
 :func:`execute` runs one task and never raises: an exception becomes an
 ``"error"`` record with its traceback, so a sweep goes on past a bad task.
+A task's ``timeout_s`` is enforced with ``SIGALRM`` in the worker (POSIX;
+tasks run on the main thread of every backend's workers): the task is
+interrupted at its next Python bytecode and recorded as a ``TimeoutError``.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ import importlib
 import math
 import os
 import platform
+import signal
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -83,6 +88,30 @@ def jsonable(value: Any) -> Any:
     return repr(value)
 
 
+class _Deadline:
+    """Raise TimeoutError in this (main) thread after ``seconds``."""
+
+    def __init__(self, seconds: float | None) -> None:
+        self.seconds = seconds
+        self._armed = (seconds is not None and hasattr(signal, "setitimer")
+                       and threading.current_thread() is threading.main_thread())
+        self._previous: Any = None
+
+    def _expire(self, signum: int, frame: object) -> None:
+        raise TimeoutError(f"task exceeded its {self.seconds:g} s limit")
+
+    def __enter__(self) -> _Deadline:
+        if self._armed:
+            self._previous = signal.signal(signal.SIGALRM, self._expire)
+            signal.setitimer(signal.ITIMER_REAL, float(self.seconds))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._armed:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, self._previous)
+
+
 def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
@@ -102,7 +131,7 @@ def execute(task: dict[str, Any]) -> dict[str, Any]:
     start = time.perf_counter()
     try:
         fn = resolve_task(task["kind"])
-        with threadpool_limits(limits=1):
+        with _Deadline(task.get("timeout_s")), threadpool_limits(limits=1):
             out = fn(**task["params"])
         if not isinstance(out, dict) or not isinstance(out.get("metrics"), dict):
             raise TypeError(f"task {task['kind']!r} returned {type(out).__name__}; expected "
