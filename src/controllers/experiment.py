@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -109,8 +110,6 @@ def control_task(*, controller: str, seed: int, scenario: str = "docking", task:
         ``{"metrics": the episode metrics of :func:`episode_metrics`,
         "timings": {"episode_s": wall time of the episode}}``.
     """
-    import time
-
     from controllers.harness import episode_metrics, run_episode
 
     if scenario not in ENV_IDS:

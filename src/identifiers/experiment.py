@@ -65,13 +65,15 @@ __all__ = [
 ]
 
 #: Method name -> factory ``(n, p, forgetting, **scales) -> identifier``.
+#: ``warmup=None`` keeps a method's own warm-up; the sliding-window SVD
+#: method always keeps its own (the window fills first) and ignores it.
 METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
     "improved": lambda n, p, lam, **kw: ImprovedRPBSID(n, p, lam, **kw),
     "improved-predictor": lambda n, p, lam, **kw: ImprovedRPBSID(
         n, p, lam, variant="predictor", **kw),
     "improved-apsa": lambda n, p, lam, **kw: ImprovedRPBSID(n, p, lam, variant="apsa", **kw),
     "classical": lambda n, p, lam, **kw: ClassicalRPBSID(n, p, lam, **kw),
-    "windowed-svd": lambda n, p, lam, regularization=0.0, **kw: WindowedPBSID(
+    "windowed-svd": lambda n, p, lam, regularization=0.0, warmup=None, **kw: WindowedPBSID(
         n, p, window=500, regularization=regularization, **kw),
 }
 
@@ -113,7 +115,10 @@ _PAPER_NAME = {"improved": "improved RPBSID", "classical": "classical RPBSID",
 
 def make_identifier(name: str, n: int, p: int, forgetting: float,
                     **kwargs) -> OnlineIdentifier:
-    """Build a method of :data:`METHODS` by name (``kwargs``: scales)."""
+    """Build a method of :data:`METHODS` by name (``kwargs``: scales,
+    regularization, ``warmup`` (None: the method's default))."""
+    if kwargs.get("warmup") is None:
+        kwargs.pop("warmup", None)
     try:
         return METHODS[name](n, p, forgetting, **kwargs)
     except KeyError:
@@ -270,8 +275,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
     dt = truth.dt
     u_test, y_test = paper_test_response(truth, n_samples)
     k_conv = round(convergence_s / dt)
-    scales = {**nominal_scales(truth), "regularization": regularization}
-    recursive_extra = {} if warmup is None else {"warmup": warmup}
+    scales = {**nominal_scales(truth), "regularization": regularization, "warmup": warmup}
 
     err = {m: [] for m in methods}
     vafs = {m: [] for m in methods}
@@ -282,8 +286,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
         for seed in range(seeds):
             records = identification_records(truth, seed, n_samples, snr_db)
             for name in methods:
-                extra = recursive_extra if name != "windowed-svd" else {}
-                ident = make_identifier(name, n, p, forgetting, **scales, **extra)
+                ident = make_identifier(name, n, p, forgetting, **scales)
                 score = score_identifier(ident, records, (u_test, y_test), k_conv)
                 err[name].append(score.test_error_pct)
                 vafs[name].append(score.vaf_pct)
@@ -388,9 +391,9 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
     truth = _truth(scenario, int(n_modes))
     *records, u_test, y_test = _records(scenario, int(n_modes), int(seed), int(n_samples),
                                         None if snr_db is None else float(snr_db))
-    extra = {} if warmup is None or method == "windowed-svd" else {"warmup": int(warmup)}
     ident = make_identifier(method, truth.n, int(p), float(forgetting), **nominal_scales(truth),
-                            regularization=float(regularization), **extra)
+                            regularization=float(regularization),
+                            warmup=None if warmup is None else int(warmup))
     with threadpool_limits(limits=1, user_api="blas"):
         score = score_identifier(ident, records, (u_test, y_test),
                                  round(convergence_s / truth.dt))

@@ -19,6 +19,7 @@ running it (a dead worker, a lost node). ``fn`` is
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import threading
@@ -31,6 +32,14 @@ from typing import Any
 from sweeps.tasks import THREAD_ENV
 
 __all__ = ["BACKENDS", "LocalBackend", "RayBackend", "SerialBackend", "make_backend"]
+
+
+def _top_up(pending: dict[Any, Any], source: Iterator[Any], limit: int,
+            submit: Callable[[Any], Any]) -> None:
+    """Submit items of ``source`` until ``limit`` are in flight (``pending``:
+    handle -> item); ``pending`` stays empty once the source is exhausted."""
+    for item in itertools.islice(source, max(limit - len(pending), 0)):
+        pending[submit(item)] = item
 
 
 def _watch_parent(parent: int) -> None:
@@ -119,15 +128,9 @@ class LocalBackend:
             raise RuntimeError("use LocalBackend as a context manager")
         pending: dict[Any, Any] = {}
         source = iter(items)
-        exhausted = False
         while True:
-            while not exhausted and len(pending) < self.max_in_flight:
-                try:
-                    item = next(source)
-                except StopIteration:
-                    exhausted = True
-                    break
-                pending[self._pool.submit(fn, item)] = item
+            _top_up(pending, source, self.max_in_flight,
+                    lambda item: self._pool.submit(fn, item))
             if not pending:
                 return
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -221,16 +224,9 @@ class RayBackend:
         limit = self.max_in_flight or 4 * max(self.workers, 1)
         pending: dict[Any, Any] = {}
         source = iter(items)
-        exhausted = False
         try:
             while True:
-                while not exhausted and len(pending) < limit:
-                    try:
-                        item = next(source)
-                    except StopIteration:
-                        exhausted = True
-                        break
-                    pending[remote.remote(item)] = item
+                _top_up(pending, source, limit, remote.remote)
                 if not pending:
                     return
                 done, _ = ray.wait(list(pending), num_returns=1)

@@ -31,7 +31,7 @@ from tqdm import tqdm
 from sweeps.backends import make_backend
 from sweeps.config import SweepConfig, Task, load_config
 from sweeps.store import ResultStore
-from sweeps.tasks import execute
+from sweeps.tasks import execute, identity
 
 __all__ = ["SweepReport", "pending_tasks", "run_sweep"]
 
@@ -143,9 +143,7 @@ def run_sweep(config: SweepConfig | str | Path, out: str | Path, backend: str = 
                           disable=not progress) as bar:
             for item, outcome in runner.imap_unordered(execute, [t.to_dict() for t in todo]):
                 if isinstance(outcome, BaseException):
-                    outcome = {"task_id": item["task_id"], "kind": item["kind"],
-                               "label": item.get("label"), "params": item["params"],
-                               "status": "error",
+                    outcome = {**identity(item), "status": "error",
                                "error": f"{type(outcome).__name__}: {outcome} (backend)"}
                 outcome["backend"] = backend
                 store.append(outcome)

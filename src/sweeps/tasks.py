@@ -36,7 +36,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-__all__ = ["TASKS", "THREAD_ENV", "execute", "jsonable", "resolve_task"]
+__all__ = ["TASKS", "THREAD_ENV", "execute", "identity", "jsonable", "resolve_task"]
 
 #: Built-in task kinds -> ``"module:function"``.
 TASKS: dict[str, str] = {
@@ -116,6 +116,12 @@ def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
+def identity(task: dict[str, Any]) -> dict[str, Any]:
+    """The fields every record of ``task`` starts with: id, kind, label, params."""
+    return {"task_id": task["task_id"], "kind": task["kind"], "label": task.get("label"),
+            "params": task["params"]}
+
+
 def execute(task: dict[str, Any]) -> dict[str, Any]:
     """Run one task (the dict of :meth:`sweeps.config.Task.to_dict`).
 
@@ -125,9 +131,7 @@ def execute(task: dict[str, Any]) -> dict[str, Any]:
     (type and message) and ``traceback``; ``wall_s``, ``host``, ``pid``,
     ``started`` and ``finished`` (UTC).
     """
-    record: dict[str, Any] = {"task_id": task["task_id"], "kind": task["kind"],
-                              "label": task.get("label"), "params": task["params"],
-                              "host": platform.node(), "pid": os.getpid(), "started": _now()}
+    record = {**identity(task), "host": platform.node(), "pid": os.getpid(), "started": _now()}
     start = time.perf_counter()
     try:
         fn = resolve_task(task["kind"])
