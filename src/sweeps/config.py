@@ -54,7 +54,6 @@ __all__ = ["Reference", "SummarySpec", "SweepConfig", "Task", "load_config"]
 _TOP_KEYS = {"name", "task", "seeds", "params", "grid", "cases", "summary", "description",
              "timeout_s"}
 _SUMMARY_KEYS = {"rows", "columns", "metrics", "ratio_to", "reference"}
-_SCALAR = (str, int, float, bool, type(None))
 
 
 def _canonical(value: Any, where: str) -> Any:
