@@ -3,6 +3,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+SOURCES := spacecraft_conventions spacecraft_env identifiers controllers spacecraft_lab tests benchmarks examples
 
 .PHONY: demo test test-all lint bench clean
 
@@ -19,14 +20,14 @@ demo: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/spacecraft control --scenario docking --seeds 10 --out results/control
 
 test: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff check $(SOURCES)
 	$(BIN)/pytest -q
 
 test-all: $(STAMP)
 	$(BIN)/pytest -q -m ""
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff check $(SOURCES)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_env.py
@@ -35,4 +36,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_sweep.py
 
 clean:
-	rm -rf $(VENV) results build *.egg-info src/*.egg-info
+	rm -rf $(VENV) results build *.egg-info

@@ -6,8 +6,8 @@ warm-started Riccati iteration and computes the torque), then, on the same
 identified models, times a from-scratch ``scipy.linalg.solve_discrete_are``
 per step: both medians are printed side by side.
 
-Goal (issue 4): median <= 1 ms, i.e. >= 100x faster than real time at
-dt = 0.1 s.
+Printed: the adaptive step's median and 90th percentile beside the
+from-scratch Riccati solve, and their ratio.
 
 Usage: ``python benchmarks/bench_control.py [--steps 1500]``
 """

@@ -1,4 +1,4 @@
-"""How much the ETS-VIII model can be identified at 40 dB: the figures the README quotes.
+"""How much the ETS-VIII model can be identified at 40 dB (docs/results/identification.md).
 
     python examples/identifiability_study.py
 

@@ -1,0 +1,129 @@
+"""The online identifier as a model-learning component for RL agents.
+
+:class:`IdentifiedModelFeatures` runs an identifier from :mod:`identifiers`
+alongside any of the spacecraft environments and appends identified-model
+features to every observation, so an agent (stable-baselines3 or any other)
+sees what the identifier has learned about the current plant.
+
+Appended features, in order (all float32, clipped to [-10, 10]):
+
+========================  =====  ==============================================
+feature                   size   scaling
+========================  =====  ==============================================
+state estimate            n      identifier state (its internal coordinates,
+                                 already normalized by the nominal sensor
+                                 ranges) divided by ``state_scale`` (10)
+modal frequencies         k      identified natural frequencies (Hz) of the k
+                                 slowest oscillatory poles, divided by 1 Hz
+damping ratios            k      of the same poles (dimensionless)
+prediction error          m      ``y_k - C xhat_{k|k-1}`` per measured output,
+                                 divided by the nominal range (1 deg,
+                                 0.1 deg/s, 1 cm)
+model ready               1      1 once the identifier has a model, else 0
+========================  =====  ==============================================
+
+Before warm-up every feature but the flag is 0.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from identifiers import default_identifier
+from spacecraft_conventions import match_groups
+
+__all__ = ["IdentifiedModelFeatures"]
+
+_CLIP = 10.0
+
+
+class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Append online-identified model features to the observation.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment (observing at least one sensor group).
+    identifier : identifiers.OnlineIdentifier, optional
+        Default: :func:`identifiers.default_identifier` for the observed
+        sensor groups (the adaptive LQR's identifier).
+    n_modes : int
+        k, number of modal frequencies and damping ratios appended.
+    state_scale : float
+        Divisor of the state estimate.
+    """
+
+    def __init__(self, env: gym.Env, identifier=None, n_modes: int = 4,
+                 state_scale: float = 10.0) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
+                                                 state_scale=state_scale)
+        gym.ObservationWrapper.__init__(self, env)
+        base = env.unwrapped
+        model = base.model
+        if n_modes < 1:
+            raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+        layout = base.observation_layout
+        self._meas_obs, _ = match_groups(layout, model.output_layout)
+        if self._meas_obs.size == 0:
+            raise ValueError("the env must observe at least one sensor group "
+                             "('attitude', 'rate' or 'deflection')")
+        measured = layout.sensors()
+        self._meas_scale = measured.scales()
+        if identifier is None:
+            identifier = default_identifier(measured, n=model.n, dt=model.dt)
+        self.identifier = identifier
+        self.n_modes = int(n_modes)
+        self.state_scale = float(state_scale)
+        self._max_torque = float(base.max_torque)
+        n = identifier.n
+        self.n_features = n + 2 * self.n_modes + self._meas_obs.size + 1
+        low = np.concatenate([env.observation_space.low,
+                              np.full(self.n_features, -_CLIP, dtype=np.float32)])
+        high = np.concatenate([env.observation_space.high,
+                               np.full(self.n_features, _CLIP, dtype=np.float32)])
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                            dtype=np.float32)
+        self._action = None
+        self._last_y = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self.identifier.reset()
+        self._action = None
+        self._last_y = None
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        self._action = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+        return super().step(action)
+
+    def _features(self, y: np.ndarray) -> np.ndarray:
+        ident = self.identifier
+        n, k = ident.n, self.n_modes
+        out = np.zeros(self.n_features)
+        model, x = ident.model, ident.state
+        if model is None or x is None or not np.all(np.isfinite(model.A)):
+            return out
+        out[:n] = x / self.state_scale
+        freq, zeta = model.modal()
+        count = min(k, freq.size)
+        out[n:n + count] = freq[:count]
+        out[n + k:n + k + count] = zeta[:count]
+        pred = model.C @ x
+        out[n + 2 * k:-1] = (y - pred) / self._meas_scale
+        out[-1] = 1.0
+        return np.nan_to_num(out, nan=0.0, posinf=_CLIP, neginf=-_CLIP)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        y = np.asarray(observation, dtype=float)[self._meas_obs]
+        if self._action is not None and self._last_y is not None:
+            if np.all(np.isfinite(y)):
+                self.identifier.update(self._action * self._max_torque, self._last_y)
+        feats = self._features(y) if np.all(np.isfinite(y)) else np.zeros(self.n_features)
+        self._last_y = y
+        full = np.concatenate([np.asarray(observation, dtype=float),
+                               np.clip(feats, -_CLIP, _CLIP)])
+        return full.astype(np.float32)

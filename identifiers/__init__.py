@@ -1,0 +1,70 @@
+"""Online subspace identification of time-varying systems.
+
+Streaming identifiers share one API: ``update(u, y)`` per sample,
+``.model`` (a :class:`StateSpaceModel`, or None while warming up),
+``.state``, ``fit(U, Y)`` and ``reset()``.
+
+* :func:`default_identifier`: the recommended identifier for the
+  spacecraft's outputs, with its settings.
+* :class:`ImprovedRPBSID`: the paper's improved recursive PBSID (affine
+  projection sign state update), for reproduction.
+* :class:`MomentRefitRPBSID`: recursive VARX plus batch-equivalent refits of
+  the system matrices from exponentially weighted data moments.
+* :class:`PredictorRPBSID`: the classical state computed as a forward run
+  of the VARX predictor (no LK), RLS system matrices.
+* :class:`ClassicalRPBSID`: Houtzager et al.'s recursive PBSID.
+* :class:`WindowedPBSID`: batch PBSID refitted on a sliding window.
+* :func:`pbsid`: offline batch PBSID.
+"""
+
+from identifiers.base import (
+    OnlineIdentifier,
+    PredictionStateIdentifier,
+    RecursiveVARXIdentifier,
+    SystemRLSIdentifier,
+)
+from identifiers.batch import PBSIDResult, pbsid
+from identifiers.classical import ClassicalRPBSID
+from identifiers.defaults import DEFAULT_SETTINGS, default_identifier
+from identifiers.evaluation import (
+    add_measurement_noise,
+    identification_inputs,
+    normalized_error,
+    one_step_predictions,
+    paper_test_inputs,
+    vaf,
+)
+from identifiers.improved import ImprovedRPBSID
+from identifiers.model import ModelSequence, StateSpaceModel, observability_basis
+from identifiers.moment_refit import MomentRefitRPBSID
+from identifiers.predictor import PredictorRPBSID
+from identifiers.rls import RecursiveLeastSquares
+from identifiers.windowed import WindowedPBSID
+from spacecraft_conventions import __version__
+
+__all__ = [
+    "DEFAULT_SETTINGS",
+    "ClassicalRPBSID",
+    "ImprovedRPBSID",
+    "ModelSequence",
+    "MomentRefitRPBSID",
+    "OnlineIdentifier",
+    "PBSIDResult",
+    "PredictionStateIdentifier",
+    "PredictorRPBSID",
+    "RecursiveLeastSquares",
+    "RecursiveVARXIdentifier",
+    "StateSpaceModel",
+    "SystemRLSIdentifier",
+    "WindowedPBSID",
+    "__version__",
+    "add_measurement_noise",
+    "default_identifier",
+    "identification_inputs",
+    "normalized_error",
+    "observability_basis",
+    "one_step_predictions",
+    "paper_test_inputs",
+    "pbsid",
+    "vaf",
+]

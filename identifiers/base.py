@@ -1,0 +1,556 @@
+"""Streaming identifier API shared by every online method, and the stages
+the recursive PBSID methods are built from.
+
+:class:`OnlineIdentifier` owns everything that is not the algorithm: input
+validation, sizes inferred from the first sample, the past window
+``phi = [z_{k-1}; ...; z_{k-p}]``, NaN/inf handling, warm-up, ``fit`` and
+``reset``. Two stages are shared by the recursive PBSID classes:
+
+* :class:`RecursiveVARXIdentifier`: the recursive VARX predictor (paper
+  Eq. 20-24), which every recursive PBSID method updates first;
+* :class:`SystemRLSIdentifier`: RLS for ``[C D]`` and ``[A B K]`` on a state
+  sequence (Eq. 47-55), for the methods that regress on states
+  (:class:`~identifiers.improved.ImprovedRPBSID`,
+  :class:`~identifiers.predictor.PredictorRPBSID`,
+  :class:`~identifiers.classical.ClassicalRPBSID`), and
+  :class:`PredictionStateIdentifier`, the state ``x = W LK phi`` of the last
+  two.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from identifiers.model import ModelSequence, StateSpaceModel
+from identifiers.rls import RecursiveLeastSquares
+
+__all__ = [
+    "OnlineIdentifier",
+    "PredictionStateIdentifier",
+    "RecursiveVARXIdentifier",
+    "SystemRLSIdentifier",
+]
+
+
+def _positive_int(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be >= 1, got {value}")
+    return int(value)
+
+
+def _scale(name: str, value) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.ndim != 1 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{name} must be a 1-D array of positive finite scales")
+    return arr
+
+
+def _rms_scale(samples: np.ndarray) -> np.ndarray:
+    """Per-column RMS of the finite entries, 1 where there is none or it is 0."""
+    finite = np.isfinite(samples)
+    count = finite.sum(axis=0)
+    sq = np.where(finite, samples, 0.0) ** 2
+    rms = np.sqrt(sq.sum(axis=0) / np.maximum(count, 1))
+    return np.where(rms > 0, rms, 1.0)
+
+
+def _forgetting(name: str, value: float) -> float:
+    value = float(value)
+    if not 0.0 < value <= 1.0:
+        raise ValueError(f"{name} must be in (0, 1], got {value}")
+    return value
+
+
+def _positive_float(name: str, value: float) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be positive, got {value}")
+    return value
+
+
+class OnlineIdentifier(ABC):
+    """Base class of the streaming identifiers: ``update(u, y)`` one sample at a time.
+
+    Parameters
+    ----------
+    n : int
+        Model order.
+    p : int
+        Past window (VARX lags); ``p * m >= n`` is required.
+    forgetting : float
+        Forgetting factor in (0, 1].
+    dt : float
+        Sample time (s) stamped on the models.
+    warmup : int, optional
+        Samples before ``model`` is available; default ``4 p``.
+    input_scale, output_scale : array_like, optional
+        Per-channel scales (RMS levels) of u and y. Every estimator runs on
+        ``u / input_scale`` and ``y / output_scale`` so that its constants
+        (initial covariances, bounds) mean the same whatever the units;
+        models are returned in physical units and the state in the internal
+        coordinates that ``model`` uses. Default: the RMS of the first ``p``
+        samples (a period in which nothing is learned anyway), 1 where that
+        is zero.
+
+    Attributes
+    ----------
+    n_samples : int
+        Samples received (including skipped ones).
+    n_skipped : int
+        Samples with NaN/inf that were skipped.
+    n_inputs, n_outputs : int or None
+        r and m, inferred from the first sample.
+    """
+
+    #: Whether successive models share state coordinates.
+    consistent_basis = True
+
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
+                 warmup: int | None = None, input_scale=None, output_scale=None) -> None:
+        self.n = _positive_int("n", n)
+        self.p = _positive_int("p", p)
+        self.forgetting = _forgetting("forgetting", forgetting)
+        self.dt = float(dt)
+        if not self.dt > 0:
+            raise ValueError(f"dt must be positive, got {dt}")
+        self.warmup = 4 * self.p if warmup is None else _positive_int("warmup", warmup)
+        if self.warmup < self.p:
+            raise ValueError(f"warmup must be >= p = {self.p}, got {self.warmup}")
+        self._user_scales = (None if input_scale is None else _scale("input_scale", input_scale),
+                             None if output_scale is None else _scale("output_scale",
+                                                                       output_scale))
+        self.reset()
+
+    # ------------------------------------------------------------ lifecycle
+    def reset(self) -> None:
+        """Forget everything, including the input and output sizes."""
+        self.n_inputs: int | None = None
+        self.n_outputs: int | None = None
+        self.n_samples = 0
+        self.n_skipped = 0
+        self._k = 0            # samples processed by the estimator
+        self._quiet = 0
+        self._phi = None
+        self._su = self._sy = None
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def _init_sizes(self, r: int, m: int) -> None:
+        if self.p * m < self.n:
+            raise ValueError(f"p * m = {self.p * m} must be >= n = {self.n} "
+                             f"(m = {m} outputs); increase p")
+        su, sy = self._user_scales
+        if su is not None and su.shape != (r,):
+            raise ValueError(f"input_scale must have shape ({r},), got {su.shape}")
+        if sy is not None and sy.shape != (m,):
+            raise ValueError(f"output_scale must have shape ({m},), got {sy.shape}")
+        self.n_inputs, self.n_outputs = r, m
+        self._zr = r + m
+        self._phi = np.zeros(self.p * self._zr)
+        self._allocate(r, m)
+
+    @abstractmethod
+    def _allocate(self, r: int, m: int) -> None:
+        """Create the estimator state once r and m are known."""
+
+    @abstractmethod
+    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        """Process one sample; must call :meth:`_push` once."""
+
+    @abstractmethod
+    def _matrices(self) -> tuple[np.ndarray, ...] | None:
+        """Current ``(A, B, C, D, K)`` or None."""
+
+    @abstractmethod
+    def _current_state(self) -> np.ndarray | None:
+        """State estimate for the next sample time, x_{k+1|k}."""
+
+    def _fill_output(self) -> np.ndarray:
+        """Stand-in for a missing output sample (default zeros)."""
+        return np.zeros(self.n_outputs)
+
+    # ------------------------------------------------------------ streaming
+    def _push(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Shift ``z_k = [u_k; y_k]`` into the past window (newest first)."""
+        phi = self._phi
+        zr = self._zr
+        phi[zr:] = phi[:-zr]
+        phi[:self.n_inputs] = u
+        phi[self.n_inputs:zr] = y
+
+    def _validate(self, u, y) -> tuple[np.ndarray, np.ndarray]:
+        arrays = []
+        for name, value in (("u", u), ("y", y)):
+            arr = np.asarray(value)
+            if arr.dtype.kind not in "fiu":
+                raise TypeError(f"{name} must be a real numeric 1-D array, got dtype {arr.dtype}")
+            if arr.ndim != 1 or arr.size == 0:
+                raise ValueError(f"{name} must be a non-empty 1-D array of one sample, "
+                                 f"got shape {arr.shape}")
+            arrays.append(arr.astype(float))
+        u, y = arrays
+        if self.n_inputs is None:
+            self._init_sizes(u.size, y.size)
+        elif u.shape != (self.n_inputs,) or y.shape != (self.n_outputs,):
+            raise ValueError(f"u and y must have shapes ({self.n_inputs},) and "
+                             f"({self.n_outputs},) as in the first sample, got {u.shape} and "
+                             f"{y.shape}")
+        return u, y
+
+    def update(self, u, y) -> None:
+        """Process one sample ``(u_k, y_k)``.
+
+        For streaming loops, limit BLAS to one thread around the loop
+        (``threadpoolctl.threadpool_limits(1, "blas")`` or
+        ``OPENBLAS_NUM_THREADS=1``): per-sample products are too small for
+        threads to pay off. :meth:`fit` does this itself.
+
+        A sample with NaN or inf is skipped for learning and counted in
+        ``n_skipped``: its missing entries are replaced (inputs by 0, outputs
+        by their prediction) only to keep the past window aligned in time,
+        and learning pauses until that stand-in has left the window.
+
+        Raises
+        ------
+        ValueError
+            Wrong shape, or a size different from the first sample's.
+        TypeError
+            Non-numeric data.
+        """
+        u, y = self._validate(u, y)
+        self.n_samples += 1
+        if self._su is None:
+            su, sy = self._user_scales
+            if su is not None and sy is not None:
+                self._su, self._sy = su, sy
+            else:
+                self._pending.append((u, y))
+                if len(self._pending) < self.p:
+                    return
+                pending_u = np.array([pu for pu, _ in self._pending])
+                pending_y = np.array([py for _, py in self._pending])
+                self._su = su if su is not None else _rms_scale(pending_u)
+                self._sy = sy if sy is not None else _rms_scale(pending_y)
+                for pu, py in self._pending:
+                    self._process(pu, py)
+                self._pending = []
+                return
+        self._process(u, y)
+
+    def _process(self, u: np.ndarray, y: np.ndarray) -> None:
+        u = u / self._su
+        y = y / self._sy
+        if np.isfinite(u).all() and np.isfinite(y).all():
+            learn = self._quiet == 0 and self._k >= self.p
+            self._step(u, y, learn)
+            if self._quiet:
+                self._quiet -= 1
+        else:
+            self.n_skipped += 1
+            u = np.where(np.isfinite(u), u, 0.0)
+            y = np.where(np.isfinite(y), y, self._fill_output())
+            self._step(u, y, False)
+            self._quiet = self.p + 1
+        self._k += 1
+
+    def _physical(self, mats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        """Matrices of the normalized model in physical units (state unchanged)."""
+        a, b, c, d, k = mats
+        su, sy = self._su, self._sy
+        return a, b / su, sy[:, None] * c, sy[:, None] * d / su, k / sy
+
+    def fit(self, U, Y) -> ModelSequence:
+        """Feed a whole record sample by sample; return the model after each.
+
+        Parameters
+        ----------
+        U : (N, r) array_like
+        Y : (N, m) array_like
+
+        Returns
+        -------
+        ModelSequence
+            Entry k is the model after sample k (None while warming up);
+            identical to calling :meth:`update` in a loop.
+        """
+        u = np.asarray(U, dtype=float)
+        y = np.asarray(Y, dtype=float)
+        if u.ndim != 2 or y.ndim != 2 or u.shape[0] != y.shape[0]:
+            raise ValueError(f"U and Y must have shapes (N, r) and (N, m), got {u.shape} and "
+                             f"{y.shape}")
+        # Per-sample BLAS calls are tiny: threads only add synchronization
+        # (matrix-vector products several times slower with 2 OpenBLAS threads).
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit(u, y)
+
+    def _fit(self, u: np.ndarray, y: np.ndarray) -> ModelSequence:
+        N, r, m, n = u.shape[0], u.shape[1], y.shape[1], self.n
+        mats = [np.full((N, *s), np.nan) for s in ((n, n), (n, r), (m, n), (m, r), (n, m))]
+        valid = np.zeros(N, dtype=bool)
+        for k in range(N):
+            self.update(u[k], y[k])
+            if self.n_samples >= self.warmup and self._su is not None:
+                cur = self._matrices()
+                if cur is not None:
+                    valid[k] = True
+                    for arr, mat in zip(mats, self._physical(cur), strict=True):
+                        arr[k] = mat
+        return ModelSequence(*mats, valid, self.dt, self.consistent_basis)
+
+    # ------------------------------------------------------------ results
+    @property
+    def ready(self) -> bool:
+        """True once warmed up."""
+        return self.n_samples >= self.warmup and self._su is not None
+
+    @property
+    def model(self) -> StateSpaceModel | None:
+        """Current identified model, or None until warmed up."""
+        if not self.ready:
+            return None
+        mats = self._matrices()
+        return None if mats is None else StateSpaceModel(*self._physical(mats), dt=self.dt)
+
+    @property
+    def state(self) -> np.ndarray | None:
+        """State estimate for the next sample, x_{k+1|k}, in the model's coordinates."""
+        if not self.ready:
+            return None
+        x = self._current_state()
+        return None if x is None else x.copy()
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(n={self.n}, p={self.p}, forgetting={self.forgetting}, "
+                f"samples={self.n_samples}, skipped={self.n_skipped})")
+
+
+
+
+def state_horizon(f: int | None, n: int, m: int, basis: str) -> int:
+    """Prediction horizon (samples) of a state built from stacked output predictions.
+
+    Default ``2 ceil(n / m)`` for a basis fitted to the predictions (twice
+    the minimum, which measured best on the ETS-VIII model) and
+    ``ceil(n / m)`` for the plain selection ``W = [I_n 0]``.
+
+    Raises
+    ------
+    ValueError
+        If ``f m < n``: the predictions cannot span an n-dimensional state.
+    """
+    horizon = (2 * -(-n // m) if basis == "svd" else -(-n // m)) if f is None else f
+    if horizon * m < n:
+        raise ValueError(f"f * m = {horizon * m} must be >= n = {n}; increase f")
+    return horizon
+
+
+class RecursiveVARXIdentifier(OnlineIdentifier):
+    """An online identifier whose first stage is the recursive VARX predictor.
+
+    ``y_k = Xi phi_k + e_k`` by exponentially weighted RLS (paper Eq. 20-24),
+    ``Xi = [Xi_1, ..., Xi_p]`` with ``Xi_i ~ C At^(i-1) Bt``. Every recursive
+    PBSID method builds its state from ``Xi``.
+
+    Parameters
+    ----------
+    n, p, forgetting, dt, warmup, input_scale, output_scale
+        See :class:`OnlineIdentifier`; ``forgetting`` is the default of
+        every stage's forgetting factor.
+    varx_forgetting : float, optional
+        beta_1, forgetting of the VARX (default ``forgetting``).
+    varx_init : float
+        alpha_1: the VARX covariance starts at ``I / alpha_1`` (normalized
+        signals; paper: 0.9).
+    regularization : float
+        Tikhonov floor of the VARX as a fraction c of its effective memory:
+        ``delta = c / (1 - beta_1)`` in normalized units (see
+        :class:`~identifiers.rls.RecursiveLeastSquares`). A VARX with
+        p (r + m) regressors on an order-n plant has many weakly excited
+        directions in which noise is fitted with huge cancelling
+        coefficients; the floor keeps its Markov parameters sane. 0 turns it
+        off (the paper's algorithm).
+    """
+
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
+                 warmup: int | None = None, regularization: float = 0.0,
+                 varx_forgetting: float | None = None, varx_init: float = 0.9,
+                 input_scale=None, output_scale=None) -> None:
+        if not (np.isfinite(regularization) and regularization >= 0):
+            raise ValueError(f"regularization must be >= 0, got {regularization}")
+        self.regularization = float(regularization)
+        self.varx_forgetting = _forgetting("varx_forgetting", varx_forgetting or forgetting)
+        self.varx_init = _positive_float("varx_init", varx_init)
+        if warmup is None:
+            warmup = max(4 * p, p + 2 * n)
+        super().__init__(n, p, forgetting, dt=dt, warmup=warmup, input_scale=input_scale,
+                         output_scale=output_scale)
+
+    def reset(self) -> None:
+        super().reset()
+        self._varx = None
+
+    def _allocate(self, r: int, m: int) -> None:
+        floor = (self.regularization / (1.0 - self.varx_forgetting)
+                 if self.varx_forgetting < 1.0 else 0.0)
+        self._varx = RecursiveLeastSquares(m, self.p * (r + m), self.varx_forgetting,
+                                           1.0 / self.varx_init, regularization=floor)
+
+    @property
+    def xi(self) -> np.ndarray | None:
+        """Current VARX matrix ``[Xi_1, ..., Xi_p]`` (m x p (r + m)), normalized units."""
+        return None if self._varx is None else self._varx.theta.copy()
+
+    def _fill_output(self) -> np.ndarray:
+        return self._varx.predict(self._phi)
+
+
+class SystemRLSIdentifier(RecursiveVARXIdentifier):
+    """Recursive VARX plus RLS for the system matrices on a state sequence.
+
+    Given states ``x_k`` from the subclass, RLS for ``y_k = C x_k (+ D u_k)``
+    (paper Eq. 47-48) and ``x_{k+1} = A x_k + B u_k + K e_k`` (Eq. 49-55, in
+    innovation form, see :meth:`_learn_system`).
+
+    Parameters
+    ----------
+    output_forgetting, system_forgetting : float, optional
+        beta_3 (``[C D]``) and beta_4 (``[A B K]``); default ``forgetting``.
+    output_init, system_init : float
+        alpha_2, alpha_3: initial covariances ``I / alpha`` (paper: 0.9).
+    feedthrough : bool
+        Estimate D (default False: strictly proper, D = 0).
+    **kwargs
+        Those of :class:`RecursiveVARXIdentifier`.
+    """
+
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
+                 output_forgetting: float | None = None,
+                 system_forgetting: float | None = None, output_init: float = 0.9,
+                 system_init: float = 0.9, feedthrough: bool = False, **kwargs) -> None:
+        self.output_forgetting = _forgetting("output_forgetting", output_forgetting or forgetting)
+        self.system_forgetting = _forgetting("system_forgetting", system_forgetting or forgetting)
+        self.output_init = _positive_float("output_init", output_init)
+        self.system_init = _positive_float("system_init", system_init)
+        self.feedthrough = bool(feedthrough)
+        super().__init__(n, p, forgetting, **kwargs)
+
+    def reset(self) -> None:
+        super().reset()
+        self._output_rls = self._system_rls = None
+        self._x = None
+
+    def _allocate(self, r: int, m: int) -> None:
+        super()._allocate(r, m)
+        n = self.n
+        self._output_rls = RecursiveLeastSquares(m, n + (r if self.feedthrough else 0),
+                                                 self.output_forgetting, 1.0 / self.output_init)
+        self._system_rls = RecursiveLeastSquares(n, n + r + m, self.system_forgetting,
+                                                 1.0 / self.system_init)
+
+    def _learn_system(self, x_k: np.ndarray, u: np.ndarray, y: np.ndarray,
+                      x_next: np.ndarray) -> None:
+        """RLS for ``y_k = C x_k (+ D u_k) + e_k`` and ``x_{k+1} = A x_k + B u_k + K e_k``.
+
+        Paper Eq. 47-55 regress ``x_{k+1}`` on ``[x_k; u_k; y_k]`` for
+        ``[At, Bt]`` and recover ``A = At + K C``. We regress on the
+        innovation ``e_k = y_k - C_k x_k`` instead (the batch PBSID form): the
+        same model, but where the data carry little innovation (low noise)
+        ``[x; u; y]`` is nearly collinear (``y ~ C x``) and RLS with
+        forgetting winds up along that direction, while ``[x; u; e]`` keeps
+        A and B well determined.
+        """
+        reg = np.concatenate((x_k, u)) if self.feedthrough else x_k
+        self._output_rls.update(reg, y)
+        e = y - self._output_rls.theta @ reg
+        self._system_rls.update(np.concatenate((x_k, u, e)), x_next)
+
+    def _matrices(self) -> tuple[np.ndarray, ...] | None:
+        if self._x is None:
+            return None
+        n, r = self.n, self.n_inputs
+        cd = self._output_rls.theta
+        c = cd[:, :n]
+        d = cd[:, n:] if self.feedthrough else np.zeros((self.n_outputs, r))
+        sys_ = self._system_rls.theta
+        return sys_[:, :n], sys_[:, n:n + r], c, d, sys_[:, n + r:]
+
+    def _current_state(self) -> np.ndarray | None:
+        return self._x
+
+
+class PredictionStateIdentifier(SystemRLSIdentifier):
+    """State from the VARX's stacked output predictions, then RLS system matrices.
+
+    The state is ``x_k = W P(phi_k)`` where ``P`` stacks the output
+    predictions ``[yhat_k; ...; yhat_{k+f-1}]`` (= ``LK phi_k``, computed by
+    the subclass), and the selection ``W`` is
+
+    * ``basis="svd"`` (default): the n leading left singular vectors of the
+      predictions over the warm-up samples, computed once when warm-up ends
+      and fixed afterwards (no SVD per step). A balanced, well-conditioned
+      basis.
+    * ``basis="selection"``: ``W = [I_n 0]``, the first n predicted outputs.
+      Cheapest, but on outputs that are nearly collinear over a few samples
+      (an angle and its rate at dt = 0.1 s) the basis is badly conditioned.
+
+    Parameters
+    ----------
+    f : int, optional
+        Prediction horizon of the state, in samples (rows of LK); default
+        from :func:`state_horizon`.
+    basis : {"svd", "selection"}
+    **kwargs
+        Those of :class:`SystemRLSIdentifier`.
+    """
+
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
+                 f: int | None = None, basis: str = "svd", **kwargs) -> None:
+        if basis not in ("svd", "selection"):
+            raise ValueError(f"basis must be 'svd' or 'selection', got {basis!r}")
+        self.basis = basis
+        self.f = None if f is None else _positive_int("f", f)
+        super().__init__(n, p, forgetting, **kwargs)
+        if basis == "svd" and self.warmup - self.p < self.n:
+            raise ValueError(f"the SVD basis needs warmup >= p + n = {self.p + self.n}")
+
+    def reset(self) -> None:
+        super().reset()
+        self._w = None
+        self._basis_data: list[np.ndarray] = []
+
+    def _allocate(self, r: int, m: int) -> None:
+        super()._allocate(r, m)
+        self._horizon = state_horizon(self.f, self.n, m, self.basis)
+        if self.basis == "selection":
+            self._w = np.eye(self.n, self._horizon * m)
+
+    @abstractmethod
+    def _predictions(self, phi: np.ndarray) -> np.ndarray:
+        """Stacked output predictions ``LK phi`` over the horizon, (f m,)."""
+
+    def _fix_basis(self) -> None:
+        """W from the SVD of the warm-up predictions (once)."""
+        preds = np.array([self._predictions(phi) for phi in self._basis_data]).T
+        left = np.linalg.svd(preds, full_matrices=False)[0]
+        self._w = left[:, :self.n].T.copy()
+        self._basis_data = []
+
+    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        if learn:
+            self._varx.update(self._phi, y)
+        self._push(u, y)
+        if self._w is None:
+            if learn:
+                self._basis_data.append(self._phi.copy())
+            if self._k + 1 >= self.warmup and len(self._basis_data) >= self.n:
+                self._fix_basis()
+            else:
+                return
+        x_next = self._w @ self._predictions(self._phi)
+        if learn and self._x is not None:
+            self._learn_system(self._x, u, y, x_next)
+        self._x = x_next

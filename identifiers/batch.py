@@ -1,0 +1,146 @@
+"""Offline (batch) predictor-based subspace identification, PBSID.
+
+VARX least squares, the weighted predictor product LK, an SVD of
+``LK Phi`` for the state sequence, then least squares for ``[C D]`` and
+``[A B K]`` (Chiuso 2007; van Wingerden and Verhaegen; docs/design/identification.md).
+Also the comparator that :class:`~identifiers.windowed.WindowedPBSID`
+refits on a sliding window.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from identifiers.model import StateSpaceModel
+from identifiers.varx import predictor_product, regressor_matrix
+
+__all__ = ["PBSIDResult", "pbsid"]
+
+
+class PBSIDResult:
+    """Model plus by-products of :func:`pbsid`.
+
+    Attributes
+    ----------
+    model : StateSpaceModel
+    states : (N - p, n) ndarray
+        State estimates x_k for k = p .. N-1 (model coordinates).
+    next_state : (n,) ndarray
+        One-step prediction of the state after the last sample.
+    singular_values : ndarray
+        Singular values of ``LK Phi`` (order selection).
+    xi : (m, p (r + m)) ndarray
+        VARX estimate.
+    """
+
+    def __init__(self, model, states, next_state, singular_values, xi):
+        self.model = model
+        self.states = states
+        self.next_state = next_state
+        self.singular_values = singular_values
+        self.xi = xi
+
+
+def _check_data(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    u = np.asarray(u, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if u.ndim != 2 or y.ndim != 2 or u.shape[0] != y.shape[0]:
+        raise ValueError(f"U and Y must have shapes (N, r) and (N, m), got {u.shape} and "
+                         f"{y.shape}")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        raise ValueError("U and Y must be finite")
+    return u, y
+
+
+def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
+          dt: float = 0.1, weighted: bool = True, feedthrough: bool = False,
+          regularization: float = 0.0, weights: np.ndarray | None = None,
+          normalize: bool = True, full_output: bool = False):
+    """Batch PBSID of an innovation-form model from one input-output record.
+
+    Parameters
+    ----------
+    U : (N, r) array_like
+        Inputs.
+    Y : (N, m) array_like
+        Outputs.
+    n : int
+        Model order.
+    p : int
+        Past window (VARX lags); needs ``p m >= n``.
+    f : int, optional
+        Future window (rows of LK, in samples); default ``p``.
+    dt : float
+        Sample time of the returned model, s.
+    weighted : bool
+        Use the weighted predictor product (closed-loop consistent).
+    feedthrough : bool
+        Estimate D (default: D = 0, strictly proper).
+    regularization : float
+        Tikhonov term added to the VARX normal equations (0: plain LS).
+    weights : (N,) array_like, optional
+        Non-negative weight of each sample's equation in every least-squares
+        step (e.g. exponential forgetting over a window); default uniform.
+    normalize : bool
+        Scale every input and output channel to unit RMS before identifying
+        (the SVD then weighs channels alike instead of by their units); the
+        model is returned in physical units.
+    full_output : bool
+        Return a :class:`PBSIDResult` instead of the model.
+
+    Returns
+    -------
+    StateSpaceModel or PBSIDResult
+    """
+    u, y = _check_data(U, Y)
+    r, m = u.shape[1], y.shape[1]
+    f = p if f is None else int(f)
+    if n < 1 or p < 1 or f < 1:
+        raise ValueError("n, p and f must be >= 1")
+    if f * m < n:
+        raise ValueError(f"f * m = {f * m} must be >= n = {n}; increase p or f")
+    n_rows = u.shape[0] - p
+    if n_rows <= p * (r + m):
+        raise ValueError(f"need more than p (r + m) = {p * (r + m)} samples after the first p, "
+                         f"got {n_rows}")
+    if weights is None:
+        sw = np.ones(n_rows)
+    else:
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (u.shape[0],) or np.any(w < 0) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be finite, >= 0, shape ({u.shape[0]},)")
+        sw = np.sqrt(w[p:])
+    if normalize:
+        su = np.sqrt(np.mean(u**2, axis=0))
+        sy = np.sqrt(np.mean(y**2, axis=0))
+        su = np.where(su > 0, su, 1.0)
+        sy = np.where(sy > 0, sy, 1.0)
+        u, y = u / su, y / sy
+    else:
+        su, sy = np.ones(r), np.ones(m)
+    z = np.hstack([u, y])
+    phi = regressor_matrix(z, p)
+    target = y[p:]
+    if regularization > 0:
+        wphi = phi * (sw**2)[:, None]
+        gram = phi.T @ wphi + regularization * np.eye(phi.shape[1])
+        xi = np.linalg.solve(gram, wphi.T @ target).T
+    else:
+        xi = np.linalg.lstsq(phi * sw[:, None], target * sw[:, None], rcond=None)[0].T
+    lk = predictor_product(xi, r, f, weighted)
+    _, s, right = np.linalg.svd(lk @ phi.T, full_matrices=False)
+    x = (np.sqrt(s[:n])[:, None] * right[:n]).T            # (N - p, n)
+    reg = np.hstack([x, u[p:]]) if feedthrough else x
+    cd = np.linalg.lstsq(reg * sw[:, None], target * sw[:, None], rcond=None)[0].T
+    c = cd[:, :n]
+    d = cd[:, n:] if feedthrough else np.zeros((m, r))
+    e = target - reg @ cd.T
+    reg2 = np.hstack([x[:-1], u[p:-1], e[:-1]])
+    sw2 = sw[:-1, None]
+    abk = np.linalg.lstsq(reg2 * sw2, x[1:] * sw2, rcond=None)[0].T
+    a, b, k = abk[:, :n], abk[:, n:n + r], abk[:, n + r:]
+    next_state = a @ x[-1] + b @ u[-1] + k @ e[-1]
+    model = StateSpaceModel(a, b / su, sy[:, None] * c, sy[:, None] * d / su, k / sy, dt)
+    if not full_output:
+        return model
+    return PBSIDResult(model, x, next_state, s, xi)

@@ -1,0 +1,50 @@
+"""Classical recursive PBSID (Houtzager, van Wingerden, Verhaegen).
+
+Per step: recursive VARX update, then the product of observability and
+controllability matrices LK (f m x p (r + m)) is rebuilt from the current
+Markov parameters and the state is ``x_k = W LK phi_k``; RLS then gives
+``[C D]`` and ``[A B K]`` (docs/design/identification.md). The "weighted"
+LK (default) replaces each future output by its own prediction, which keeps
+the estimate consistent on closed-loop data; the unweighted one is the
+plain shift.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from identifiers.base import PredictionStateIdentifier
+from identifiers.varx import predictor_product
+
+__all__ = ["ClassicalRPBSID"]
+
+
+class ClassicalRPBSID(PredictionStateIdentifier):
+    """Classical recursive predictor-based subspace identification.
+
+    Parameters
+    ----------
+    n, p, forgetting
+        Order, past window, forgetting factor (paper: 15 and 0.98).
+    weighted : bool
+        Weighted (closed-loop consistent) LK; default True.
+    **kwargs
+        ``f`` (default ``p``, as the PBSID toolbox's ``rpbsid``), ``basis``,
+        ``dt``, ``warmup`` and the constants of
+        :class:`~identifiers.base.PredictionStateIdentifier`.
+
+    Notes
+    -----
+    Building LK costs O(f^2 m^2 p (r + m)) per step; this is what
+    :class:`~identifiers.predictor.PredictorRPBSID` avoids.
+    """
+
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
+                 weighted: bool = True, **kwargs) -> None:
+        self.weighted = bool(weighted)
+        kwargs.setdefault("f", p)
+        super().__init__(n, p, forgetting, **kwargs)
+
+    def _predictions(self, phi: np.ndarray) -> np.ndarray:
+        lk = predictor_product(self._varx.theta, self.n_inputs, self._horizon, self.weighted)
+        return lk @ phi

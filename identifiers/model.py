@@ -1,0 +1,281 @@
+"""Identified discrete-time state-space models in innovation form.
+
+    x_{k+1} = A x_k + B u_k + K e_k,      y_k = C x_k + D u_k + e_k
+
+:class:`StateSpaceModel` holds one model; :class:`ModelSequence` the
+time-varying sequence ``{A_k, B_k, C_k, D_k, K_k}`` an online identifier
+produces (paper Sec. 4.3 judges identification on it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ModelSequence", "StateSpaceModel", "observability_basis"]
+
+
+def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``T`` = the first n rows of ``[C; CA; CA^2; ...]``.
+
+    ``x' = T x`` expresses a model in "predicted-output" coordinates: the
+    state is the first n entries of the stacked free-response output
+    predictions. For an observable model whose first n such rows are
+    independent these coordinates depend on the input-output behaviour
+    only, so models identified in different bases can be compared and
+    chained (:meth:`ModelSequence.chained` uses it for sequences whose
+    models do not share a basis).
+
+    Returns
+    -------
+    (n, n) ndarray
+    """
+    n = a.shape[0]
+    rows, block = [], c
+    total = 0
+    while total < n:
+        rows.append(block)
+        total += block.shape[0]
+        block = block @ a
+    return np.vstack(rows)[:n]
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpaceModel:
+    """Discrete-time innovation-form model ``(A, B, C, D, K)``.
+
+    Attributes
+    ----------
+    A : (n, n) ndarray
+    B : (n, r) ndarray
+    C : (m, n) ndarray
+    D : (m, r) ndarray
+    K : (n, m) ndarray
+        Kalman (predictor) gain.
+    dt : float
+        Sample time, s.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    K: np.ndarray
+    dt: float = 0.1
+
+    def __post_init__(self) -> None:
+        mats = {}
+        for name in ("A", "B", "C", "D", "K"):
+            arr = np.array(getattr(self, name), dtype=float)
+            if arr.ndim != 2:
+                raise ValueError(f"{name} must be 2-D, got shape {arr.shape}")
+            arr.flags.writeable = False
+            mats[name] = arr
+            object.__setattr__(self, name, arr)
+        n, r, m = self.n, self.B.shape[1], self.C.shape[0]
+        expected = {"A": (n, n), "B": (n, r), "C": (m, n), "D": (m, r), "K": (n, m)}
+        for name, shape in expected.items():
+            if mats[name].shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {mats[name].shape}")
+        if not self.dt > 0:
+            raise ValueError(f"dt must be positive, got {self.dt}")
+
+    @property
+    def n(self) -> int:
+        """State order."""
+        return self.A.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self.C.shape[0]
+
+    def to_control(self):
+        """The deterministic part as a ``control.StateSpace`` with ``dt``."""
+        import control
+
+        return control.StateSpace(self.A, self.B, self.C, self.D, self.dt)
+
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of A (discrete)."""
+        return np.linalg.eigvals(self.A)
+
+    def modal(self) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequencies (Hz) and damping ratios of the oscillatory poles.
+
+        Continuous equivalents ``s = log(z) / dt`` of the eigenvalues with
+        positive imaginary part, sorted by frequency.
+        """
+        z = self.poles()
+        z = z[z.imag > 1e-12]
+        s = np.log(z) / self.dt
+        wn = np.abs(s)
+        order = np.argsort(wn)
+        return wn[order] / (2 * np.pi), -s.real[order] / wn[order]
+
+    def transform(self, t: np.ndarray) -> StateSpaceModel:
+        """Same model in coordinates ``x' = T x``."""
+        t_inv = np.linalg.inv(t)
+        return StateSpaceModel(t @ self.A @ t_inv, t @ self.B, self.C @ t_inv, self.D,
+                               t @ self.K, self.dt)
+
+    def in_observability_basis(self) -> StateSpaceModel:
+        """The model in the :func:`observability_basis` coordinates."""
+        return self.transform(observability_basis(self.A, self.C))
+
+    def simulate(self, inputs: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """Deterministic response ``y_k = C x_k + D u_k`` to ``inputs`` (N, r)."""
+        u = np.asarray(inputs, dtype=float)
+        if u.ndim != 2 or u.shape[1] != self.n_inputs:
+            raise ValueError(f"inputs must have shape (N, {self.n_inputs}), got {u.shape}")
+        return self._run(u, None, x0)
+
+    def predict(self, inputs: np.ndarray, outputs: np.ndarray,
+                x0: np.ndarray | None = None) -> np.ndarray:
+        """One-step-ahead predictions ``yhat_{k|k-1}`` with the innovation gain K."""
+        return self._run(np.asarray(inputs, dtype=float), np.asarray(outputs, dtype=float), x0)
+
+    def _run(self, u: np.ndarray, y: np.ndarray | None, x0: np.ndarray | None) -> np.ndarray:
+        """Simulation, or one-step prediction when measured outputs ``y`` are given."""
+        x = np.zeros(self.n) if x0 is None else np.asarray(x0, dtype=float)
+        out = np.empty((u.shape[0], self.n_outputs))
+        for k in range(u.shape[0]):
+            out[k] = self.C @ x + self.D @ u[k]
+            x = self.A @ x + self.B @ u[k]
+            if y is not None:
+                x += self.K @ (y[k] - out[k])
+        return out
+
+
+class ModelSequence(Sequence):
+    """Time-varying model sequence from an online identifier.
+
+    Entry k is the model after sample k was processed, or ``None`` while the
+    identifier was warming up.
+
+    Attributes
+    ----------
+    A, B, C, D, K : ndarray
+        Stacked matrices, shape ``(N, ...)``; NaN where not warmed up.
+    valid : (N,) bool ndarray
+    consistent_basis : bool
+        True when every model uses the same state coordinates (every
+        identifier of this package: the recursive ones by construction, the
+        sliding-window method by aligning each refit to the previous one);
+        False for a sequence of independently chosen bases, whose models are
+        re-based into the :func:`observability_basis` before being chained.
+    """
+
+    def __init__(self, A, B, C, D, K, valid, dt: float, consistent_basis: bool = True) -> None:
+        self.A, self.B, self.C, self.D, self.K = (np.asarray(v) for v in (A, B, C, D, K))
+        self.valid = np.asarray(valid, dtype=bool)
+        self.dt = float(dt)
+        self.consistent_basis = bool(consistent_basis)
+
+    @classmethod
+    def from_models(cls, models: Sequence[StateSpaceModel | None],
+                    dt: float | None = None) -> ModelSequence:
+        """Stack a list of models (``None`` entries allowed)."""
+        first = next((m for m in models if m is not None), None)
+        if first is None:
+            raise ValueError("no model in the sequence")
+        n, r, m = first.n, first.n_inputs, first.n_outputs
+        N = len(models)
+        arrays = [np.full((N, *s), np.nan) for s in ((n, n), (n, r), (m, n), (m, r), (n, m))]
+        valid = np.zeros(N, dtype=bool)
+        for k, mod in enumerate(models):
+            if mod is None:
+                continue
+            valid[k] = True
+            for arr, mat in zip(arrays, (mod.A, mod.B, mod.C, mod.D, mod.K), strict=True):
+                arr[k] = mat
+        return cls(*arrays, valid, dt if dt is not None else first.dt)
+
+    def __len__(self) -> int:
+        return self.valid.shape[0]
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if not self.valid[k]:
+            return None
+        return StateSpaceModel(self.A[k], self.B[k], self.C[k], self.D[k], self.K[k], self.dt)
+
+    def first_valid(self) -> int:
+        """Index of the first warmed-up model."""
+        idx = np.flatnonzero(self.valid)
+        if idx.size == 0:
+            raise ValueError("no valid model in the sequence")
+        return int(idx[0])
+
+    def chained(self, k: int) -> StateSpaceModel:
+        """Model k in coordinates that chain across steps (see ``consistent_basis``)."""
+        mod = self[k]
+        if self.consistent_basis:
+            return mod
+        try:
+            return mod.transform(observability_basis(mod.A, mod.C))
+        except np.linalg.LinAlgError:
+            return mod
+
+    def _index(self, k: int, k0: int) -> int:
+        return k if k >= k0 and self.valid[k] else k0
+
+    def simulate(self, inputs: np.ndarray, start: int | None = None) -> np.ndarray:
+        """Response of the time-varying sequence from zero state (paper Sec. 4.3).
+
+        ``x_{k+1} = A_k x_k + B_k u_k``, ``y_k = C_k x_k + D_k u_k``; steps
+        before ``start`` (default: the first valid model) and invalid steps
+        use the model at ``start``.
+
+        Parameters
+        ----------
+        inputs : (N, r) ndarray
+            Input sequence aligned with the models.
+        """
+        return self._run(inputs, None, start)
+
+    def predict(self, inputs: np.ndarray, outputs: np.ndarray,
+                start: int | None = None) -> np.ndarray:
+        """One-step-ahead predictions with the time-varying innovation predictor.
+
+        ``x_{k+1} = A_k x_k + B_k u_k + K_k (y_k - C_k x_k - D_k u_k)``.
+        """
+        return self._run(inputs, outputs, start)
+
+    def _run(self, inputs: np.ndarray, outputs: np.ndarray | None,
+             start: int | None) -> np.ndarray:
+        """Chain the models over a record: simulation, or prediction if ``outputs``."""
+        u = np.asarray(inputs, dtype=float)
+        y = None if outputs is None else np.asarray(outputs, dtype=float)
+        n_steps = min(len(self), u.shape[0]) if y is None else y.shape[0]
+        k0 = self.first_valid() if start is None else int(start)
+        x = np.zeros(self.A.shape[1])
+        out = np.empty((n_steps, self.C.shape[1]))
+        cache: dict[int, StateSpaceModel] = {}
+        for k in range(n_steps):
+            j = self._index(k, k0)
+            mod = cache.get(j)
+            if mod is None:
+                cache = {j: self.chained(j)}
+                mod = cache[j]
+            out[k] = mod.C @ x + mod.D @ u[k]
+            x = mod.A @ x + mod.B @ u[k]
+            if y is not None:
+                x += mod.K @ (y[k] - out[k])
+        return out
+
+    def modal(self, n_freq: int | None = None) -> np.ndarray:
+        """Identified natural frequencies (Hz) per step, NaN-padded, (N, n_freq)."""
+        n_half = self.A.shape[1] // 2 if n_freq is None else n_freq
+        out = np.full((len(self), n_half), np.nan)
+        for k in np.flatnonzero(self.valid):
+            f, _ = self[k].modal()
+            f = f[:n_half]
+            out[k, :f.size] = f
+        return out

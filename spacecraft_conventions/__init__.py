@@ -1,0 +1,45 @@
+"""Conventions shared by every package of the project, each defined once.
+
+The lowest layer: it imports nothing of the project, so the environment,
+the identifiers and the controllers can all rely on it without depending
+on each other.
+
+* :mod:`spacecraft_conventions.units`: angle unit conversions.
+* :mod:`spacecraft_conventions.sensors`: nominal signal level of each
+  sensor group and of the torques (what ``snr_db``, the reward, the LQR
+  weights and the identifiers' normalization are relative to).
+* :mod:`spacecraft_conventions.outputs`: the sensor groups, their order,
+  their channel labels and :class:`OutputLayout`, which gives each group's
+  rows of an output or observation vector by name.
+"""
+
+from spacecraft_conventions.outputs import (
+    AXES,
+    LABEL_PREFIX,
+    OBSERVATION_GROUPS,
+    OUTPUT_GROUPS,
+    STANDARD_OUTPUTS,
+    TASK_GROUPS,
+    OutputLayout,
+    match_groups,
+)
+from spacecraft_conventions.sensors import NOMINAL_SCALE, NOMINAL_TORQUE, nominal_scale
+from spacecraft_conventions.units import DEG_PER_RAD, RAD_PER_DEG
+from spacecraft_conventions.version import __version__
+
+__all__ = [
+    "AXES",
+    "DEG_PER_RAD",
+    "LABEL_PREFIX",
+    "NOMINAL_SCALE",
+    "NOMINAL_TORQUE",
+    "OBSERVATION_GROUPS",
+    "OUTPUT_GROUPS",
+    "RAD_PER_DEG",
+    "STANDARD_OUTPUTS",
+    "TASK_GROUPS",
+    "OutputLayout",
+    "__version__",
+    "match_groups",
+    "nominal_scale",
+]

@@ -1,0 +1,65 @@
+"""Time-varying flexible spacecraft (ETS-VIII) truth model and Gymnasium environments.
+
+Importing the package registers three environments (250 s episodes,
+``max_episode_steps=2500`` at dt = 0.1 s):
+
+* ``FlexibleSpacecraft-v0``: constant (LTI) plant,
+* ``FlexibleSpacecraftDocking-v0``: two modules dock at t = 100 s and 180 s,
+* ``FlexibleSpacecraftSolarRotation-v0``: paddles turn at 0.2 deg/s.
+
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v0")`` works
+without a prior import.
+"""
+
+from __future__ import annotations
+
+from spacecraft_conventions import __version__
+from spacecraft_env.dynamics import FlexibleSpacecraftModel, StateSpaceMatrices
+from spacecraft_env.env import FlexibleSpacecraftEnv, RewardWeights
+from spacecraft_env.parameters import (
+    ANTENNA_FREQUENCIES_HZ,
+    PADDLE_FREQUENCIES_HZ,
+    AppendageParameters,
+    DockingModule,
+    SpacecraftParameters,
+    ets8_parameters,
+)
+from spacecraft_env.registration import ENV_IDS, MAX_EPISODE_STEPS, env_id, register_envs
+from spacecraft_env.scenarios import (
+    SCENARIOS,
+    CombinedScenario,
+    Configuration,
+    ConstantScenario,
+    DockingScenario,
+    Scenario,
+    SolarRotationScenario,
+    make_scenario,
+)
+
+__all__ = [
+    "ANTENNA_FREQUENCIES_HZ",
+    "ENV_IDS",
+    "MAX_EPISODE_STEPS",
+    "PADDLE_FREQUENCIES_HZ",
+    "SCENARIOS",
+    "AppendageParameters",
+    "CombinedScenario",
+    "Configuration",
+    "ConstantScenario",
+    "DockingModule",
+    "DockingScenario",
+    "FlexibleSpacecraftEnv",
+    "FlexibleSpacecraftModel",
+    "RewardWeights",
+    "Scenario",
+    "SolarRotationScenario",
+    "SpacecraftParameters",
+    "StateSpaceMatrices",
+    "__version__",
+    "env_id",
+    "ets8_parameters",
+    "make_scenario",
+    "register_envs",
+]
+
+register_envs()

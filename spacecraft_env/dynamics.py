@@ -1,0 +1,504 @@
+"""Rigid-flexible coupling truth model of the spacecraft (docs/design/model.md).
+
+Equations of motion (paper Eq. 1-12), generalized coordinates
+``delta = [psi (3); eta_1 (k_1); ...; eta_N (k_N)]``::
+
+    M(t) delta'' + E delta' + K delta = L u
+
+    M(t) = [[J(t), F(t)], [F(t)^T, I]],   F = [F_1, ..., F_N]
+    E = blkdiag(0_3, 2 zeta_i Omega_i),   K = blkdiag(0_3, Omega_i^2),   L = [I_3; 0]
+
+    J(t) = J_r - m_r S(r_r)^2 + sum_i T_i^T J_i T_i - sum_i m_i S(r_i)^2
+           + sum over docked modules (own inertia + parallel-axis term)
+
+State ``x = [delta; delta']`` (order n = 2 (3 + sum k_i)), continuous
+matrices ``A_c = [[0, I], [-M^-1 K, -M^-1 E]]``, ``B_c = [0; M^-1 L]``;
+outputs ``y = C x`` select attitude angles psi (rad), body rates
+omega = psi' (rad/s) and appendage deflections ``w_i = Phi_i eta_i`` (m).
+
+The sampled model is the exact zero-order-hold discretization, from the
+matrix exponential of ``[[A_c, B_c], [0, 0]] dt``, cached on the scenario's
+configuration (so docking costs one exponential per segment and a repeated
+rotation episode reuses its matrices).
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections import OrderedDict
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from scipy.linalg import expm
+
+from spacecraft_conventions import AXES, LABEL_PREFIX, OUTPUT_GROUPS, OutputLayout
+from spacecraft_env.modes import cantilever_moments, coupling_matrix, sensor_mode_shapes
+from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
+from spacecraft_env.scenarios import (
+    CombinedScenario,
+    Configuration,
+    DockingScenario,
+    Scenario,
+    SolarRotationScenario,
+    make_scenario,
+)
+
+__all__ = [
+    "FlexibleSpacecraftModel",
+    "StateSpaceMatrices",
+    "rotation_pitch",
+    "skew",
+]
+
+class StateSpaceMatrices(NamedTuple):
+    """State-space matrices ``(A, B, C, D)`` of the true plant at one instant.
+
+    ``dt`` is ``None`` for the continuous-time model and the sample time (s)
+    for the zero-order-hold model.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float | None
+
+
+def skew(r: np.ndarray) -> np.ndarray:
+    """Cross-product matrix ``S(r)`` with ``S(r) v = r x v``."""
+    x, y, z = r
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rotation_pitch(theta: float) -> np.ndarray:
+    """Paddle rotation ``T_s(theta)`` of Appendix A: body frame -> paddle frame.
+
+    The paddle's inertia in the body frame is ``T^T J_s T`` and a paddle-fixed
+    direction ``d0`` appears in the body frame as ``T^T d0``. With this
+    convention 50 deg of rotation moves J_xz from +1708 to about -2213 kg m^2,
+    as docs/design/model.md records.
+    """
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _inv3_spd(s: np.ndarray, t: float) -> np.ndarray:
+    """Inverse of a symmetric 3x3 matrix, checked positive definite.
+
+    Sylvester's criterion (positive leading minors) and the adjugate, in
+    scalar arithmetic: several times faster than LAPACK calls at this size.
+
+    Raises
+    ------
+    ValueError
+        If ``s`` is not positive definite (the mass matrix at time ``t`` is not).
+    """
+    (a, b, c), (_, e, f), (_, _, i) = s.tolist()
+    c11, c12, c13 = e * i - f * f, c * f - b * i, b * f - c * e
+    det = a * c11 + b * c12 + c * c13
+    if not (a > 0 and a * e - b * b > 0 and det > 0):
+        raise ValueError(f"mass matrix M(t) is not positive definite at t = {t} s: "
+                         "J - sum F_i F_i^T must be positive definite")
+    c22, c23, c33 = a * i - c * c, b * c - a * f, a * e - b * b
+    return np.array([[c11, c12, c13], [c12, c22, c23], [c13, c23, c33]]) / det
+
+
+def _scenario_key(scenario: Scenario):
+    """A cheap hashable key function ``t -> key`` for the matrix cache."""
+    if isinstance(scenario, DockingScenario):
+        times = scenario.event_times()
+        return lambda t: bisect_right(times, t)
+    if isinstance(scenario, SolarRotationScenario):
+        return lambda t: scenario.configuration(t).paddle_angle
+    if isinstance(scenario, CombinedScenario):
+        times = scenario.event_times()
+        rot = scenario.rotation
+        return lambda t: (bisect_right(times, t), rot.configuration(t).paddle_angle)
+    return scenario.configuration
+
+
+class FlexibleSpacecraftModel:
+    """Time-varying truth model of the flexible spacecraft.
+
+    Parameters
+    ----------
+    params : SpacecraftParameters, optional
+        Physical parameters; default :func:`ets8_parameters` with 2 modes per
+        appendage (n = 22).
+    scenario : str or Scenario
+        ``"constant"``, ``"docking"``, ``"solar_rotation"``,
+        ``"docking_solar_rotation"`` or a :class:`Scenario` instance.
+    outputs : sequence of str
+        Output groups to measure, a subset of ``("attitude", "rate",
+        "deflection")``; stacked in the canonical order.
+    dt : float
+        Sample time of the discrete model, s (paper: 0.1).
+    cache_size : int, optional
+        Most discrete models kept in the LRU cache; default holds a full
+        2500-step rotation episode within about 64 MB.
+
+    Attributes
+    ----------
+    n : int
+        State order, 2 (3 + sum k_i).
+    n_inputs : int
+        3 torques (N m).
+    n_outputs : int
+        Number of measured outputs m.
+    output_labels : tuple of str
+        Name of every output channel (``"psi_x"``, ..., ``"w_s1_1.00"``).
+    output_layout : spacecraft_conventions.OutputLayout
+        Rows of each output group in ``C`` (``C[model.output_layout.slice("rate")]``).
+    n_sensors : int
+        Deflection sensors over all appendages.
+    """
+
+    def __init__(self, params: SpacecraftParameters | None = None,
+                 scenario: str | Scenario = "constant",
+                 outputs: Sequence[str] = OUTPUT_GROUPS, dt: float = 0.1,
+                 cache_size: int | None = None) -> None:
+        if params is None:
+            params = ets8_parameters()
+        if not isinstance(params, SpacecraftParameters):
+            raise TypeError(f"params must be SpacecraftParameters, got {type(params).__name__}")
+        dt = float(dt)
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+        if isinstance(outputs, str):
+            outputs = (outputs,)
+        unknown = [o for o in outputs if o not in OUTPUT_GROUPS]
+        if unknown or not outputs:
+            raise ValueError(f"outputs must be a non-empty subset of {OUTPUT_GROUPS}, "
+                             f"got {tuple(outputs)}")
+        self.params = params
+        self.scenario = make_scenario(scenario)
+        self.outputs = tuple(o for o in OUTPUT_GROUPS if o in outputs)
+        self.dt = dt
+        self._key = _scenario_key(self.scenario)
+        self._build_constant_parts()
+        if cache_size is None:
+            per_entry = 8 * self.n * (self.n + 3)
+            cache_size = int(np.clip(64e6 // per_entry, 16, 4096))
+        self._cache_size = int(cache_size)
+        self._cache: OrderedDict = OrderedDict()
+
+    # ------------------------------------------------------------------ setup
+    def _build_constant_parts(self) -> None:
+        p = self.params
+        self.n_dof = p.n_dof
+        self.n = p.order
+        self.n_inputs = 3
+        kk = sum(p.n_modes)
+        omega = np.concatenate([2 * np.pi * np.asarray(a.frequencies_hz) for a in p.appendages])
+        zeta = np.concatenate([np.full(a.n_modes, a.damping) for a in p.appendages])
+        self.modal_frequencies_rad = omega
+        self._K = np.diag(np.concatenate([np.zeros(3), omega**2]))
+        self._E = np.diag(np.concatenate([np.zeros(3), 2 * zeta * omega]))
+        self._L = np.zeros((self.n_dof, 3))
+        self._L[:3] = np.eye(3)
+        self._neg_k_modal = -(omega**2)
+        self._neg_e_modal = -2 * zeta * omega
+        self._eye_modal = np.eye(kk)
+        self._eye_dof = np.eye(self.n_dof)
+
+        # Time-invariant part of J: hub, non-rotating appendages, all
+        # parallel-axis terms (the paddles rotate about their own mass centre).
+        r_r = np.asarray(p.hub_position)
+        j_fixed = np.asarray(p.hub_inertia) - p.hub_mass * skew(r_r) @ skew(r_r)
+        for a in p.appendages:
+            s_r = skew(a.position_vector)
+            j_fixed = j_fixed - a.mass * s_r @ s_r
+            if not a.rotates:
+                j_fixed = j_fixed + a.inertia_matrix
+        self._j_fixed = j_fixed
+        self._rotating = [a for a in p.appendages if a.rotates]
+
+        # Coupling. Non-rotating appendages have fixed columns. A rotating one
+        # is linear in its bending direction d = T^T d0 (modes.coupling_matrix):
+        # F = (sqrt(m) S(h) d) I0^T + (sqrt(m) L S(e) d) I1^T, so we keep the two
+        # 3x3 operators and the closed-form moments and never redo root finding.
+        self._mode_slices = []
+        start = 3
+        for a in p.appendages:
+            self._mode_slices.append(slice(start, start + a.n_modes))
+            start += a.n_modes
+        self._F_fixed = np.zeros((3, kk))
+        self._F_rotating = []  # (columns, sqrt(m) S(h), sqrt(m) L S(e), d0, I0, I1)
+        for a, sl in zip(p.appendages, self._mode_slices, strict=True):
+            cols = slice(sl.start - 3, sl.stop - 3)
+            if not p.coupling:
+                continue
+            hinge, span, d0 = (np.asarray(v) for v in (a.hinge, a.span_axis, a.bending_axis))
+            if a.rotates:
+                i0, i1 = cantilever_moments(a.n_modes)
+                root_op = np.sqrt(a.mass) * skew(hinge)
+                lever_op = np.sqrt(a.mass) * a.length * skew(span)
+                self._F_rotating.append((cols, root_op, lever_op, d0, i0, i1))
+            else:
+                self._F_fixed[:, cols] = coupling_matrix(a.mass, a.length, hinge, span, d0,
+                                                         a.n_modes)
+
+        self._build_rotation_harmonics()
+
+        # Output matrix (time-invariant: sensors ride on the appendages).
+        nd = self.n_dof
+        self.n_sensors = sum(len(a.sensor_positions) for a in p.appendages)
+        self.output_layout = OutputLayout.of(self.outputs, self.n_sensors)
+        blocks = {"attitude": np.eye(3, self.n), "rate": np.eye(3, self.n, nd)}
+        labels = {g: [f"{LABEL_PREFIX[g]}_{axis}" for axis in AXES] for g in ("attitude", "rate")}
+        phis, labels["deflection"] = [], []
+        for a, sl in zip(p.appendages, self._mode_slices, strict=True):
+            phi = sensor_mode_shapes(a.mass, np.asarray(a.sensor_positions), a.n_modes)
+            block = np.zeros((phi.shape[0], self.n))
+            block[:, sl] = phi
+            phis.append(block)
+            labels["deflection"] += [f"{LABEL_PREFIX['deflection']}_{a.name}_{s:.2f}"
+                                     for s in a.sensor_positions]
+        blocks["deflection"] = np.vstack(phis)
+        self.C = np.vstack([blocks[g] for g in self.outputs])
+        self.C.flags.writeable = False
+        self.D = np.zeros((self.C.shape[0], 3))
+        self.D.flags.writeable = False
+        self.n_outputs = self.C.shape[0]
+        self.output_labels = tuple(lab for g in self.outputs for lab in labels[g])
+
+    # --------------------------------------------------------- configuration
+    def configuration(self, t: float) -> Configuration:
+        """The scenario's configuration at time ``t`` (s)."""
+        return self.scenario.configuration(float(t))
+
+    def _paddle_inertia(self, theta: float) -> np.ndarray:
+        """Sum of the rotating paddles' ``T^T J_s T`` at angle ``theta`` (rad)."""
+        t_s = rotation_pitch(theta)
+        return sum((t_s.T @ a.inertia_matrix @ t_s for a in self._rotating), np.zeros((3, 3)))
+
+    def _rotating_coupling(self, theta: float) -> np.ndarray:
+        """Coupling columns of the rotating paddles at angle ``theta`` (rad)."""
+        f = np.zeros_like(self._F_fixed)
+        t_s = rotation_pitch(theta)
+        for cols, root_op, lever_op, d0, i0, i1 in self._F_rotating:
+            d = t_s.T @ d0
+            f[:, cols] = np.outer(root_op @ d, i0) + np.outer(lever_op @ d, i1)
+        return f
+
+    def _build_rotation_harmonics(self) -> None:
+        """Exact harmonic form of the paddle terms, so no rotation per query.
+
+        ``T^T J_s T`` is quadratic in (cos, sin) of theta, hence
+        ``J_p(theta) = J0 + Jc cos 2 theta + Js sin 2 theta``; the coupling is
+        linear in the rotated direction, ``F_p = F0 + Fc cos theta + Fs sin theta``.
+        """
+        j0, j90, j45 = (self._paddle_inertia(th) for th in (0.0, np.pi / 2, np.pi / 4))
+        mean = 0.5 * (j0 + j90)
+        self._j_harmonics = (mean, 0.5 * (j0 - j90), j45 - mean)
+        f0, f90, f180 = (self._rotating_coupling(th) for th in (0.0, np.pi / 2, np.pi))
+        fmean = 0.5 * (f0 + f180)
+        self._f_harmonics = (fmean, 0.5 * (f0 - f180), f90 - fmean)
+
+    def _inertia(self, cfg: Configuration) -> np.ndarray:
+        j = self._j_fixed.copy()
+        if self._rotating:
+            mean, jc, js = self._j_harmonics
+            two = 2.0 * cfg.paddle_angle
+            j += mean + math.cos(two) * jc + math.sin(two) * js
+        for module in cfg.modules:
+            j += module.inertia_about_system_centre()
+        return j
+
+    def _coupling(self, cfg: Configuration) -> np.ndarray:
+        if not self._F_rotating:
+            return self._F_fixed.copy()
+        mean, fc, fs = self._f_harmonics
+        th = cfg.paddle_angle
+        return self._F_fixed + mean + math.cos(th) * fc + math.sin(th) * fs
+
+    def inertia(self, t: float) -> np.ndarray:
+        """Total inertia J(t) about the system mass centre, (3, 3), kg m^2."""
+        return self._inertia(self.configuration(t))
+
+    def coupling(self, t: float) -> np.ndarray:
+        """Coupling matrix F(t) = [F_1, ..., F_N], (3, sum k_i), kg^(1/2) m."""
+        return self._coupling(self.configuration(t))
+
+    def _mass_matrix(self, cfg: Configuration) -> np.ndarray:
+        nd = self.n_dof
+        m = np.eye(nd)
+        m[:3, :3] = self._inertia(cfg)
+        f = self._coupling(cfg)
+        m[:3, 3:] = f
+        m[3:, :3] = f.T
+        return m
+
+    def mass_matrix(self, t: float) -> np.ndarray:
+        """Generalized mass matrix M(t), (n_dof, n_dof); checked positive definite.
+
+        Raises
+        ------
+        ValueError
+            If ``M(t)`` is not positive definite (``J - sum F_i F_i^T``
+            must stay positive definite).
+        """
+        return self._checked_mass(self.configuration(t), t)
+
+    def _checked_mass(self, cfg: Configuration, t: float) -> np.ndarray:
+        m = self._mass_matrix(cfg)
+        try:
+            np.linalg.cholesky(m)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"mass matrix M(t) is not positive definite at t = {t} s: "
+                             "J - sum F_i F_i^T must be positive definite") from None
+        return m
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Stiffness matrix K, (n_dof, n_dof)."""
+        return self._K.copy()
+
+    @property
+    def damping(self) -> np.ndarray:
+        """Damping matrix E, (n_dof, n_dof)."""
+        return self._E.copy()
+
+    # --------------------------------------------------------------- matrices
+    def _fill_continuous(self, out: np.ndarray, cfg: Configuration, t: float) -> None:
+        """Write ``[A_c, B_c]`` into ``out[:n, :n + 3]`` (rest untouched).
+
+        Uses the block inverse of M through the 3x3 Schur complement
+        ``S = J - F F^T``, ``G = S^-1 F``:
+        ``M^-1 = [[S^-1, -G], [-G^T, I + F^T G]]``. M is positive definite
+        iff S is, which :func:`_inv3_spd` checks (Sylvester's criterion).
+        """
+        nd = self.n_dof
+        f = self._coupling(cfg)
+        s_inv = _inv3_spd(self._inertia(cfg) - f @ f.T, t)
+        g = s_inv @ f
+        # only the modal columns of K and E are non-zero: M^-1[:, 3:] = [-G; I + F^T G]
+        minv_modal = np.vstack((-g, self._eye_modal + f.T @ g))
+        out[:nd, nd:2 * nd] = self._eye_dof
+        out[nd:self.n, 3:nd] = minv_modal * self._neg_k_modal
+        out[nd:self.n, nd + 3:self.n] = minv_modal * self._neg_e_modal
+        out[nd:nd + 3, self.n:] = s_inv
+        out[nd + 3:self.n, self.n:] = -g.T
+
+    def _continuous(self, cfg: Configuration, t: float) -> tuple[np.ndarray, np.ndarray]:
+        aug = np.zeros((self.n, self.n + 3))
+        self._fill_continuous(aug, cfg, t)
+        return aug[:, :self.n].copy(), aug[:, self.n:].copy()
+
+    def continuous(self, t: float) -> StateSpaceMatrices:
+        """True continuous-time ``(A_c, B_c, C, D)`` at time ``t`` (s)."""
+        a, b = self._continuous(self.configuration(t), t)
+        return StateSpaceMatrices(a, b, self.C.copy(), self.D.copy(), None)
+
+    def modal(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequencies (Hz) and damping ratios of the true plant at ``t``.
+
+        From the eigenvalues ``s`` of ``A_c(t)`` with positive imaginary part:
+        ``|s| / 2 pi`` and ``-Re(s) / |s|``, sorted by frequency (the rigid-body
+        poles at 0 are left out). The same definitions as
+        ``identifiers.StateSpaceModel.modal`` uses for identified models.
+        """
+        a, _ = self._continuous(self.configuration(t), t)
+        s = np.linalg.eigvals(a)
+        s = s[s.imag > 1e-9]
+        wn = np.abs(s)
+        order = np.argsort(wn)
+        return wn[order] / (2 * np.pi), -s.real[order] / wn[order]
+
+    def _discrete_ab(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Cached zero-order-hold ``(A_d, B_d)`` at time ``t`` (read-only arrays)."""
+        key = self._key(t)
+        cache = self._cache
+        hit = cache.get(key)
+        if hit is not None:
+            return hit
+        n = self.n
+        aug = np.zeros((n + 3, n + 3))
+        self._fill_continuous(aug, self.configuration(t), t)
+        aug *= self.dt
+        phi = expm(aug)
+        phi.flags.writeable = False
+        entry = (phi[:n, :n], phi[:n, n:])
+        cache[key] = entry
+        if len(cache) > self._cache_size:
+            cache.popitem(last=False)
+        return entry
+
+    def discrete(self, t: float) -> StateSpaceMatrices:
+        """True zero-order-hold ``(A_d, B_d, C, D)`` for the step starting at ``t``."""
+        ad, bd = self._discrete_ab(t)
+        return StateSpaceMatrices(ad.copy(), bd.copy(), self.C.copy(), self.D.copy(), self.dt)
+
+    def with_scenario(self, scenario: str | Scenario) -> FlexibleSpacecraftModel:
+        """A copy sharing the constant matrices but following another scenario."""
+        new = object.__new__(FlexibleSpacecraftModel)
+        new.__dict__.update(self.__dict__)
+        new.scenario = make_scenario(scenario)
+        new._key = _scenario_key(new.scenario)
+        new._cache = OrderedDict()
+        return new
+
+    def clear_cache(self) -> None:
+        """Forget every cached discrete model."""
+        self._cache.clear()
+
+    # ------------------------------------------------------------ simulation
+    def step(self, x: np.ndarray, u: np.ndarray, t: float) -> np.ndarray:
+        """Exact ZOH step from time ``t``: ``x(t + dt)`` for constant torque ``u``."""
+        ad, bd = self._discrete_ab(t)
+        return ad @ x + bd @ u
+
+    def simulate(self, inputs: np.ndarray, x0: np.ndarray | None = None,
+                 t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Noiseless response to a torque sequence.
+
+        Parameters
+        ----------
+        inputs : (N, 3) array_like
+            Torques u_k, N m, held over [t0 + k dt, t0 + (k + 1) dt).
+        x0 : (n,) array_like, optional
+            Initial state (default zero).
+        t0 : float
+            Start time, s.
+
+        Returns
+        -------
+        states : (N + 1, n) ndarray
+            x_0 ... x_N.
+        outputs : (N, m) ndarray
+            y_k = C x_k, k = 0 .. N - 1.
+        """
+        u = np.asarray(inputs, dtype=float)
+        if u.ndim != 2 or u.shape[1] != 3:
+            raise ValueError(f"inputs must have shape (N, 3), got {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise ValueError("inputs must be finite")
+        x = np.zeros(self.n) if x0 is None else np.asarray(x0, dtype=float).copy()
+        if x.shape != (self.n,):
+            raise ValueError(f"x0 must have shape ({self.n},), got {x.shape}")
+        states = np.empty((u.shape[0] + 1, self.n))
+        states[0] = x
+        for k in range(u.shape[0]):
+            ad, bd = self._discrete_ab(t0 + k * self.dt)
+            x = ad @ x + bd @ u[k]
+            states[k + 1] = x
+        return states, states[:-1] @ self.C.T
+
+    def energy(self, x: np.ndarray, t: float) -> float:
+        """Mechanical energy ``1/2 delta'^T M delta' + 1/2 delta^T K delta``, J."""
+        nd = self.n_dof
+        m = self._mass_matrix(self.configuration(t))
+        q, v = x[:nd], x[nd:]
+        return 0.5 * float(v @ m @ v + q @ self._K @ q)
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_cache"] = OrderedDict()  # rebuilt on demand; keeps pickles small
+        del state["_key"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._key = _scenario_key(self.scenario)

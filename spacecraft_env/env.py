@@ -1,0 +1,369 @@
+"""Gymnasium environment of the time-varying flexible spacecraft.
+
+Attitude regulation or slew of the ETS-VIII rigid-flexible model under
+3-axis torque, with noisy sensor outputs. See :class:`FlexibleSpacecraftEnv`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from spacecraft_conventions import (
+    AXES,
+    LABEL_PREFIX,
+    OBSERVATION_GROUPS,
+    OUTPUT_GROUPS,
+    RAD_PER_DEG,
+    OutputLayout,
+)
+from spacecraft_env.dynamics import FlexibleSpacecraftModel
+from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
+from spacecraft_env.rendering import SpacecraftRenderer
+from spacecraft_env.scenarios import Scenario, make_scenario
+
+__all__ = ["FlexibleSpacecraftEnv", "RewardWeights"]
+
+#: Observation bounds per group (far outside the small-angle model's validity).
+_BOUND = {"attitude": np.pi, "rate": np.pi, "deflection": 10.0,
+          "attitude_error": 2 * np.pi, "reference": np.pi}
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the quadratic stage cost; the reward is its negative.
+
+    ``cost = attitude * |e / 1 deg|^2 + rate * |omega / 0.1 deg/s|^2
+    + vibration * |w / 1 cm|^2 + torque * |a|^2`` (the nominal levels of
+    :mod:`spacecraft_conventions.sensors`) with ``e`` the true
+    attitude error (rad), ``omega`` the true body rates (rad/s), ``w`` the
+    true tip deflections (m) and ``a`` the normalized action in [-1, 1].
+    """
+
+    attitude: float = 1.0
+    rate: float = 1.0
+    vibration: float = 0.1
+    torque: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("attitude", "rate", "vibration", "torque"):
+            value = float(getattr(self, name))
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"reward weight {name} must be finite and >= 0, got {value}")
+            object.__setattr__(self, name, value)
+
+
+def _vector3(name: str, value: Any) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape == ():
+        arr = np.full(3, float(arr))
+    if arr.shape != (3,):
+        raise ValueError(f"{name} must be a scalar or have shape (3,), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return arr
+
+
+class FlexibleSpacecraftEnv(gym.Env):
+    """Attitude control of the time-varying ETS-VIII flexible spacecraft.
+
+    The plant is the exact zero-order-hold sample of the rigid-flexible
+    coupling model (:class:`~spacecraft_env.dynamics.FlexibleSpacecraftModel`)
+    whose inertia and coupling follow a time-varying scenario (docking, solar
+    paddle rotation).
+
+    Action space
+        ``Box(-1, 1, (3,), float32)``: roll/pitch/yaw torque normalized by
+        ``max_torque``. Out-of-range actions are clipped to [-1, 1] before
+        scaling; NaN/inf, a wrong shape or a non-numeric dtype raise.
+    Observation space
+        ``Box(float32)`` stacking the requested ``outputs`` in the order given:
+        ``"attitude"`` psi (3, rad), ``"rate"`` omega (3, rad/s),
+        ``"deflection"`` out-of-plane sensor deflections (one per sensor, m),
+        ``"attitude_error"`` measured psi minus reference (3, rad),
+        ``"reference"`` reference attitude (3, rad). Sensor channels carry white
+        Gaussian noise with standard deviation ``scale * 10^(-snr_db / 20)``,
+        ``scale`` = 1 deg, 0.1 deg/s and 1 cm for the three groups (at 40 dB:
+        0.01 deg, 0.001 deg/s, 0.1 mm). Values are clipped to the Box bounds
+        (+-pi rad, +-pi rad/s, +-10 m), which lie far outside the model's range.
+    Reward
+        Negative quadratic cost of the true attitude error, rates, deflections
+        and torque, see :class:`RewardWeights`.
+    Episode end
+        ``terminated`` when any true attitude angle exceeds
+        ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
+        error passes 2 %); ``truncated`` only by the registered time limit
+        (2500 steps = 250 s).
+    Starting state
+        ``task="regulation"``: reference 0 and initial attitude uniform in
+        +-``initial_attitude_deg`` per axis; ``task="slew"``: initial attitude
+        0 and reference uniform in +-``slew_range_deg``. ``reset(options=...)``
+        overrides with ``"initial_attitude"`` (rad, (3,)), ``"initial_rate"``
+        (rad/s, (3,)) and ``"reference_attitude"`` (rad, (3,)).
+    Info
+        ``"time"`` (s), ``"state"`` (true state, float64, (n,)), ``"torque"``
+        (applied control torque, N m, after clipping and scaling),
+        ``"reference"`` (rad).
+
+    Parameters
+    ----------
+    scenario : str or Scenario
+        ``"constant"``, ``"docking"``, ``"solar_rotation"`` or
+        ``"docking_solar_rotation"``.
+    randomize : bool
+        Draw a random scenario variant (docking times and masses, rotation
+        rate) from ``self.np_random`` at every reset.
+    n_modes : int
+        Modes per appendage, 1..8 (ignored when ``params`` is given).
+    params : SpacecraftParameters, optional
+        Full parameter set (default: ETS-VIII).
+    outputs : sequence of str
+        Observation groups, see above.
+    snr_db : float or None
+        Measurement signal-to-noise ratio in dB (paper: 40); None is noiseless.
+    max_torque : float
+        Torque for a unit action, N m (default 10).
+    dt : float
+        Sample time, s.
+    task : {"regulation", "slew"}
+        How the reference and initial attitude are drawn at reset.
+    initial_attitude_deg, slew_range_deg : float
+        Ranges of the random initial attitude and slew reference, deg.
+    disturbance_torque : float or (3,) array_like
+        Constant external torque, N m.
+    disturbance_std : float
+        Standard deviation of a white external torque, N m.
+    reward_weights : RewardWeights, optional
+    max_attitude_deg : float
+        Termination bound on any attitude angle, deg.
+    render_mode : {"human", "rgb_array"}, optional
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, scenario: str | Scenario = "constant", *, randomize: bool = False,
+                 n_modes: int = 2, params: SpacecraftParameters | None = None,
+                 outputs: Sequence[str] = OUTPUT_GROUPS, snr_db: float | None = 40.0,
+                 max_torque: float = 10.0, dt: float = 0.1, task: str = "regulation",
+                 initial_attitude_deg: float = 2.0, slew_range_deg: float = 10.0,
+                 disturbance_torque: float | Sequence[float] = 0.0,
+                 disturbance_std: float = 0.0, reward_weights: RewardWeights | None = None,
+                 max_attitude_deg: float = 20.0, render_mode: str | None = None) -> None:
+        super().__init__()
+        if params is None:
+            params = ets8_parameters(n_modes)
+        self._base_scenario = make_scenario(scenario)
+        self.randomize = bool(randomize)
+        self.model = FlexibleSpacecraftModel(params, self._base_scenario, OUTPUT_GROUPS, dt)
+        if isinstance(outputs, str):
+            outputs = (outputs,)
+        outputs = tuple(outputs)
+        bad = [o for o in outputs if o not in OBSERVATION_GROUPS]
+        if bad or not outputs or len(set(outputs)) != len(outputs):
+            raise ValueError(f"outputs must be distinct names from {OBSERVATION_GROUPS}, "
+                             f"got {outputs}")
+        self.outputs = outputs
+        if snr_db is not None:
+            snr_db = float(snr_db)
+            if not np.isfinite(snr_db):
+                raise ValueError(f"snr_db must be finite or None, got {snr_db}")
+        self.snr_db = snr_db
+        self.max_torque = float(max_torque)
+        if not np.isfinite(self.max_torque) or self.max_torque <= 0:
+            raise ValueError(f"max_torque must be a positive number of N m, got {max_torque}")
+        if task not in ("regulation", "slew"):
+            raise ValueError(f"task must be 'regulation' or 'slew', got {task!r}")
+        self.task = task
+        for name, value in (("initial_attitude_deg", initial_attitude_deg),
+                            ("slew_range_deg", slew_range_deg),
+                            ("disturbance_std", disturbance_std)):
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not 0 < max_attitude_deg <= 90:
+            raise ValueError(f"max_attitude_deg must be in (0, 90], got {max_attitude_deg}")
+        drawn = initial_attitude_deg if task == "regulation" else slew_range_deg
+        if drawn >= max_attitude_deg:
+            raise ValueError(f"the {task} range ({drawn} deg) must stay below "
+                             f"max_attitude_deg ({max_attitude_deg} deg)")
+        self.initial_attitude = float(initial_attitude_deg) * RAD_PER_DEG
+        self.slew_range = float(slew_range_deg) * RAD_PER_DEG
+        self.max_attitude = float(max_attitude_deg) * RAD_PER_DEG
+        self.disturbance_torque = _vector3("disturbance_torque", disturbance_torque)
+        self.disturbance_std = float(disturbance_std)
+        self.reward_weights = reward_weights or RewardWeights()
+        if not isinstance(self.reward_weights, RewardWeights):
+            raise TypeError("reward_weights must be a RewardWeights instance")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} "
+                             f"or None, got {render_mode!r}")
+        self.render_mode = render_mode
+        self._build_spaces()
+        self._x = np.zeros(self.model.n)
+        self._ref = np.zeros(3)
+        self._k = 0
+        self._torque = np.zeros(3)
+        self._renderer = None
+
+    # ----------------------------------------------------------------- set-up
+    def _build_spaces(self) -> None:
+        m = self.model
+        plant = m.output_layout                          # every plant output, canonical order
+        # extended measurement vector: [y (plant outputs), attitude error (3), reference (3)]
+        extended = OutputLayout((*plant.groups, ("attitude_error", 3), ("reference", 3)))
+        self.observation_layout = OutputLayout.of(self.outputs, m.n_sensors)
+        ext_labels = [*m.output_labels,
+                      *(f"{LABEL_PREFIX[g]}_{axis}" for g in ("attitude_error", "reference")
+                        for axis in AXES)]
+        self._obs_index = np.concatenate([extended.indices(g) for g in self.outputs])
+        self.observation_labels = tuple(ext_labels[i] for i in self._obs_index)
+        high = np.concatenate([np.full(size, _BOUND[g], dtype=np.float32)
+                               for g, size in self.observation_layout.groups])
+        self._obs_high = high.astype(float)
+        self.observation_space = spaces.Box(-high, high, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        scale = plant.scales()
+        self.noise_std = (np.zeros_like(scale) if self.snr_db is None
+                          else scale * 10.0 ** (-self.snr_db / 20.0))
+        w = self.reward_weights
+        weight = {"attitude": w.attitude, "rate": w.rate, "deflection": w.vibration}
+        self._cost_weights = np.concatenate([np.full(size, weight[g]) for g, size in plant.groups]
+                                            ) / scale**2
+
+    # ------------------------------------------------------------- properties
+    @property
+    def time(self) -> float:
+        """Current time, s."""
+        return self._k * self.model.dt
+
+    @property
+    def state(self) -> np.ndarray:
+        """Copy of the true state x (float64, (n,))."""
+        return self._x.copy()
+
+    @property
+    def reference(self) -> np.ndarray:
+        """Copy of the reference attitude (rad, (3,))."""
+        return self._ref.copy()
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario of the current episode (a random draw if ``randomize``)."""
+        return self.model.scenario
+
+    def set_reference(self, reference: Sequence[float]) -> None:
+        """Change the reference attitude (rad, (3,)) mid-episode."""
+        ref = _vector3("reference", reference)
+        if np.any(np.abs(ref) >= self.max_attitude):
+            raise ValueError(f"reference must stay within +-{np.rad2deg(self.max_attitude)} deg")
+        self._ref = ref
+
+    # ------------------------------------------------------------------- core
+    def _observe(self) -> np.ndarray:
+        y = self.model.C @ self._x
+        if self.snr_db is not None:
+            y += self.noise_std * self.np_random.standard_normal(y.shape[0])
+        ext = np.concatenate((y, y[:3] - self._ref, self._ref))
+        obs = ext[self._obs_index]
+        np.clip(obs, -self._obs_high, self._obs_high, out=obs)
+        return obs.astype(np.float32)
+
+    def _info(self) -> dict[str, Any]:
+        return {"time": self._k * self.model.dt, "state": self._x.copy(),
+                "torque": self._torque.copy(), "reference": self._ref.copy()}
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"initial_attitude", "initial_rate", "reference_attitude"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; expected "
+                             "'initial_attitude', 'initial_rate', 'reference_attitude'")
+        rng = self.np_random
+        if self.task == "regulation":
+            psi0 = rng.uniform(-self.initial_attitude, self.initial_attitude, 3)
+            ref = np.zeros(3)
+        else:
+            psi0 = np.zeros(3)
+            ref = rng.uniform(-self.slew_range, self.slew_range, 3)
+        if "initial_attitude" in options:
+            psi0 = _vector3("initial_attitude", options["initial_attitude"])
+        rate0 = _vector3("initial_rate", options.get("initial_rate", 0.0))
+        if "reference_attitude" in options:
+            ref = _vector3("reference_attitude", options["reference_attitude"])
+        if np.any(np.abs(psi0) >= self.max_attitude) or np.any(np.abs(ref) >= self.max_attitude):
+            raise ValueError("initial and reference attitudes must stay within "
+                             f"+-{np.rad2deg(self.max_attitude)} deg")
+        if self.randomize:
+            self.model = self.model.with_scenario(self._base_scenario.randomized(rng))
+        nd = self.model.n_dof
+        self._x = np.zeros(self.model.n)
+        self._x[:3] = psi0
+        self._x[nd:nd + 3] = rate0
+        self._ref = ref
+        self._k = 0
+        self._torque = np.zeros(3)
+        obs = self._observe()
+        if self.render_mode == "human":
+            self.render()
+        return obs, self._info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        a = np.asarray(action)
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"action must be a real numeric array of shape (3,), got dtype "
+                            f"{a.dtype}")
+        if a.shape != (3,):
+            raise ValueError(f"action must have shape (3,), got {a.shape}")
+        a = a.astype(float)
+        if not np.isfinite(a).all():
+            raise ValueError(f"action must be finite (no NaN or inf), got {a.tolist()}")
+        np.clip(a, -1.0, 1.0, out=a)
+        torque = a * self.max_torque
+        self._torque = torque
+        total = torque + self.disturbance_torque
+        if self.disturbance_std > 0:
+            total = total + self.disturbance_std * self.np_random.standard_normal(3)
+        x = self._x
+        model = self.model
+        # cost of the state the action acts on, plus the action (stage cost)
+        err = model.C @ x
+        err[:3] -= self._ref
+        cost = err @ (self._cost_weights * err) + self.reward_weights.torque * (a @ a)
+        ad, bd = model._discrete_ab(self._k * model.dt)
+        self._x = ad @ x + bd @ total
+        self._k += 1
+        terminated = bool(np.abs(self._x[:3]).max() > self.max_attitude)
+        obs = self._observe()
+        if self.render_mode == "human":
+            self.render()
+        return obs, -float(cost), terminated, False, self._info()
+
+    # -------------------------------------------------------------- rendering
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode="
+                            "'rgb_array' or 'human' to the constructor")
+            return None
+        if self._renderer is None:
+            self._renderer = SpacecraftRenderer(self.model)
+        frame = self._renderer.draw(self._x, self.time, self.model, self._ref)
+        if self.render_mode == "rgb_array":
+            return frame
+        self._renderer.show(frame, self.metadata["render_fps"])
+        return None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state

@@ -1,0 +1,52 @@
+"""The registered environment ids, defined once, and their registration.
+
+Importing :mod:`spacecraft_env` registers them, so
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v0")`` works
+without a prior import.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import gymnasium as gym
+
+__all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "env_id", "register_envs"]
+
+#: Registered environment id -> scenario name.
+ENV_IDS: Mapping[str, str] = MappingProxyType({
+    "FlexibleSpacecraft-v0": "constant",
+    "FlexibleSpacecraftDocking-v0": "docking",
+    "FlexibleSpacecraftSolarRotation-v0": "solar_rotation",
+})
+
+#: Episode length of every registered id: 250 s at dt = 0.1 s.
+MAX_EPISODE_STEPS = 2500
+
+
+def env_id(scenario: str) -> str:
+    """The registered id (with the ``spacecraft_env:`` module prefix) of a scenario.
+
+    Raises
+    ------
+    ValueError
+        For a scenario that has no registered id (the message lists those that do).
+    """
+    for name, registered in ENV_IDS.items():
+        if registered == scenario:
+            return f"spacecraft_env:{name}"
+    raise ValueError(f"no registered environment for scenario {scenario!r}; registered: "
+                     f"{sorted(ENV_IDS.values())}")
+
+
+def register_envs() -> None:
+    """Register the environments with Gymnasium (idempotent)."""
+    for name, scenario in ENV_IDS.items():
+        if name not in gym.registry:
+            gym.register(
+                id=name,
+                entry_point="spacecraft_env.env:FlexibleSpacecraftEnv",
+                max_episode_steps=MAX_EPISODE_STEPS,
+                kwargs={"scenario": scenario},
+            )

@@ -1,0 +1,111 @@
+"""Environment demo: a rendered rollout of a time-varying scenario.
+
+Runs one episode of the environment under the attitude PD baseline
+(:class:`controllers.PD`, bandwidth 0.05 rad/s, well below the first
+flexible mode), prints a summary and writes
+
+* ``summary.json``: episode figures,
+* ``response.png``: attitude, tip deflections, inertia J(t) and the first
+  system frequencies over time, docking events marked,
+* ``rollout.gif`` and ``frame.png``: rendered frames.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+from tqdm import tqdm
+
+from controllers import PD
+from spacecraft_conventions import DEG_PER_RAD
+from spacecraft_env import FlexibleSpacecraftEnv
+from spacecraft_lab.plots import plot_demo_response
+
+__all__ = ["run_demo"]
+
+
+def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: int = 0,
+             steps: int = 2500, gif_every: int = 10) -> dict:
+    """Run the demo rollout and write its artefacts to ``out``.
+
+    Parameters
+    ----------
+    scenario : str
+        Scenario name (see :data:`spacecraft_env.SCENARIOS`).
+    out : path
+        Output directory (created).
+    seed : int
+        Environment seed.
+    steps : int
+        Episode length in steps (dt = 0.1 s).
+    gif_every : int
+        Keep every ``gif_every``-th frame in the GIF.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary.json``.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    env = FlexibleSpacecraftEnv(scenario, render_mode="rgb_array", initial_attitude_deg=3.0)
+    obs, info = env.reset(seed=seed)
+    pd = PD(env)
+    pd.reset(seed)
+    layout = env.model.output_layout
+    c_att = env.model.C[layout.slice("attitude")]
+    c_defl = env.model.C[layout.slice("deflection")]
+    initial_attitude = c_att @ info["state"]
+    times, att, defl, torque, inertia, freqs, frames = [], [], [], [], [], [], []
+    total_reward = 0.0
+    for k in tqdm(range(steps), desc=f"{scenario} rollout", unit="step"):
+        action = pd.act(obs, info)
+        obs, reward, terminated, truncated, info = env.step(action)
+        total_reward += reward
+        times.append(info["time"])
+        att.append(c_att @ info["state"] * DEG_PER_RAD)
+        defl.append(c_defl @ info["state"])
+        torque.append(info["torque"])
+        if k % gif_every == 0:
+            frames.append(Image.fromarray(env.render()))
+            inertia.append(np.diag(env.model.inertia(env.time)))
+            freqs.append(env.model.modal(env.time)[0][:3])
+        if terminated or truncated:
+            break
+    t = np.array(times)
+    att, defl, torque = np.array(att), np.array(defl), np.array(torque)
+    t_sparse = t[::gif_every][: len(inertia)]
+    events = list(env.scenario.event_times())
+
+    inertia_arr, freq_arr = np.array(inertia), np.array(freqs)
+    plot_demo_response(out / "response.png", t, att, defl,
+                       env.model.output_labels[layout.slice("deflection")], t_sparse,
+                       inertia_arr, freq_arr, events,
+                       f"{scenario}: PD-regulated rollout, seed {seed} (dashed: docking events)")
+
+    frames[0].save(out / "rollout.gif", save_all=True, append_images=frames[1:],
+                   duration=100, loop=0)
+    mid = min(len(frames) - 1, int(events[0] / env.model.dt / gif_every) + 3) if events else -1
+    frames[mid].save(out / "frame.png")
+
+    summary = {
+        "scenario": scenario,
+        "seed": seed,
+        "steps": len(t),
+        "duration_s": float(t[-1]) if len(t) else 0.0,
+        "return": float(total_reward),
+        "initial_attitude_deg": (initial_attitude * DEG_PER_RAD).tolist(),
+        "final_attitude_error_deg": float(np.abs(att[-1] - env.reference * DEG_PER_RAD).max()),
+        "peak_tip_deflection_mm": float(1e3 * np.abs(defl).max()),
+        "peak_torque_Nm": float(np.abs(torque).max()),
+        "docking_events_s": events,
+        "inertia_diag_start": inertia_arr[0].tolist(),
+        "inertia_diag_end": inertia_arr[-1].tolist(),
+        "first_frequencies_hz_start": freq_arr[0].tolist(),
+        "first_frequencies_hz_end": freq_arr[-1].tolist(),
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary

@@ -1,0 +1,40 @@
+"""The source paper's published figures, recorded once.
+
+Ni, Liu, Wu, Wu, "Time-varying state-space model identification of an
+on-orbit rigid-flexible coupling spacecraft using an improved
+predictor-based recursive subspace algorithm", Acta Astronautica 163 (2019)
+157-167. Keys of the method tables are this package's method names
+(:data:`spacecraft_lab.identification.METHODS`).
+"""
+
+from __future__ import annotations
+
+__all__ = ["PAPER_METHOD_NAMES", "PAPER_TABLE5", "PAPER_TABLES"]
+
+#: Our method name -> the paper's name for it.
+PAPER_METHOD_NAMES: dict[str, str] = {"improved": "improved RPBSID",
+                                      "classical": "classical RPBSID",
+                                      "windowed-svd": "SVD-based"}
+
+#: Average relative test-response errors (%), Tables 3 (docking, attitude
+#: only) and 4 (solar rotation); keys: scenario, our method name, group.
+PAPER_TABLES: dict[str, dict[str, dict[str, list[float]]]] = {
+    "docking": {
+        "classical": {"psi": [3.0835, 2.3342, 2.7766]},
+        "windowed-svd": {"psi": [2.6808, 2.4893, 3.6031]},
+        "improved": {"psi": [3.4380, 3.2092, 2.9923]},
+    },
+    "solar_rotation": {
+        "classical": {"psi": [3.4729, 1.6783, 2.9235], "omega": [5.8796, 6.6838, 7.4765]},
+        "windowed-svd": {"psi": [1.9646, 1.2601, 2.6480], "omega": [5.0194, 6.8414, 8.6877]},
+        "improved": {"psi": [2.9664, 1.6217, 3.5811], "omega": [5.7382, 8.9119, 7.7325]},
+    },
+}
+
+#: Table 5: average MATLAB computation time (s) per run over 30 Monte-Carlo
+#: runs, by system order n; keys: our method names.
+PAPER_TABLE5: dict[str, dict[int, float]] = {
+    "classical": {22: 14.64, 30: 23.35, 38: 34.23, 46: 46.96},
+    "improved": {22: 12.27, 30: 19.56, 38: 28.99, 46: 39.22},
+    "windowed-svd": {22: 26.15, 30: 37.01, 38: 50.51, 46: 68.10},
+}

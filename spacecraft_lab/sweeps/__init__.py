@@ -1,0 +1,45 @@
+"""Monte-Carlo sweeps of identification and control experiments.
+
+Declare a grid in a TOML/YAML file (:mod:`.config`), run it on this
+machine's cores or a Ray cluster (:mod:`.backends`) with resumable JSON-lines
+results (:mod:`.store`, :mod:`.runner`), and tabulate mean and spread over
+seeds (:mod:`.summary`)::
+
+    spacecraft sweep --config configs/table5.toml --backend local --out results/table5
+    spacecraft sweep-summary results/table5
+"""
+
+from spacecraft_lab.sweeps.backends import (
+    BACKENDS,
+    LocalBackend,
+    RayBackend,
+    SerialBackend,
+    make_backend,
+)
+from spacecraft_lab.sweeps.config import Reference, SummarySpec, SweepConfig, Task, load_config
+from spacecraft_lab.sweeps.runner import SweepReport, pending_tasks, run_sweep
+from spacecraft_lab.sweeps.store import ResultStore
+from spacecraft_lab.sweeps.summary import group_statistics, summarize
+from spacecraft_lab.sweeps.tasks import TASKS, execute, resolve_task
+
+__all__ = [
+    "BACKENDS",
+    "TASKS",
+    "LocalBackend",
+    "RayBackend",
+    "Reference",
+    "ResultStore",
+    "SerialBackend",
+    "SummarySpec",
+    "SweepConfig",
+    "SweepReport",
+    "Task",
+    "execute",
+    "group_statistics",
+    "load_config",
+    "make_backend",
+    "pending_tasks",
+    "resolve_task",
+    "run_sweep",
+    "summarize",
+]

@@ -1,0 +1,162 @@
+"""Run a sweep: expand the grid, skip what is done, run the rest, record as it finishes.
+
+``spacecraft sweep --config FILE --backend local|ray --out DIR`` calls
+:func:`run_sweep`. The output directory holds
+
+* ``sweep.json``: the configuration as parsed (rewritten on every run);
+* ``results.jsonl``: one record per finished task (:mod:`spacecraft_lab.sweeps.store`),
+  appended by this process as results arrive;
+* ``summary.md``, ``summary.csv``, ``summary.json`` and ``summary.png`` from
+  :func:`spacecraft_lab.sweeps.summary.summarize` at the end.
+
+Running the same command again resumes: tasks with a record are skipped
+(tasks that failed too, unless ``retry_errors``), so an interrupted sweep
+only redoes the tasks that were in flight, and a sweep file extended with
+more seeds or grid values only runs the new tasks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from spacecraft_lab.sweeps.backends import make_backend
+from spacecraft_lab.sweeps.config import SweepConfig, Task, load_config
+from spacecraft_lab.sweeps.store import ResultStore
+from spacecraft_lab.sweeps.summary import summarize as write_summary
+from spacecraft_lab.sweeps.tasks import execute, identity
+
+__all__ = ["SweepReport", "pending_tasks", "run_sweep"]
+
+
+@dataclass(frozen=True)
+class SweepReport:
+    """What one :func:`run_sweep` call did.
+
+    Attributes
+    ----------
+    total : int
+        Tasks in the grid.
+    skipped : int
+        Tasks already recorded before this call.
+    ran, ok, errors : int
+        Tasks run now, and how many of them succeeded / failed.
+    wall_s : float
+        Wall time of this call, s.
+    backend : str
+    workers : int
+        Workers (processes or cluster CPUs) of the backend.
+    out : Path
+    """
+
+    total: int
+    skipped: int
+    ran: int
+    ok: int
+    errors: int
+    wall_s: float
+    backend: str
+    workers: int
+    out: Path
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """While running, SIGTERM (``kill``, a batch scheduler) unwinds like
+    Ctrl-C, so the backend stops its workers; records already written stay."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def pending_tasks(tasks: list[Task], store: ResultStore,
+                  retry_errors: bool = False) -> list[Task]:
+    """The tasks without a record (or with an error record, if ``retry_errors``)."""
+    done = store.load()
+    return [t for t in tasks if t.task_id not in done
+            or (retry_errors and done[t.task_id].get("status") != "ok")]
+
+
+def run_sweep(config: SweepConfig | str | Path, out: str | Path, backend: str = "local", *,
+              workers: int | None = None, address: str | None = None,
+              retry_errors: bool = False, ship_code: bool = False, summarize: bool = True,
+              progress: bool = True) -> SweepReport:
+    """Run every pending task of a sweep and record the results.
+
+    Parameters
+    ----------
+    config : SweepConfig or path
+        A configuration or a sweep file (:func:`spacecraft_lab.sweeps.config.load_config`).
+    out : path
+        Output directory; an existing one is resumed.
+    backend : {"local", "ray", "serial"}
+    workers : int, optional
+        Local worker processes (default: all cores), or the CPUs of a new
+        local Ray instance.
+    address : str, optional
+        Ray cluster address (``backend="ray"``).
+    retry_errors : bool
+        Run again the tasks whose record is an error.
+    ship_code : bool
+        Ray only: upload this package to the cluster with the job.
+    summarize : bool
+        Write the summary tables and plots at the end.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    SweepReport
+    """
+    if not isinstance(config, SweepConfig):
+        config = load_config(config)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.json").write_text(json.dumps(config.to_dict(), indent=2))
+    store = ResultStore(out / "results.jsonl")
+    store.repair()
+    tasks = config.tasks()
+    todo = pending_tasks(tasks, store, retry_errors)
+    start = time.perf_counter()
+    ok = errors = 0
+    runner = make_backend(backend, workers, address, ship_code)
+    if todo:
+        with _sigterm_as_interrupt(), runner, tqdm(total=len(tasks), initial=len(tasks) - len(todo),
+                          desc=f"sweep {config.name} ({backend})", unit="task",
+                          disable=not progress) as bar:
+            for item, outcome in runner.imap_unordered(execute, [t.to_dict() for t in todo]):
+                if isinstance(outcome, BaseException):
+                    outcome = {**identity(item), "status": "error",
+                               "error": f"{type(outcome).__name__}: {outcome} (backend)"}
+                outcome["backend"] = backend
+                store.append(outcome)
+                if outcome["status"] == "ok":
+                    ok += 1
+                else:
+                    errors += 1
+                bar.update()
+                bar.set_postfix(errors=errors, refresh=False)
+    report = SweepReport(total=len(tasks), skipped=len(tasks) - len(todo), ran=ok + errors,
+                         ok=ok, errors=errors, wall_s=time.perf_counter() - start,
+                         backend=backend, workers=runner.workers, out=out)
+    if summarize:
+        write_summary(out)
+    return report

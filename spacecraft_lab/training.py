@@ -1,0 +1,159 @@
+"""Training stable-baselines3 agents on the spacecraft environments.
+
+``spacecraft train --algo ppo|sac --features none|identified --timesteps N
+--seeds S --out DIR`` calls :func:`run_training`: for each seed it trains an
+agent on a registered environment (slew task), with observations and rewards
+normalized by ``VecNormalize``, optionally with
+:class:`controllers.IdentifiedModelFeatures` appended; every
+``eval_every`` steps the current policy is evaluated through the same
+harness as the controllers (:func:`controllers.run_episode`). It writes the saved models,
+``learning_curves.png``, ``metrics.json`` (final attitude RMS, return, and
+the env steps needed to come within 2x of the adaptive LQR's attitude RMS on
+the same evaluation seeds) and, with ``--tensorboard``, TensorBoard logs.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+from controllers import (
+    AdaptiveLQR,
+    Controller,
+    IdentifiedModelFeatures,
+    episode_metrics,
+    run_episode,
+)
+from spacecraft_env import env_id
+from spacecraft_lab.control import SCENARIO_NAMES
+from spacecraft_lab.plots import plot_learning_curves
+
+__all__ = ["NormalizedPolicy", "run_training"]
+
+EVAL_SEEDS = (1000, 1001, 1002)
+
+
+class NormalizedPolicy(Controller):
+    """An SB3 model trained under ``VecNormalize``, as a harness controller."""
+
+    def __init__(self, model, vec_normalize, name: str) -> None:
+        self.model = model
+        self.vec_normalize = vec_normalize
+        self.name = name
+
+    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+        norm = self.vec_normalize.normalize_obs(np.asarray(obs, dtype=np.float32)[None])
+        action, _ = self.model.predict(norm, deterministic=True)
+        return np.asarray(action[0], dtype=np.float32)
+
+
+def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]):
+    env = gym.make(env_id(scenario), **env_kwargs)
+    if features == "identified":
+        env = IdentifiedModelFeatures(env)
+    return env
+
+
+def _evaluate(controller: Controller, scenario: str, features: str,
+              env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
+    rms, ret = [], []
+    for seed in seeds:
+        env = _make_env(scenario, features, env_kwargs)
+        traj = run_episode(env, controller, seed=seed)
+        m = episode_metrics(traj, env.unwrapped.model)
+        rms.append(m["attitude_rms_deg"])
+        ret.append(m["return"])
+        env.close()
+    return {"attitude_rms_deg": float(np.mean(rms)), "return": float(np.mean(ret))}
+
+
+def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100_000,
+                 seeds: int = 1, out: str | Path = "results/train", *,
+                 scenario: str = "docking", eval_every: int = 20_000,
+                 tensorboard: str | None = None, progress: bool = True) -> dict:
+    """Train, evaluate and save SB3 agents; see the module docstring."""
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    algos = {"ppo": PPO, "sac": SAC}
+    if algo not in algos:
+        raise ValueError(f"algo must be one of {sorted(algos)}, got {algo!r}")
+    if features not in ("none", "identified"):
+        raise ValueError(f"features must be 'none' or 'identified', got {features!r}")
+    if scenario not in SCENARIO_NAMES:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
+    if timesteps < 1 or seeds < 1:
+        raise ValueError("timesteps and seeds must be >= 1")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    env_kwargs = {"task": "slew"}
+
+    baseline_env = gym.make(env_id(scenario), **env_kwargs)
+    baseline = _evaluate(AdaptiveLQR(baseline_env.unwrapped), scenario, "none", env_kwargs)
+    target = 2.0 * baseline["attitude_rms_deg"]
+
+    runs = []
+    for seed in range(seeds):
+        venv = VecNormalize(DummyVecEnv([lambda: _make_env(scenario, features, env_kwargs)]),
+                            norm_obs=True, norm_reward=True, clip_obs=10.0)
+        venv.seed(seed)
+        model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
+                            tensorboard_log=tensorboard)
+        curve: list[dict[str, float]] = []
+        name = f"{algo}-{features}-seed{seed}"
+
+        callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
+                                 eval_every, scenario, features, env_kwargs, progress)
+        model.learn(total_timesteps=timesteps, callback=callback,
+                    tb_log_name=name if tensorboard else "run")
+        venv.training = False
+        final = _evaluate(NormalizedPolicy(model, venv, name), scenario, features, env_kwargs)
+        model.save(out / f"{name}.zip")
+        venv.save(str(out / f"{name}_vecnormalize.pkl"))
+        reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
+        runs.append({"seed": seed, "final": final, "curve": curve,
+                     "steps_to_2x_adaptive": reached})
+
+    metrics = {
+        "algo": algo, "features": features, "scenario": scenario, "timesteps": timesteps,
+        "seeds": seeds, "eval_seeds": list(EVAL_SEEDS), "adaptive_lqr": baseline,
+        "target_attitude_rms_deg": target, "runs": runs,
+        "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
+        "final_return": float(np.mean([r["final"]["return"] for r in runs])),
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    plot_learning_curves(out / "learning_curves.png", metrics)
+    return metrics
+
+
+def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
+                  features, env_kwargs, progress):
+    """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` steps."""
+
+    class EvalCallback(base):
+        def __init__(self) -> None:
+            super().__init__()
+            self.bar = tqdm(total=timesteps, desc=name, disable=not progress)
+            self.next_eval = eval_every
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            if self.num_timesteps >= self.next_eval:
+                self.next_eval += eval_every
+                venv.training = False
+                score = _evaluate(NormalizedPolicy(model, venv, name), scenario, features,
+                                  env_kwargs)
+                venv.training = True
+                curve.append({"timesteps": int(self.num_timesteps), **score})
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return EvalCallback()

@@ -1,0 +1,75 @@
+"""RL bridge: the identified-model features wrapper."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import spacecraft_env  # noqa: F401  (registers the environments)
+from controllers import IdentifiedModelFeatures
+from identifiers import MomentRefitRPBSID
+
+
+def _wrapped(**kwargs):
+    env = gym.make("FlexibleSpacecraftDocking-v0")
+    ident = MomentRefitRPBSID(22, 15, 0.999, warmup=100, regularization=0.001,
+                           input_scale=np.ones(3),
+                           output_scale=np.r_[np.full(3, 0.01745), np.full(3, 0.001745),
+                                              np.full(4, 0.01)])
+    return IdentifiedModelFeatures(env, identifier=ident, **kwargs)
+
+
+def test_features_pass_both_env_checkers_without_warnings():
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    from gymnasium.utils.env_checker import check_env
+
+    env = _wrapped()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(env, warn=True)
+        # Gymnasium's checker flags any wrapper as such ("is different from the
+        # unwrapped version"); only that notice is allowed, all else errors.
+        warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
+        check_env(env, skip_render_check=True)
+
+
+def test_features_layout_and_warmup_flag():
+    env = _wrapped(n_modes=3)
+    assert env.observation_space.shape == (10 + 22 + 6 + 10 + 1,)
+    obs, _ = env.reset(seed=0)
+    assert obs[-1] == 0.0 and np.all(obs[10:] == 0)
+    rng = np.random.default_rng(0)
+    for _ in range(150):
+        obs, *_ = env.step(rng.uniform(-0.3, 0.3, 3).astype(np.float32))
+    assert obs[-1] == 1.0
+    assert env.observation_space.contains(obs)
+    freqs = obs[10 + 22:10 + 22 + 3]
+    assert np.all(freqs >= 0) and np.any(freqs > 0)
+
+
+def test_features_pickle_and_vector_envs():
+    env = _wrapped()
+    env.reset(seed=1)
+    for _ in range(120):
+        env.step(np.full(3, 0.1, dtype=np.float32))
+    clone = pickle.loads(pickle.dumps(env))
+    a = np.array([0.2, -0.1, 0.05], dtype=np.float32)
+    np.testing.assert_array_equal(env.step(a)[0], clone.step(a)[0])
+    vec = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v0", num_envs=2,
+                       vectorization_mode="sync", wrappers=[IdentifiedModelFeatures])
+    obs, _ = vec.reset(seed=[0, 1])
+    assert obs.shape == (2, 10 + 22 + 8 + 10 + 1)
+    vec.close()
+    sb3_vec = pytest.importorskip("stable_baselines3.common.vec_env")
+    venv = sb3_vec.DummyVecEnv([lambda: _wrapped(), lambda: _wrapped()])
+    assert venv.reset().shape == (2, 51)
+
+
+def test_features_reject_env_without_sensors():
+    env = gym.make("FlexibleSpacecraft-v0", outputs=("reference",))
+    with pytest.raises(ValueError, match="sensor group"):
+        IdentifiedModelFeatures(env)
