@@ -28,11 +28,14 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from numpy.typing import ArrayLike
 
+from controllers.base import Controller
 from controllers.baselines import PD, LQRWeights, _EnvController, equilibrium_state, output_weight
 from controllers.riccati import RiccatiTracker, check_weights, spectral_radius
-from identifiers import default_identifier
+from identifiers import OnlineIdentifier, StateSpaceModel, default_identifier
 
 __all__ = ["AdaptiveLQR"]
 
@@ -63,8 +66,9 @@ class AdaptiveLQR(_EnvController):
 
     name = "adaptive LQR"
 
-    def __init__(self, env, identifier=None, weights: LQRWeights | None = None,
-                 dither: float = 0.01, iterations: int = 4, fallback=None) -> None:
+    def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,
+                 weights: LQRWeights | None = None, dither: float = 0.01, iterations: int = 4,
+                 fallback: Controller | None = None) -> None:
         super().__init__(env)
         if not (np.isfinite(dither) and dither >= 0):
             raise ValueError(f"dither must be >= 0, got {dither}")
@@ -92,7 +96,7 @@ class AdaptiveLQR(_EnvController):
         self.stats = {"steps": 0, "fallback_steps": 0, "redesigns": 0, "rejected_unstable": 0,
                       "failed_redesigns": 0, "nonfinite_observations": 0}
 
-    def _redesign(self, model) -> None:
+    def _redesign(self, model: StateSpaceModel) -> None:
         a, b, c = model.A, model.B, model.C
         q = c.T @ self._qy @ c + self.weights.eps * np.eye(a.shape[0])
         try:
@@ -112,7 +116,7 @@ class AdaptiveLQR(_EnvController):
         self.gain = gain
         self.stats["redesigns"] += 1
 
-    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         self.stats["steps"] += 1
         obs = self._check_obs(obs)
         if obs is None:

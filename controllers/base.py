@@ -63,7 +63,7 @@ class PolicyController(Controller):
         Label for tables.
     """
 
-    def __init__(self, policy, name: str = "policy") -> None:
+    def __init__(self, policy: Any, name: str = "policy") -> None:
         if not callable(getattr(policy, "predict", None)):
             raise TypeError("policy must have a predict(obs, deterministic=True) method")
         self.policy = policy

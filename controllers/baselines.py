@@ -15,7 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
 from controllers.base import Controller
@@ -77,7 +79,7 @@ def equilibrium_state(a: np.ndarray, c_att: np.ndarray, reference: np.ndarray) -
 class _EnvController(Controller):
     """Shared plumbing: layout of observations, torque scaling, reference."""
 
-    def __init__(self, env) -> None:
+    def __init__(self, env: gym.Env) -> None:
         env = getattr(env, "unwrapped", env)
         self.env = env
         self.max_torque = float(env.max_torque)
@@ -97,7 +99,7 @@ class _EnvController(Controller):
         self.n_nonfinite = 0
 
     @staticmethod
-    def _reference(info) -> np.ndarray:
+    def _reference(info: dict[str, Any] | None) -> np.ndarray:
         if info is not None and "reference" in info:
             return np.asarray(info["reference"], dtype=float)
         return np.zeros(3)
@@ -107,7 +109,7 @@ class _EnvController(Controller):
         self._last = action
         return action
 
-    def _check_obs(self, obs) -> np.ndarray | None:
+    def _check_obs(self, obs: ArrayLike) -> np.ndarray | None:
         obs = np.asarray(obs, dtype=float)
         if obs.shape != self.env.observation_space.shape:
             raise ValueError(f"observation must have shape {self.env.observation_space.shape}, "
@@ -136,7 +138,7 @@ class PD(_EnvController):
 
     name = "PD"
 
-    def __init__(self, env, bandwidth: float = 0.05, damping: float = 0.7) -> None:
+    def __init__(self, env: gym.Env, bandwidth: float = 0.05, damping: float = 0.7) -> None:
         super().__init__(env)
         if not bandwidth > 0 or not damping > 0:
             raise ValueError("bandwidth and damping must be positive")
@@ -144,7 +146,7 @@ class PD(_EnvController):
         self.kp = self.inertia * bandwidth**2
         self.kd = self.inertia * 2 * damping * bandwidth
 
-    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         obs = self._check_obs(obs)
         if obs is None:
             return self._last
@@ -165,7 +167,7 @@ class LQR(_EnvController):
 
     name = "LQR"
 
-    def __init__(self, env, weights: LQRWeights | None = None,
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None,
                  process_noise: float = 0.05) -> None:
         super().__init__(env)
         self.weights = weights or LQRWeights()
@@ -187,7 +189,7 @@ class LQR(_EnvController):
         super().reset(seed)
         self.x_pred = np.zeros(self.a.shape[0])
 
-    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         obs = self._check_obs(obs)
         if obs is None:
             self.x_pred = self.a @ self.x_pred + self.b @ (self._last * self.max_torque)
@@ -209,7 +211,7 @@ class OracleLQR(_EnvController):
 
     name = "oracle LQR"
 
-    def __init__(self, env, weights: LQRWeights | None = None) -> None:
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None) -> None:
         super().__init__(env)
         self.weights = weights or LQRWeights()
         model = self.env.model
@@ -223,7 +225,7 @@ class OracleLQR(_EnvController):
         q = model.C.T @ self._qy @ model.C + self.weights.eps * np.eye(model.n)
         self._tracker = RiccatiTracker(q, self._r)
 
-    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         if info is None or "state" not in info:
             raise ValueError("OracleLQR needs the env's info dict with 'state' and 'time'")
         model = self.env.model

@@ -27,13 +27,14 @@ Before warm-up every feature but the flag is 0.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numpy.typing import ArrayLike
 
-from identifiers import default_identifier
+from identifiers import OnlineIdentifier, default_identifier
 from spacecraft_conventions import match_groups
 
 __all__ = ["IdentifiedModelFeatures"]
@@ -57,7 +58,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         Divisor of the state estimate.
     """
 
-    def __init__(self, env: gym.Env, identifier=None, n_modes: int = 4,
+    def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None, n_modes: int = 4,
                  state_scale: float = 10.0) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
                                                  state_scale=state_scale)
@@ -90,13 +91,15 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self._action = None
         self._last_y = None
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         self.identifier.reset()
         self._action = None
         self._last_y = None
         return super().reset(seed=seed, options=options)
 
-    def step(self, action):
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
+                                              dict[str, Any]]:
         self._action = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
         return super().step(action)
 

@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
@@ -73,7 +74,7 @@ def _first(freqs: np.ndarray, count: int) -> np.ndarray:
     return out
 
 
-def run_episode(env, controller: Controller, seed: int | None = None,
+def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 options: dict[str, Any] | None = None, max_steps: int | None = None,
                 freq_every: int = 25, n_freq: int = 4) -> Trajectory:
     """Roll one episode of ``controller`` on ``env``.
@@ -139,7 +140,7 @@ def run_episode(env, controller: Controller, seed: int | None = None,
     )
 
 
-def episode_metrics(traj: Trajectory, model, settle_tol_deg: float = 0.05,
+def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
                     stable_bound_deg: float = 1.0, after_s: float = 50.0) -> dict[str, Any]:
     """Scores of one episode.
 

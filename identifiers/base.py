@@ -20,8 +20,10 @@ validation, sizes inferred from the first sample, the past window
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from threadpoolctl import threadpool_limits
 
 from identifiers.model import ModelSequence, StateSpaceModel
@@ -111,7 +113,8 @@ class OnlineIdentifier(ABC):
     consistent_basis = True
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
-                 warmup: int | None = None, input_scale=None, output_scale=None) -> None:
+                 warmup: int | None = None, input_scale: ArrayLike | None = None,
+                 output_scale: ArrayLike | None = None) -> None:
         self.n = _positive_int("n", n)
         self.p = _positive_int("p", p)
         self.forgetting = _forgetting("forgetting", forgetting)
@@ -201,7 +204,7 @@ class OnlineIdentifier(ABC):
                              f"{y.shape}")
         return u, y
 
-    def update(self, u, y) -> None:
+    def update(self, u: ArrayLike, y: ArrayLike) -> None:
         """Process one sample ``(u_k, y_k)``.
 
         For streaming loops, limit BLAS to one thread around the loop
@@ -263,7 +266,7 @@ class OnlineIdentifier(ABC):
         su, sy = self._su, self._sy
         return a, b / su, sy[:, None] * c, sy[:, None] * d / su, k / sy
 
-    def fit(self, U, Y) -> ModelSequence:
+    def fit(self, U: ArrayLike, Y: ArrayLike) -> ModelSequence:
         """Feed a whole record sample by sample; return the model after each.
 
         Parameters
@@ -378,7 +381,8 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
                  warmup: int | None = None, regularization: float = 0.0,
                  varx_forgetting: float | None = None, varx_init: float = 0.9,
-                 input_scale=None, output_scale=None) -> None:
+                 input_scale: ArrayLike | None = None,
+                 output_scale: ArrayLike | None = None) -> None:
         if not (np.isfinite(regularization) and regularization >= 0):
             raise ValueError(f"regularization must be >= 0, got {regularization}")
         self.regularization = float(regularization)
@@ -430,7 +434,7 @@ class SystemRLSIdentifier(RecursiveVARXIdentifier):
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
                  output_forgetting: float | None = None,
                  system_forgetting: float | None = None, output_init: float = 0.9,
-                 system_init: float = 0.9, feedthrough: bool = False, **kwargs) -> None:
+                 system_init: float = 0.9, feedthrough: bool = False, **kwargs: Any) -> None:
         self.output_forgetting = _forgetting("output_forgetting", output_forgetting or forgetting)
         self.system_forgetting = _forgetting("system_forgetting", system_forgetting or forgetting)
         self.output_init = _positive_float("output_init", output_init)
@@ -508,7 +512,7 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
-                 f: int | None = None, basis: str = "svd", **kwargs) -> None:
+                 f: int | None = None, basis: str = "svd", **kwargs: Any) -> None:
         if basis not in ("svd", "selection"):
             raise ValueError(f"basis must be 'svd' or 'selection', got {basis!r}")
         self.basis = basis

@@ -33,7 +33,8 @@ class PBSIDResult:
         VARX estimate.
     """
 
-    def __init__(self, model, states, next_state, singular_values, xi):
+    def __init__(self, model: StateSpaceModel, states: np.ndarray, next_state: np.ndarray,
+                 singular_values: np.ndarray, xi: np.ndarray) -> None:
         self.model = model
         self.states = states
         self.next_state = next_state
@@ -55,7 +56,7 @@ def _check_data(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
           dt: float = 0.1, weighted: bool = True, feedthrough: bool = False,
           regularization: float = 0.0, weights: np.ndarray | None = None,
-          normalize: bool = True, full_output: bool = False):
+          normalize: bool = True, full_output: bool = False) -> StateSpaceModel | PBSIDResult:
     """Batch PBSID of an innovation-form model from one input-output record.
 
     Parameters

@@ -11,6 +11,8 @@ plain shift.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from identifiers.base import PredictionStateIdentifier
@@ -40,7 +42,7 @@ class ClassicalRPBSID(PredictionStateIdentifier):
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
-                 weighted: bool = True, **kwargs) -> None:
+                 weighted: bool = True, **kwargs: Any) -> None:
         self.weighted = bool(weighted)
         kwargs.setdefault("f", p)
         super().__init__(n, p, forgetting, **kwargs)

@@ -27,6 +27,7 @@ repair that; this class reproduces the paper as printed.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, mu: float = 0.01,
-                 nu: float = 1.0, state_forgetting: float | None = None, **kwargs) -> None:
+                 nu: float = 1.0, state_forgetting: float | None = None, **kwargs: Any) -> None:
         if not (np.isfinite(mu) and mu > 0 and np.isfinite(nu) and nu >= 0):
             raise ValueError(f"mu must be > 0 and nu >= 0, got mu={mu}, nu={nu}")
         self.mu, self.nu = float(mu), float(nu)

@@ -11,8 +11,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:  # python-control is imported only by to_control()
+    import control
 
 __all__ = ["ModelSequence", "StateSpaceModel", "observability_basis"]
 
@@ -95,7 +100,7 @@ class StateSpaceModel:
     def n_outputs(self) -> int:
         return self.C.shape[0]
 
-    def to_control(self):
+    def to_control(self) -> control.StateSpace:
         """The deterministic part as a ``control.StateSpace`` with ``dt``."""
         import control
 
@@ -171,7 +176,8 @@ class ModelSequence(Sequence):
         re-based into the :func:`observability_basis` before being chained.
     """
 
-    def __init__(self, A, B, C, D, K, valid, dt: float, consistent_basis: bool = True) -> None:
+    def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, K: ArrayLike,
+                 valid: ArrayLike, dt: float, consistent_basis: bool = True) -> None:
         self.A, self.B, self.C, self.D, self.K = (np.asarray(v) for v in (A, B, C, D, K))
         self.valid = np.asarray(valid, dtype=bool)
         self.dt = float(dt)

@@ -13,6 +13,8 @@ O(p (r + m)^2) per sample plus O(n p^2 (r + m)^2) per refit.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.linalg.blas import dger
 
@@ -44,7 +46,7 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
-                 refit_every: int = 10, f: int | None = None, **kwargs) -> None:
+                 refit_every: int = 10, f: int | None = None, **kwargs: Any) -> None:
         if isinstance(refit_every, bool) or not isinstance(refit_every, (int, np.integer)) \
                 or refit_every < 1:
             raise ValueError(f"refit_every must be a positive int, got {refit_every!r}")

@@ -11,6 +11,7 @@ basis; it is aligned to the previous refit's basis (see
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from identifiers.base import OnlineIdentifier, _positive_int
 from identifiers.batch import pbsid
@@ -49,7 +50,8 @@ class WindowedPBSID(OnlineIdentifier):
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 1.0, *, window: int = 500,
                  refit_every: int = 1, f: int | None = None, dt: float = 0.1,
-                 warmup: int | None = None, input_scale=None, output_scale=None,
+                 warmup: int | None = None, input_scale: ArrayLike | None = None,
+                 output_scale: ArrayLike | None = None,
                  regularization: float = 0.0) -> None:
         self.window = _positive_int("window", window)
         self.refit_every = _positive_int("refit_every", refit_every)

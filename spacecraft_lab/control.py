@@ -163,7 +163,7 @@ def run_control(scenario: str = "docking", seeds: int = 10, out: str | Path = "r
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    def make_env():
+    def make_env() -> gym.Env:
         return gym.make(env_id(scenario), **kwargs)
 
     table, first = compare(CONTROLLERS(weights), make_env, list(range(seeds)),

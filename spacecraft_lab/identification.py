@@ -125,7 +125,7 @@ class IdentificationScore(NamedTuple):
     time_s: float
 
 
-def identification_records(truth, seed: int, n_samples: int = 2500,
+def identification_records(truth: FlexibleSpacecraftModel, seed: int, n_samples: int = 2500,
                            snr_db: float | None = 40.0) -> tuple[np.ndarray, ...]:
     """The identification and held-out records of one seed.
 
@@ -147,7 +147,8 @@ def identification_records(truth, seed: int, n_samples: int = 2500,
     return u_id, y_id, u_ho, y_ho
 
 
-def paper_test_response(truth, n_samples: int = 2500) -> tuple[np.ndarray, np.ndarray]:
+def paper_test_response(truth: FlexibleSpacecraftModel,
+                        n_samples: int = 2500) -> tuple[np.ndarray, np.ndarray]:
     """The paper's test torques and the true plant's noise-free response
     from rest, ``(n_samples, 3)`` and ``(n_samples, n_outputs)``."""
     u_test = paper_test_inputs(n_samples, truth.dt)

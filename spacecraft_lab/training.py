@@ -41,12 +41,12 @@ EVAL_SEEDS = (1000, 1001, 1002)
 class NormalizedPolicy(Controller):
     """An SB3 model trained under ``VecNormalize``, as a harness controller."""
 
-    def __init__(self, model, vec_normalize, name: str) -> None:
+    def __init__(self, model: Any, vec_normalize: Any, name: str) -> None:
         self.model = model
         self.vec_normalize = vec_normalize
         self.name = name
 
-    def act(self, obs, info: dict[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
         norm = self.vec_normalize.normalize_obs(np.asarray(obs, dtype=np.float32)[None])
         action, _ = self.model.predict(norm, deterministic=True)
         return np.asarray(action[0], dtype=np.float32)

@@ -8,6 +8,8 @@ it says otherwise: results must not depend on it.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import pytest
 
@@ -16,3 +18,33 @@ import pytest
 def rng() -> np.random.Generator:
     """A seeded generator, so a test's random data never depend on test order."""
     return np.random.default_rng(12345)
+
+
+def pytest_make_parametrize_id(config: pytest.Config, val: object, argname: str) -> str | None:
+    """Readable test ids: ``kwargs={'task': 'dance'}`` becomes ``task='dance'`` and a
+    ``lambda: ImprovedRPBSID(0, 8)`` becomes ``ImprovedRPBSID(0, 8)``."""
+    if isinstance(val, dict):
+        return ",".join(f"{k}={v!r}" for k, v in val.items())[:60] or "empty"
+    if callable(val) and getattr(val, "__name__", "") == "<lambda>":
+        try:
+            source = inspect.getsource(val).strip()
+        except OSError:
+            return None
+        body = source.split("lambda", 1)[1].split(":", 1)[1]
+        return " ".join(_expression(body).split())[:60]
+    return None
+
+
+def _expression(text: str) -> str:
+    """The leading expression of ``text``: up to a top-level comma or an unmatched bracket."""
+    depth = 0
+    for i, ch in enumerate(text):
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+            if depth < 0:
+                return text[:i].strip()
+        elif ch in ",#\n" and depth == 0:
+            return text[:i].strip()
+    return text.strip()
