@@ -12,14 +12,13 @@ import pytest
 import spacecraft_env  # noqa: F401  (registers the environments)
 from controllers import IdentifiedModelFeatures
 from identifiers import MomentRefitRPBSID
+from spacecraft_conventions import STANDARD_OUTPUTS
 
 
 def _wrapped(**kwargs):
     env = gym.make("FlexibleSpacecraftDocking-v0")
     ident = MomentRefitRPBSID(22, 15, 0.999, warmup=100, regularization=0.001,
-                           input_scale=np.ones(3),
-                           output_scale=np.r_[np.full(3, 0.01745), np.full(3, 0.001745),
-                                              np.full(4, 0.01)])
+                              input_scale=np.ones(3), output_scale=STANDARD_OUTPUTS.scales())
     return IdentifiedModelFeatures(env, identifier=ident, **kwargs)
 
 
