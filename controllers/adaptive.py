@@ -18,9 +18,10 @@ Safeguards, each counted in :attr:`AdaptiveLQR.stats`: until the identifier
 is warmed up and a first gain is accepted, a PD fallback acts; a new gain is
 accepted only if it is finite and stabilizes the identified model
 (``rho(A - B G) < 1``), otherwise the last accepted gain is kept; a
-non-finite observation reaches neither the identifier nor the gain, and the
-last action is held. Dither: white Gaussian torque, ``dither`` x max_torque
-standard deviation per axis, from a generator seeded by ``reset(seed)``.
+non-finite observation is passed to the identifier, which skips and counts
+it, while the action comes from the identifier's predicted state as usual.
+Dither: white Gaussian torque, ``dither`` x max_torque standard deviation
+per axis, from a generator seeded by ``reset(seed)``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from controllers.base import Controller
 from controllers.baselines import PD, LQRWeights, _EnvController, equilibrium_state, output_weight
 from controllers.riccati import RiccatiTracker, check_weights, spectral_radius
 from identifiers import OnlineIdentifier, StateSpaceModel, default_identifier
+from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["AdaptiveLQR"]
 
@@ -116,12 +118,12 @@ class AdaptiveLQR(_EnvController):
         self.gain = gain
         self.stats["redesigns"] += 1
 
+    @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         self.stats["steps"] += 1
-        obs = self._check_obs(obs)
-        if obs is None:
+        obs = self._observation(obs)
+        if not np.all(np.isfinite(obs)):
             self.stats["nonfinite_observations"] += 1
-            return self._last
         y = obs[self._meas_obs]
         x_hat = self.identifier.state
         model = self.identifier.model
@@ -137,5 +139,7 @@ class AdaptiveLQR(_EnvController):
         if self.dither > 0:
             torque = torque + self.dither * self.max_torque * self._rng.standard_normal(3)
         action = self._to_action(torque)
+        # a non-finite measurement goes to the identifier too: it skips and counts it
+        # and keeps its past window aligned in time
         self.identifier.update(action.astype(float) * self.max_torque, y)
         return action

@@ -22,7 +22,7 @@ from scipy.linalg import solve_discrete_are
 
 from controllers.base import Controller
 from controllers.riccati import RiccatiTracker, dlqr
-from spacecraft_conventions import OutputLayout, match_groups
+from spacecraft_conventions import OutputLayout, match_groups, single_threaded_blas
 
 __all__ = ["LQR", "PD", "LQRWeights", "OracleLQR", "equilibrium_state", "output_weight"]
 
@@ -109,11 +109,23 @@ class _EnvController(Controller):
         self._last = action
         return action
 
-    def _check_obs(self, obs: ArrayLike) -> np.ndarray | None:
+    def _observation(self, obs: ArrayLike) -> np.ndarray:
+        """``obs`` as a float array of the env's observation shape (NaN allowed).
+
+        Raises
+        ------
+        ValueError
+            For any other shape.
+        """
         obs = np.asarray(obs, dtype=float)
         if obs.shape != self.env.observation_space.shape:
             raise ValueError(f"observation must have shape {self.env.observation_space.shape}, "
                              f"got {obs.shape}")
+        return obs
+
+    def _check_obs(self, obs: ArrayLike) -> np.ndarray | None:
+        """``obs`` if finite, else None (counted in ``n_nonfinite``)."""
+        obs = self._observation(obs)
         if not np.all(np.isfinite(obs)):
             self.n_nonfinite += 1
             return None
@@ -189,6 +201,7 @@ class LQR(_EnvController):
         super().reset(seed)
         self.x_pred = np.zeros(self.a.shape[0])
 
+    @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         obs = self._check_obs(obs)
         if obs is None:
@@ -225,6 +238,7 @@ class OracleLQR(_EnvController):
         q = model.C.T @ self._qy @ model.C + self.weights.eps * np.eye(model.n)
         self._tracker = RiccatiTracker(q, self._r)
 
+    @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         if info is None or "state" not in info:
             raise ValueError("OracleLQR needs the env's info dict with 'state' and 'time'")

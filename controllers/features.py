@@ -35,7 +35,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike
 
 from identifiers import OnlineIdentifier, default_identifier
-from spacecraft_conventions import match_groups
+from spacecraft_conventions import match_groups, single_threaded_blas
 
 __all__ = ["IdentifiedModelFeatures"]
 
@@ -116,16 +116,18 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         out[n:n + count] = freq[:count]
         out[n + k:n + k + count] = zeta[:count]
         pred = model.C @ x
-        out[n + 2 * k:-1] = (y - pred) / self._meas_scale
+        out[n + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
         out[-1] = 1.0
         return np.nan_to_num(out, nan=0.0, posinf=_CLIP, neginf=-_CLIP)
 
+    @single_threaded_blas
     def observation(self, observation: np.ndarray) -> np.ndarray:
         y = np.asarray(observation, dtype=float)[self._meas_obs]
         if self._action is not None and self._last_y is not None:
-            if np.all(np.isfinite(y)):
-                self.identifier.update(self._action * self._max_torque, self._last_y)
-        feats = self._features(y) if np.all(np.isfinite(y)) else np.zeros(self.n_features)
+            # (u_k, y_k): the torque applied after y_k was measured. A non-finite
+            # y_k goes in as it is: the identifier skips and counts it.
+            self.identifier.update(self._action * self._max_torque, self._last_y)
+        feats = self._features(y)
         self._last_y = y
         full = np.concatenate([np.asarray(observation, dtype=float),
                                np.clip(feats, -_CLIP, _CLIP)])

@@ -14,11 +14,10 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from controllers.base import Controller
-from spacecraft_conventions import DEG_PER_RAD
+from spacecraft_conventions import DEG_PER_RAD, single_threaded_blas
 
 __all__ = ["Trajectory", "compare", "episode_metrics", "run_episode"]
 
@@ -109,7 +108,7 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     freq_t, freq_id, freq_true = [], [], []
     terminated = truncated = False
     k = 0
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_threaded_blas:
         while not (terminated or truncated) and k < max_steps:
             action = controller.act(obs, info)
             obs, reward, terminated, truncated, info = env.step(action)

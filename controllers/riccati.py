@@ -16,12 +16,15 @@ iteration has not converged or the model jumped.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
-__all__ = ["RiccatiTracker", "check_weights", "dlqr", "spectral_radius"]
+from spacecraft_conventions import single_threaded_blas
+
+__all__ = ["RiccatiTracker", "check_model", "check_weights", "dlqr", "spectral_radius"]
 
 
-def check_weights(q: np.ndarray, r: np.ndarray, n: int | None = None,
+def check_weights(q: ArrayLike, r: ArrayLike, n: int | None = None,
                   m: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Validate LQR weights: Q symmetric positive semidefinite, R positive definite.
 
@@ -48,6 +51,27 @@ def check_weights(q: np.ndarray, r: np.ndarray, n: int | None = None,
     return q, r
 
 
+def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a model for LQR design: ``A`` finite (n, n), ``B`` finite (n, m).
+
+    Raises
+    ------
+    ValueError
+        Naming the expected shapes, or non-finite entries.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] == 0:
+        raise ValueError(f"A must be a square (n, n) matrix, got shape {a.shape}")
+    n = a.shape[0]
+    if b.ndim != 2 or b.shape[0] != n or b.shape[1] == 0:
+        raise ValueError(f"B must have shape ({n}, m) for A of shape {a.shape}, got {b.shape} "
+                         "(a single input is a column: B.reshape(-1, 1))")
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError("A and B must be finite")
+    return a, b
+
+
 def spectral_radius(a: np.ndarray) -> float:
     """Largest eigenvalue modulus."""
     return float(np.abs(np.linalg.eigvals(a)).max())
@@ -58,8 +82,9 @@ def _gain(a, b, r, p):
     return np.linalg.solve(r + btp @ b, btp @ a)
 
 
-def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray,
-         r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@single_threaded_blas
+def dlqr(a: ArrayLike, b: ArrayLike, q: ArrayLike,
+         r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Discrete LQR gain and Riccati solution from scratch.
 
     Parameters
@@ -81,15 +106,24 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray,
     Raises
     ------
     ValueError
-        Invalid weights, or no stabilizing solution ((A, B) not
-        stabilizable or (A, Q) with unobservable modes on the unit circle).
+        Wrong shapes or non-finite entries (named), invalid weights, or no
+        stabilizing solution: (A, B) not stabilizable, or (A, Q) with an
+        unobservable mode on the unit circle, so that ``A - B G`` keeps a
+        pole with modulus >= 1.
     """
+    a, b = check_model(a, b)
     q, r = check_weights(q, r, a.shape[0], b.shape[1])
     try:
         p = solve_discrete_are(a, b, q, r)
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(f"no stabilizing Riccati solution: {exc}") from None
-    return _gain(a, b, r, p), p
+    gain = _gain(a, b, r, p)
+    rho = spectral_radius(a - b @ gain)
+    if not rho < 1.0 - 1e-12:
+        raise ValueError(f"no stabilizing Riccati solution: the closed loop A - B G keeps a "
+                         f"pole at |z| = {rho:.6g} (a mode on the unit circle that (A, B) "
+                         "cannot stabilize or Q does not observe)")
+    return gain, p
 
 
 class RiccatiTracker:
@@ -113,8 +147,16 @@ class RiccatiTracker:
         self.p: np.ndarray | None = None
         self.n_exact = 0
 
-    def design(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Gain for the model ``(a, b)``, warm-started from the last solution."""
+    @single_threaded_blas
+    def design(self, a: ArrayLike, b: ArrayLike) -> np.ndarray:
+        """Gain for the model ``(a, b)``, warm-started from the last solution.
+
+        Raises
+        ------
+        ValueError
+            As :func:`dlqr` (shapes, or no stabilizing solution).
+        """
+        a, b = check_model(a, b)
         if self.p is None or self.p.shape != a.shape:
             gain, self.p = dlqr(a, b, self.q, self.r)
             self.n_exact += 1

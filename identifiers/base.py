@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from threadpoolctl import threadpool_limits
 
 from identifiers.model import ModelSequence, StateSpaceModel
 from identifiers.rls import RecursiveLeastSquares
+from spacecraft_conventions import single_threaded_blas
 
 __all__ = [
     "OnlineIdentifier",
@@ -53,12 +53,17 @@ def _scale(name: str, value) -> np.ndarray:
 
 
 def _rms_scale(samples: np.ndarray) -> np.ndarray:
-    """Per-column RMS of the finite entries, 1 where there is none or it is 0."""
-    finite = np.isfinite(samples)
-    count = finite.sum(axis=0)
-    sq = np.where(finite, samples, 0.0) ** 2
-    rms = np.sqrt(sq.sum(axis=0) / np.maximum(count, 1))
-    return np.where(rms > 0, rms, 1.0)
+    """Per-column RMS of the finite entries, 1 where there is none or it is 0.
+
+    Computed relative to each column's peak, so data of any magnitude up to
+    the largest float give a finite scale (no overflow in the squares).
+    """
+    finite = np.where(np.isfinite(samples), samples, 0.0)
+    count = np.isfinite(samples).sum(axis=0)
+    peak = np.abs(finite).max(axis=0)
+    peak = np.where(peak > 0, peak, 1.0)
+    rms = peak * np.sqrt(((finite / peak) ** 2).sum(axis=0) / np.maximum(count, 1))
+    return np.where((rms > 0) & np.isfinite(rms), rms, 1.0)
 
 
 def _forgetting(name: str, value: float) -> float:
@@ -98,13 +103,18 @@ class OnlineIdentifier(ABC):
         coordinates that ``model`` uses. Default: the RMS of the first ``p``
         samples (a period in which nothing is learned anyway), 1 where that
         is zero.
+    max_abs : float
+        Largest normalized magnitude a sample may have (default 1e6: a
+        million nominal levels, far beyond any physical signal); larger
+        entries are treated as corrupt and the sample is skipped.
 
     Attributes
     ----------
     n_samples : int
         Samples received (including skipped ones).
     n_skipped : int
-        Samples with NaN/inf that were skipped.
+        Samples that were skipped: NaN/inf, beyond ``max_abs``, or rejected
+        as outliers (see :meth:`update`).
     n_inputs, n_outputs : int or None
         r and m, inferred from the first sample.
     """
@@ -114,13 +124,14 @@ class OnlineIdentifier(ABC):
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
                  warmup: int | None = None, input_scale: ArrayLike | None = None,
-                 output_scale: ArrayLike | None = None) -> None:
+                 output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
         self.n = _positive_int("n", n)
         self.p = _positive_int("p", p)
         self.forgetting = _forgetting("forgetting", forgetting)
         self.dt = float(dt)
-        if not self.dt > 0:
-            raise ValueError(f"dt must be positive, got {dt}")
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+        self.max_abs = _positive_float("max_abs", max_abs)
         self.warmup = 4 * self.p if warmup is None else _positive_int("warmup", warmup)
         if self.warmup < self.p:
             raise ValueError(f"warmup must be >= p = {self.p}, got {self.warmup}")
@@ -204,18 +215,22 @@ class OnlineIdentifier(ABC):
                              f"{y.shape}")
         return u, y
 
+    @single_threaded_blas
     def update(self, u: ArrayLike, y: ArrayLike) -> None:
         """Process one sample ``(u_k, y_k)``.
 
-        For streaming loops, limit BLAS to one thread around the loop
-        (``threadpoolctl.threadpool_limits(1, "blas")`` or
-        ``OPENBLAS_NUM_THREADS=1``): per-sample products are too small for
-        threads to pay off. :meth:`fit` does this itself.
+        BLAS runs single-threaded during the call (the library's small
+        per-sample products are fastest and bit-reproducible that way; see
+        :mod:`spacecraft_conventions.blas`), whatever the caller's setting.
 
-        A sample with NaN or inf is skipped for learning and counted in
-        ``n_skipped``: its missing entries are replaced (inputs by 0, outputs
-        by their prediction) only to keep the past window aligned in time,
-        and learning pauses until that stand-in has left the window.
+        A sample that cannot be learned from is skipped and counted in
+        ``n_skipped``: one with NaN or inf, or with a normalized magnitude
+        beyond ``max_abs`` (a corrupt reading: a million nominal levels), or
+        (if ``outlier_threshold`` is set) an outlier of the one-step
+        prediction error. Its unusable entries are replaced (inputs by 0,
+        outputs by their prediction) only to keep the past window aligned in
+        time, and learning pauses until that stand-in has left the window.
+        ``update`` never raises on such data.
 
         Raises
         ------
@@ -245,20 +260,30 @@ class OnlineIdentifier(ABC):
         self._process(u, y)
 
     def _process(self, u: np.ndarray, y: np.ndarray) -> None:
-        u = u / self._su
-        y = y / self._sy
-        if np.isfinite(u).all() and np.isfinite(y).all():
+        with np.errstate(over="ignore", invalid="ignore"):
+            u = u / self._su
+            y = y / self._sy
+        usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
+        usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs)
+        if usable_u.all() and usable_y.all() and not self._admissible(u, y):
+            usable_y[:] = False                      # an outlier: predict every output
+        if usable_u.all() and usable_y.all():
             learn = self._quiet == 0 and self._k >= self.p
             self._step(u, y, learn)
             if self._quiet:
                 self._quiet -= 1
         else:
             self.n_skipped += 1
-            u = np.where(np.isfinite(u), u, 0.0)
-            y = np.where(np.isfinite(y), y, self._fill_output())
+            u = np.where(usable_u, u, 0.0)
+            y = np.where(usable_y, y, self._fill_output())
             self._step(u, y, False)
             self._quiet = self.p + 1
         self._k += 1
+
+    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool:
+        """Whether a finite, in-range normalized sample may be learned from
+        (hook for outlier guards; default: always)."""
+        return True
 
     def _physical(self, mats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
         """Matrices of the normalized model in physical units (state unchanged)."""
@@ -285,9 +310,7 @@ class OnlineIdentifier(ABC):
         if u.ndim != 2 or y.ndim != 2 or u.shape[0] != y.shape[0]:
             raise ValueError(f"U and Y must have shapes (N, r) and (N, m), got {u.shape} and "
                              f"{y.shape}")
-        # Per-sample BLAS calls are tiny: threads only add synchronization
-        # (matrix-vector products several times slower with 2 OpenBLAS threads).
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_threaded_blas:       # one entry for the loop; updates nest cheaply
             return self._fit(u, y)
 
     def _fit(self, u: np.ndarray, y: np.ndarray) -> ModelSequence:
@@ -376,26 +399,37 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         directions in which noise is fitted with huge cancelling
         coefficients; the floor keeps its Markov parameters sane. 0 turns it
         off (the paper's algorithm).
+    outlier_threshold : float, optional
+        Reject samples whose one-step innovation exceeds this many running
+        RMS on any channel (see :meth:`_admissible`); default None (off).
+    max_abs : float
+        See :class:`OnlineIdentifier`.
     """
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
                  warmup: int | None = None, regularization: float = 0.0,
                  varx_forgetting: float | None = None, varx_init: float = 0.9,
-                 input_scale: ArrayLike | None = None,
-                 output_scale: ArrayLike | None = None) -> None:
+                 outlier_threshold: float | None = None, input_scale: ArrayLike | None = None,
+                 output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
+        forgetting = _forgetting("forgetting", forgetting)
         if not (np.isfinite(regularization) and regularization >= 0):
             raise ValueError(f"regularization must be >= 0, got {regularization}")
         self.regularization = float(regularization)
-        self.varx_forgetting = _forgetting("varx_forgetting", varx_forgetting or forgetting)
+        self.varx_forgetting = _forgetting(
+            "varx_forgetting", forgetting if varx_forgetting is None else varx_forgetting)
         self.varx_init = _positive_float("varx_init", varx_init)
+        self.outlier_threshold = (None if outlier_threshold is None
+                                  else _positive_float("outlier_threshold", outlier_threshold))
         if warmup is None:
-            warmup = max(4 * p, p + 2 * n)
+            warmup = max(4 * _positive_int("p", p), p + 2 * _positive_int("n", n))
         super().__init__(n, p, forgetting, dt=dt, warmup=warmup, input_scale=input_scale,
-                         output_scale=output_scale)
+                         output_scale=output_scale, max_abs=max_abs)
 
     def reset(self) -> None:
         super().reset()
         self._varx = None
+        self.n_outliers = 0
+        self._innovation_ms: np.ndarray | None = None    # running mean square, per channel
 
     def _allocate(self, r: int, m: int) -> None:
         floor = (self.regularization / (1.0 - self.varx_forgetting)
@@ -410,6 +444,28 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
 
     def _fill_output(self) -> np.ndarray:
         return self._varx.predict(self._phi)
+
+    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool:
+        """The optional outlier guard on the normalized one-step innovation.
+
+        With ``outlier_threshold = c``, once warmed up a sample whose VARX
+        innovation ``y - Xi phi`` exceeds ``c`` times its running RMS (per
+        channel, memory 1 / (1 - varx_forgetting)) on any channel is
+        rejected and counted in ``n_outliers``; accepted samples update the
+        running RMS.
+        """
+        if self.outlier_threshold is None or self._k < self.p:
+            return True
+        innovation_sq = (y - self._varx.predict(self._phi)) ** 2
+        ms = self._innovation_ms
+        if ms is not None and self._k >= self.warmup and np.any(
+                innovation_sq > self.outlier_threshold**2 * ms):
+            self.n_outliers += 1
+            return False
+        lam = self.varx_forgetting
+        self._innovation_ms = (innovation_sq if ms is None
+                               else lam * ms + (1.0 - lam) * innovation_sq)
+        return True
 
 
 class SystemRLSIdentifier(RecursiveVARXIdentifier):
@@ -435,8 +491,11 @@ class SystemRLSIdentifier(RecursiveVARXIdentifier):
                  output_forgetting: float | None = None,
                  system_forgetting: float | None = None, output_init: float = 0.9,
                  system_init: float = 0.9, feedthrough: bool = False, **kwargs: Any) -> None:
-        self.output_forgetting = _forgetting("output_forgetting", output_forgetting or forgetting)
-        self.system_forgetting = _forgetting("system_forgetting", system_forgetting or forgetting)
+        forgetting = _forgetting("forgetting", forgetting)
+        self.output_forgetting = _forgetting(
+            "output_forgetting", forgetting if output_forgetting is None else output_forgetting)
+        self.system_forgetting = _forgetting(
+            "system_forgetting", forgetting if system_forgetting is None else system_forgetting)
         self.output_init = _positive_float("output_init", output_init)
         self.system_init = _positive_float("system_init", system_init)
         self.feedthrough = bool(feedthrough)

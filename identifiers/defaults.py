@@ -19,10 +19,11 @@ __all__ = ["DEFAULT_SETTINGS", "default_identifier"]
 
 #: Settings of the recommended identifier (normalized by the nominal
 #: sensor levels): a long memory (forgetting 0.9995, about 2000 samples)
-#: with a Tikhonov floor on the VARX, and a 50 s warm-up; see
+#: with a Tikhonov floor on the VARX, a 50 s warm-up, and samples whose
+#: one-step innovation exceeds 100 running RMS rejected as outliers; see
 #: docs/design/identification.md for the measurements behind them.
 DEFAULT_SETTINGS: dict[str, Any] = {"p": 15, "forgetting": 0.9995, "regularization": 0.001,
-                                    "warmup": 500}
+                                    "warmup": 500, "outlier_threshold": 100.0}
 
 
 def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,

@@ -63,7 +63,9 @@ class ImprovedRPBSID(SystemRLSIdentifier):
         if not (np.isfinite(mu) and mu > 0 and np.isfinite(nu) and nu >= 0):
             raise ValueError(f"mu must be > 0 and nu >= 0, got mu={mu}, nu={nu}")
         self.mu, self.nu = float(mu), float(nu)
-        self.state_forgetting = _forgetting("state_forgetting", state_forgetting or forgetting)
+        forgetting = _forgetting("forgetting", forgetting)
+        self.state_forgetting = _forgetting(
+            "state_forgetting", forgetting if state_forgetting is None else state_forgetting)
         super().__init__(n, p, forgetting, **kwargs)
 
     def reset(self) -> None:

@@ -84,8 +84,10 @@ class StateSpaceModel:
         for name, shape in expected.items():
             if mats[name].shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {mats[name].shape}")
-        if not self.dt > 0:
-            raise ValueError(f"dt must be positive, got {self.dt}")
+        dt = float(self.dt)
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive finite number of seconds, got {self.dt}")
+        object.__setattr__(self, "dt", dt)
 
     @property
     def n(self) -> int:
@@ -133,21 +135,43 @@ class StateSpaceModel:
         """The model in the :func:`observability_basis` coordinates."""
         return self.transform(observability_basis(self.A, self.C))
 
-    def simulate(self, inputs: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
-        """Deterministic response ``y_k = C x_k + D u_k`` to ``inputs`` (N, r)."""
+    def simulate(self, inputs: ArrayLike, x0: ArrayLike | None = None) -> np.ndarray:
+        """Deterministic response ``y_k = C x_k + D u_k`` to ``inputs`` (N, r) from ``x0``.
+
+        Raises
+        ------
+        ValueError
+            If ``inputs`` is not (N, r) or ``x0`` not (n,).
+        """
+        return self._run(self._inputs(inputs), None, x0)
+
+    def predict(self, inputs: ArrayLike, outputs: ArrayLike,
+                x0: ArrayLike | None = None) -> np.ndarray:
+        """One-step-ahead predictions ``yhat_{k|k-1}`` with the innovation gain K.
+
+        Raises
+        ------
+        ValueError
+            If ``inputs`` is not (N, r), ``outputs`` not (N, m) or ``x0`` not (n,).
+        """
+        u = self._inputs(inputs)
+        y = np.asarray(outputs, dtype=float)
+        if y.shape != (u.shape[0], self.n_outputs):
+            raise ValueError(f"outputs must have shape ({u.shape[0]}, {self.n_outputs}), "
+                             f"got {y.shape}")
+        return self._run(u, y, x0)
+
+    def _inputs(self, inputs: ArrayLike) -> np.ndarray:
         u = np.asarray(inputs, dtype=float)
         if u.ndim != 2 or u.shape[1] != self.n_inputs:
             raise ValueError(f"inputs must have shape (N, {self.n_inputs}), got {u.shape}")
-        return self._run(u, None, x0)
+        return u
 
-    def predict(self, inputs: np.ndarray, outputs: np.ndarray,
-                x0: np.ndarray | None = None) -> np.ndarray:
-        """One-step-ahead predictions ``yhat_{k|k-1}`` with the innovation gain K."""
-        return self._run(np.asarray(inputs, dtype=float), np.asarray(outputs, dtype=float), x0)
-
-    def _run(self, u: np.ndarray, y: np.ndarray | None, x0: np.ndarray | None) -> np.ndarray:
+    def _run(self, u: np.ndarray, y: np.ndarray | None, x0: ArrayLike | None) -> np.ndarray:
         """Simulation, or one-step prediction when measured outputs ``y`` are given."""
         x = np.zeros(self.n) if x0 is None else np.asarray(x0, dtype=float)
+        if x.shape != (self.n,):
+            raise ValueError(f"x0 must have shape ({self.n},), got {x.shape}")
         out = np.empty((u.shape[0], self.n_outputs))
         for k in range(u.shape[0]):
             out[k] = self.C @ x + self.D @ u[k]

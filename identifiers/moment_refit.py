@@ -24,6 +24,13 @@ from identifiers.varx import predictor_product
 __all__ = ["MomentRefitRPBSID"]
 
 
+def _ridged(gram: np.ndarray) -> np.ndarray:
+    """``gram`` plus a ridge of 1e-9 of its mean diagonal, and at least 1e-12
+    (normalized units): solvable even when the data carried no excitation."""
+    size = gram.shape[0]
+    return gram + (1e-9 * np.trace(gram) / size + 1e-12) * np.eye(size)
+
+
 class MomentRefitRPBSID(RecursiveVARXIdentifier):
     """Recursive PBSID with batch-equivalent refits from data moments.
 
@@ -134,17 +141,17 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
         sy[:, r:zr] = np.eye(m)
         r_mx = rr @ mx.T                                            # (dim, n)
         gram_x = mx @ r_mx
-        ridge = 1e-9 * np.trace(gram_x) / n * np.eye(n)
-        c = np.linalg.solve(gram_x + ridge, (sy @ r_mx).T).T        # (m, n)
-        me = sy - c @ mx
-        g = np.vstack([mx, su, me])                                 # regressor map
-        r_g = rr @ g.T
-        gram = g @ r_g
-        gram += 1e-9 * np.trace(gram) / gram.shape[0] * np.eye(gram.shape[0])
-        theta = np.linalg.solve(gram, (mx1 @ r_g).T).T              # (n, n + r + m)
-        a, b, k = theta[:, :n], theta[:, n:n + r], theta[:, n + r:]
+        try:
+            c = np.linalg.solve(_ridged(gram_x), (sy @ r_mx).T).T   # (m, n)
+            me = sy - c @ mx
+            g = np.vstack([mx, su, me])                             # regressor map
+            r_g = rr @ g.T
+            theta = np.linalg.solve(_ridged(g @ r_g), (mx1 @ r_g).T).T   # (n, n + r + m)
+        except np.linalg.LinAlgError:      # no excitation at all: keep the last model
+            return
         if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(c))):
             return
+        a, b, k = theta[:, :n], theta[:, n:n + r], theta[:, n + r:]
         self._m_state = m_state
         self._mats = (a, b, c, np.zeros((m, r)), k)
 

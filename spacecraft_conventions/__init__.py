@@ -13,6 +13,7 @@ on each other.
   rows of an output or observation vector by name.
 """
 
+from spacecraft_conventions.blas import single_threaded_blas
 from spacecraft_conventions.outputs import (
     AXES,
     LABEL_PREFIX,
@@ -42,4 +43,5 @@ __all__ = [
     "__version__",
     "match_groups",
     "nominal_scale",
+    "single_threaded_blas",
 ]

@@ -33,7 +33,13 @@ from typing import NamedTuple
 import numpy as np
 from scipy.linalg import expm
 
-from spacecraft_conventions import AXES, LABEL_PREFIX, OUTPUT_GROUPS, OutputLayout
+from spacecraft_conventions import (
+    AXES,
+    LABEL_PREFIX,
+    OUTPUT_GROUPS,
+    OutputLayout,
+    single_threaded_blas,
+)
 from spacecraft_env.modes import cantilever_moments, coupling_matrix, sensor_mode_shapes
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.scenarios import (
@@ -418,7 +424,8 @@ class FlexibleSpacecraftModel:
         aug = np.zeros((n + 3, n + 3))
         self._fill_continuous(aug, self.configuration(t), t)
         aug *= self.dt
-        phi = expm(aug)
+        with single_threaded_blas:   # bit-identical whatever the caller's BLAS threads
+            phi = expm(aug)
         phi.flags.writeable = False
         entry = (phi[:n, :n], phi[:n, n:])
         cache[key] = entry

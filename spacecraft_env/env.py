@@ -29,6 +29,13 @@ from spacecraft_env.scenarios import Scenario, make_scenario
 
 __all__ = ["FlexibleSpacecraftEnv", "RewardWeights"]
 
+#: Accepted range of ``snr_db``: from noise 100x the nominal level to 1e-15 of it.
+SNR_RANGE_DB = (-40.0, 300.0)
+#: Largest ``max_torque``, N m (large thrusters; reaction wheels give < 1 N m).
+MAX_TORQUE_LIMIT = 1e4
+#: Largest initial body rate per axis, deg/s (the model assumes slow rotation).
+MAX_INITIAL_RATE_DEG_S = 10.0
+
 #: Observation bounds per group (far outside the small-angle model's validity).
 _BOUND = {"attitude": np.pi, "rate": np.pi, "deflection": 10.0,
           "attitude_error": 2 * np.pi, "reference": np.pi}
@@ -125,9 +132,10 @@ class FlexibleSpacecraftEnv(gym.Env):
     outputs : sequence of str
         Observation groups, see above.
     snr_db : float or None
-        Measurement signal-to-noise ratio in dB (paper: 40); None is noiseless.
+        Measurement signal-to-noise ratio in dB relative to the nominal levels
+        (paper: 40), in [-40, 300]; None is noiseless.
     max_torque : float
-        Torque for a unit action, N m (default 10).
+        Torque for a unit action, N m, in (0, 1e4] (default 10).
     dt : float
         Sample time, s.
     task : {"regulation", "slew"}
@@ -158,6 +166,8 @@ class FlexibleSpacecraftEnv(gym.Env):
         if params is None:
             params = ets8_parameters(n_modes)
         self._base_scenario = make_scenario(scenario)
+        if not isinstance(randomize, bool | np.bool_):
+            raise TypeError(f"randomize must be True or False, got {randomize!r}")
         self.randomize = bool(randomize)
         self.model = FlexibleSpacecraftModel(params, self._base_scenario, OUTPUT_GROUPS, dt)
         if isinstance(outputs, str):
@@ -170,12 +180,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         self.outputs = outputs
         if snr_db is not None:
             snr_db = float(snr_db)
-            if not np.isfinite(snr_db):
-                raise ValueError(f"snr_db must be finite or None, got {snr_db}")
+            if not SNR_RANGE_DB[0] <= snr_db <= SNR_RANGE_DB[1]:
+                raise ValueError(f"snr_db must be in [{SNR_RANGE_DB[0]:g}, {SNR_RANGE_DB[1]:g}] "
+                                 f"dB or None (noiseless), got {snr_db}")
         self.snr_db = snr_db
         self.max_torque = float(max_torque)
-        if not np.isfinite(self.max_torque) or self.max_torque <= 0:
-            raise ValueError(f"max_torque must be a positive number of N m, got {max_torque}")
+        if not 0 < self.max_torque <= MAX_TORQUE_LIMIT:
+            raise ValueError(f"max_torque must be in (0, {MAX_TORQUE_LIMIT:g}] N m, "
+                             f"got {max_torque}")
         if task not in ("regulation", "slew"):
             raise ValueError(f"task must be 'regulation' or 'slew', got {task!r}")
         self.task = task
@@ -294,6 +306,9 @@ class FlexibleSpacecraftEnv(gym.Env):
         if "initial_attitude" in options:
             psi0 = _vector3("initial_attitude", options["initial_attitude"])
         rate0 = _vector3("initial_rate", options.get("initial_rate", 0.0))
+        if np.any(np.abs(rate0) > MAX_INITIAL_RATE_DEG_S * RAD_PER_DEG):
+            raise ValueError(f"initial_rate must stay within +-{MAX_INITIAL_RATE_DEG_S:g} deg/s "
+                             f"per axis (slow-rotation model), got {rate0.tolist()} rad/s")
         if "reference_attitude" in options:
             ref = _vector3("reference_attitude", options["reference_attitude"])
         if np.any(np.abs(psi0) >= self.max_attitude) or np.any(np.abs(ref) >= self.max_attitude):

@@ -140,7 +140,7 @@ def test_adaptive_lqr_runs_and_counts_its_safeguards():
     assert np.all(np.isfinite(traj.actions))
 
 
-def test_nan_observation_holds_last_action_and_skips_identifier():
+def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
     env = FlexibleSpacecraftEnv("docking")
     ctrl = AdaptiveLQR(env)
     obs, info = env.reset(seed=0)
@@ -148,12 +148,15 @@ def test_nan_observation_holds_last_action_and_skips_identifier():
     for _ in range(5):
         action = ctrl.act(obs, info)
         obs, _, _, _, info = env.step(action)
-    samples = ctrl.identifier.n_samples
+    samples, skipped = ctrl.identifier.n_samples, ctrl.identifier.n_skipped
+    pd_action = ctrl.fallback._last.copy()
     bad = obs.copy()
     bad[1] = np.nan
-    held = ctrl.act(bad, info)
-    np.testing.assert_array_equal(held, action)
-    assert ctrl.identifier.n_samples == samples
+    action = ctrl.act(bad, info)
+    assert np.all(np.isfinite(action))
+    np.testing.assert_array_equal(ctrl.fallback._last, pd_action)   # PD holds its action
+    assert ctrl.identifier.n_samples == samples + 1      # the sample is not lost ...
+    assert ctrl.identifier.n_skipped == skipped + 1      # ... it is skipped and counted
     assert ctrl.stats["nonfinite_observations"] == 1
 
 
