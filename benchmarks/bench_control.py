@@ -20,9 +20,9 @@ import time
 import gymnasium as gym
 import numpy as np
 from scipy.linalg import solve_discrete_are
-from threadpoolctl import threadpool_limits
 
 from controllers import AdaptiveLQR
+from spacecraft_conventions import single_threaded_blas
 
 
 def main() -> None:
@@ -34,7 +34,7 @@ def main() -> None:
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     step_times, models = [], []
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_threaded_blas:
         for _ in range(args.steps):
             start = time.perf_counter()
             action = ctrl.act(obs, info)

@@ -21,9 +21,9 @@ import json
 import time
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from identifiers import add_measurement_noise, identification_inputs
+from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.identification import make_identifier, nominal_scales
 from spacecraft_lab.paper import PAPER_TABLE5
@@ -61,7 +61,7 @@ def main() -> None:
     parser.add_argument("--orders", type=int, nargs="+", default=[22, 30, 38, 46])
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_threaded_blas:
         times = run(args.orders)
     print(f"{'n':>4}" + "".join(f"{m:>21}" if len(m) > 14 else f"{m:>15}" for m in METHODS)
           + f"{'ours/cls':>10}{'paper':>8}{'ours/SVD':>10}{'paper':>8}")

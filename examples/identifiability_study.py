@@ -9,10 +9,10 @@
 """
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from identifiers import add_measurement_noise, identification_inputs, pbsid, vaf
 from identifiers.varx import predictor_product, regressor_matrix
+from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel
 
 truth = FlexibleSpacecraftModel(scenario="constant")
@@ -20,7 +20,7 @@ rng = np.random.default_rng(0)
 u2 = identification_inputs(2500, np.random.default_rng(99))
 y2 = add_measurement_noise(truth.simulate(u2)[1], 40.0, np.random.default_rng(98))
 
-with threadpool_limits(limits=1, user_api="blas"):
+with single_threaded_blas:
     print("1. batch PBSID at 40 dB, held-out one-step VAF (%) by record length")
     print(f"{'samples':>8} {'ridge':>7} {'attitude':>9} {'rate':>7} {'deflection':>11}")
     for n_samples in (500, 1000, 1500, 2500, 5000):
@@ -67,7 +67,7 @@ from identifiers import StateSpaceModel  # noqa: E402
 
 u = identification_inputs(2500, np.random.default_rng(0))
 y = add_measurement_noise(truth.simulate(u)[1], 40.0, np.random.default_rng(1))
-with threadpool_limits(limits=1, user_api="blas"):
+with single_threaded_blas:
     start = time.perf_counter()
     ours = pbsid(u, y, truth.n, 15, regularization=0.01 * 2500)
     t_ours = time.perf_counter() - start

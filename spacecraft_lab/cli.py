@@ -18,6 +18,10 @@ Commands
     machine's cores or a Ray cluster, resumable
     (:func:`spacecraft_lab.sweeps.run_sweep`); ``sweep-summary``
     re-tabulates a sweep directory.
+
+Every option is checked when the command line is parsed: a bad value ends
+with a one-line ``spacecraft <command>: error: ...`` message and exit status
+2, never a traceback.
 """
 
 from __future__ import annotations
@@ -25,158 +29,277 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from controllers import LQRWeights
+from spacecraft_conventions import __version__
 from spacecraft_env import SCENARIOS
-from spacecraft_lab.control import run_control, scenario_override
+from spacecraft_lab.control import SCENARIO_NAMES, run_control, scenario_override
 from spacecraft_lab.demo import run_demo
 from spacecraft_lab.identification import METHODS, run_identification
 from spacecraft_lab.reporting import rl_table
-from spacecraft_lab.sweeps import ResultStore, load_config, pending_tasks, run_sweep, summarize
-from spacecraft_lab.training import run_training
+from spacecraft_lab.sweeps import (
+    BACKENDS,
+    ResultStore,
+    SweepLockedError,
+    load_config,
+    pending_tasks,
+    run_sweep,
+    summarize,
+)
+from spacecraft_lab.training import ALGORITHMS, FEATURES, run_training
 
 __all__ = ["build_parser", "main"]
 
 
+# ----------------------------------------------------------------- value checks
+def _integer(low: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def _number(low: float, high: float = math.inf, *, low_open: bool = False,
+            unit: str = "") -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        ok = (value > low if low_open else value >= low) and value <= high
+        if not (math.isfinite(value) and ok):
+            bracket = "(" if low_open else "["
+            raise argparse.ArgumentTypeError(
+                f"must be in {bracket}{low:g}, {high:g}]{unit}, got {text}")
+        return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+def _snr(text: str) -> float | None:
+    if text.lower() == "none":
+        return None
+    return _number(-40.0, 300.0, unit=" dB")(text)
+
+
+def _forgetting(text: str) -> float:
+    return _number(0.0, 1.0, low_open=True)(text)
+
+
+def _existing_file(text: str) -> Path:
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"no such file: {text}")
+    return path
+
+
+def _run_directory(text: str) -> Path:
+    """A directory holding the ``metrics.json`` of a ``spacecraft train`` run."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"no such directory: {text}")
+    if not (path / "metrics.json").is_file():
+        raise argparse.ArgumentTypeError(f"{text} holds no metrics.json of a 'train' run")
+    return path
+
+
+def _sweep_directory(text: str) -> Path:
+    path = Path(text)
+    if not (path / "results.jsonl").is_file():
+        raise argparse.ArgumentTypeError(f"{text} holds no results.jsonl of a sweep")
+    return path
+
+
+def _output_directory(text: str) -> Path:
+    """A directory that exists and is writable, or can be created."""
+    path = Path(text)
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot create {text}: {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot write to {probe}")
+    return path
+
+
+# ----------------------------------------------------------------- the parser
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with one sub-parser per command."""
-    parser = argparse.ArgumentParser(prog="spacecraft", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    parser = argparse.ArgumentParser(prog="spacecraft", description=__doc__.splitlines()[0],
+                                     formatter_class=fmt)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    demo = sub.add_parser("demo", help="rendered rollout of a scenario")
-    demo.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking")
-    demo.add_argument("--out", default="results/demo", help="output directory")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--steps", type=int, default=2500)
+    demo = sub.add_parser("demo", help="rendered rollout of a scenario", formatter_class=fmt)
+    demo.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking",
+                      help="time-varying scenario")
+    demo.add_argument("--out", type=_output_directory, default="results/demo",
+                      help="output directory")
+    demo.add_argument("--seed", type=_integer(0), default=0, help="environment seed")
+    demo.add_argument("--steps", type=_integer(1), default=2500,
+                      help="episode length, steps of 0.1 s")
 
-    ident = sub.add_parser("identify", help="the paper's identification experiment")
-    ident.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking")
-    ident.add_argument("--seeds", type=int, default=10, help="noise seeds 0..N-1")
-    ident.add_argument("--out", default="results/identify", help="output directory")
+    ident = sub.add_parser("identify", help="the paper's identification experiment",
+                           formatter_class=fmt)
+    ident.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking",
+                       help="truth-model scenario")
+    ident.add_argument("--seeds", type=_integer(1), default=10,
+                       help="number of input/noise seeds, 0..N-1")
+    ident.add_argument("--out", type=_output_directory, default="results/identify",
+                       help="output directory")
     ident.add_argument("--methods", nargs="+", default=None, choices=sorted(METHODS),
                        help="methods to run (default: all)")
     ident.add_argument("--snr-db", type=_snr, default=40.0,
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
-    ident.add_argument("--modes", type=int, default=2, help="modes per appendage (n = 6 + 8 k)")
-    ident.add_argument("--p", type=int, default=15, help="past window (paper: 15)")
-    ident.add_argument("--forgetting", type=float, default=0.98, help="paper: 0.98")
-    ident.add_argument("--regularization", type=float, default=0.0,
+    ident.add_argument("--modes", type=_integer(1), default=2,
+                       help="modes per appendage, 1..8 (order n = 6 + 8 k)")
+    ident.add_argument("--p", type=_integer(1), default=15, help="past window (paper: 15)")
+    ident.add_argument("--forgetting", type=_forgetting, default=0.98,
+                       help="forgetting factor of every stage, (0, 1] (paper: 0.98)")
+    ident.add_argument("--regularization", type=_number(0.0), default=0.0,
                        help="VARX Tikhonov floor, fraction of the effective memory (paper: 0)")
-    ident.add_argument("--convergence", type=float, default=50.0,
-                       help="start of the held-out VAF window, s (default 50)")
-    ident.add_argument("--warmup", type=int, default=None,
+    ident.add_argument("--convergence", type=_number(0.0), default=50.0,
+                       help="start of the held-out VAF window, s")
+    ident.add_argument("--warmup", type=_integer(1), default=None,
                        help="warm-up samples of the recursive methods (default: theirs)")
 
-    ctl = sub.add_parser("control", help="closed-loop comparison of the controllers")
-    ctl.add_argument("--scenario", choices=["constant", "docking", "solar_rotation"],
-                     default="docking")
-    ctl.add_argument("--seeds", type=int, default=10)
-    ctl.add_argument("--out", default="results/control")
-    ctl.add_argument("--module-mass", type=float, default=None,
-                     help="mass of each docking module, kg (paper: 600)")
-    ctl.add_argument("--rotation-rate", type=float, default=None,
+    ctl = sub.add_parser("control", help="closed-loop comparison of the controllers",
+                         formatter_class=fmt)
+    ctl.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="docking",
+                     help="registered scenario")
+    ctl.add_argument("--seeds", type=_integer(1), default=10,
+                     help="number of episode seeds, 0..N-1")
+    ctl.add_argument("--out", type=_output_directory, default="results/control",
+                     help="output directory")
+    ctl.add_argument("--module-mass", type=_number(0.0, low_open=True, unit=" kg"),
+                     default=None, help="mass of each docking module, kg (paper: 600)")
+    ctl.add_argument("--rotation-rate", type=_number(-10.0, 10.0, unit=" deg/s"), default=None,
                      help="paddle rotation rate, deg/s (paper: 0.2)")
-    ctl.add_argument("--torque-weight", type=float, default=None,
-                     help="LQR torque weight per (N m)^2; smaller = more aggressive (0.3)")
-    ctl.add_argument("--max-torque", type=float, default=None, help="N m per unit action (10)")
+    ctl.add_argument("--torque-weight", type=_number(0.0, low_open=True), default=None,
+                     help="LQR torque weight per (N m)^2; smaller = more aggressive "
+                          "(default: LQRWeights' 0.3)")
+    ctl.add_argument("--max-torque", type=_number(0.0, 1e4, low_open=True, unit=" N m"),
+                     default=None, help="N m per unit action (default: the env's 10)")
 
-    train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)")
-    train.add_argument("--algo", choices=["ppo", "sac"], default="ppo")
-    train.add_argument("--features", choices=["none", "identified"], default="none")
-    train.add_argument("--timesteps", type=int, default=100_000)
-    train.add_argument("--seeds", type=int, default=1)
-    train.add_argument("--scenario", choices=["constant", "docking", "solar_rotation"],
-                       default="docking")
-    train.add_argument("--eval-every", type=int, default=20_000)
-    train.add_argument("--out", default="results/train")
-    train.add_argument("--tensorboard", default=None, help="TensorBoard log directory")
+    train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)", formatter_class=fmt)
+    train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
+    train.add_argument("--features", choices=FEATURES, default="none",
+                       help="observation features appended for the agent")
+    train.add_argument("--timesteps", type=_integer(1), default=100_000,
+                       help="training env steps per seed")
+    train.add_argument("--seeds", type=_integer(1), default=1, help="training seeds 0..N-1")
+    train.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="docking",
+                       help="registered scenario")
+    train.add_argument("--eval-every", type=_integer(1), default=20_000,
+                       help="env steps between evaluations")
+    train.add_argument("--out", type=_output_directory, default="results/train",
+                       help="output directory")
+    train.add_argument("--tensorboard", type=_output_directory, default=None,
+                       help="TensorBoard log directory (default: none)")
 
-    table = sub.add_parser("rl-table", help="comparison table of 'train' output directories")
-    table.add_argument("dirs", nargs="+")
+    table = sub.add_parser("rl-table", help="comparison table of 'train' output directories",
+                           formatter_class=fmt)
+    table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
+                       help="output directories of 'spacecraft train'")
 
-    sweep = sub.add_parser("sweep", help="Monte-Carlo grid of identify/control tasks")
-    sweep.add_argument("--config", required=True, help="sweep file (.toml, .yaml, .json)")
-    sweep.add_argument("--backend", choices=["local", "ray", "serial"], default="local")
-    sweep.add_argument("--out", required=True,
+    sweep = sub.add_parser("sweep", help="Monte-Carlo grid of identify/control tasks",
+                           formatter_class=fmt)
+    sweep.add_argument("--config", required=True, type=_existing_file,
+                       help="sweep file (.toml, .yaml, .json); trusted input")
+    sweep.add_argument("--backend", choices=sorted(BACKENDS), default="local",
+                       help="where tasks run")
+    sweep.add_argument("--out", required=True, type=_output_directory,
                        help="output directory; an existing one is resumed")
-    sweep.add_argument("--workers", type=int, default=None,
+    sweep.add_argument("--workers", type=_integer(1), default=None,
                        help="local processes, or CPUs of a new local Ray instance "
                             "(default: all cores)")
     sweep.add_argument("--address", default=None,
                        help="Ray cluster address (default: start a local instance)")
     sweep.add_argument("--ship-code", action="store_true",
                        help="upload this package to the Ray cluster with the job")
-    sweep.add_argument("--timeout", type=float, default=None,
+    sweep.add_argument("--timeout", type=_number(0.0, low_open=True, unit=" s"), default=None,
                        help="per-task wall-clock limit, s (overrides the file's timeout_s)")
     sweep.add_argument("--retry-errors", action="store_true",
                        help="run again the tasks recorded as failed")
     sweep.add_argument("--dry-run", action="store_true",
                        help="list the tasks (and how many are done) without running")
+    sweep.add_argument("--allow-custom-tasks", action="store_true",
+                       help="accept 'module:function' task kinds, which import and run "
+                            "code named by the sweep file")
 
-    summ = sub.add_parser("sweep-summary", help="tables and plots of a sweep directory")
-    summ.add_argument("dir")
+    summ = sub.add_parser("sweep-summary", help="tables and plots of a sweep directory",
+                          formatter_class=fmt)
+    summ.add_argument("dir", type=_sweep_directory, help="sweep output directory")
     return parser
 
 
-def _snr(text: str) -> float | None:
-    return None if text.lower() == "none" else float(text)
+# ----------------------------------------------------------------- commands
+def _demo(args: argparse.Namespace) -> int:
+    summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps)
+    print(json.dumps(summary, indent=2))
+    print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
+    return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``spacecraft`` console script."""
-    args = build_parser().parse_args(argv)
-    if args.command == "demo":
-        summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps)
-        print(json.dumps(summary, indent=2))
-        print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
-    elif args.command == "control":
-        env_kwargs = scenario_override(args.module_mass, args.rotation_rate)
-        if args.max_torque is not None:
-            env_kwargs["max_torque"] = args.max_torque
-        weights = (LQRWeights(torque=args.torque_weight) if args.torque_weight is not None
-                   else None)
-        run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
-                    weights=weights)
-        print((Path(args.out) / "table.md").read_text())
-        print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
-    elif args.command == "train":
-        m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
-                         scenario=args.scenario, eval_every=args.eval_every,
-                         tensorboard=args.tensorboard)
-        print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps",
-                                           "final_attitude_rms_deg", "final_return",
-                                           "adaptive_lqr")}, indent=2))
-        print("steps to 2x adaptive LQR RMS:",
-              [r["steps_to_2x_adaptive"] for r in m["runs"]])
-        print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
-    elif args.command == "rl-table":
-        print(rl_table(args.dirs))
-    elif args.command == "sweep":
-        return _sweep(args)
-    elif args.command == "sweep-summary":
-        summarize(args.dir)
-        print((Path(args.dir) / "summary.md").read_text())
-        print(f"wrote {args.dir}/summary.md, summary.csv, summary.json, summary.png")
-    elif args.command == "identify":
-        metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
-                                     snr_db=args.snr_db, n_modes=args.modes, p=args.p,
-                                     forgetting=args.forgetting,
-                                     regularization=args.regularization,
-                                     warmup=args.warmup, convergence_s=args.convergence)
-        print((Path(args.out) / "table.md").read_text())
-        print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
-              f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
+def _identify(args: argparse.Namespace) -> int:
+    metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
+                                 snr_db=args.snr_db, n_modes=args.modes, p=args.p,
+                                 forgetting=args.forgetting, regularization=args.regularization,
+                                 warmup=args.warmup, convergence_s=args.convergence)
+    print((Path(args.out) / "table.md").read_text())
+    print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
+          f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
+    return 0
+
+
+def _control(args: argparse.Namespace) -> int:
+    env_kwargs = scenario_override(args.module_mass, args.rotation_rate)
+    if args.max_torque is not None:
+        env_kwargs["max_torque"] = args.max_torque
+    weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
+    run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs, weights=weights)
+    print((Path(args.out) / "table.md").read_text())
+    print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
+    return 0
+
+
+def _train(args: argparse.Namespace) -> int:
+    m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
+                     scenario=args.scenario, eval_every=args.eval_every,
+                     tensorboard=None if args.tensorboard is None else str(args.tensorboard))
+    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps",
+                                       "final_attitude_rms_deg", "final_return",
+                                       "adaptive_lqr")}, indent=2))
+    print("steps to 2x adaptive LQR RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
+    print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
+    return 0
+
+
+def _rl_table(args: argparse.Namespace) -> int:
+    print(rl_table(args.dirs))
     return 0
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    config = load_config(args.config)
+    config = load_config(args.config, allow_custom_tasks=args.allow_custom_tasks)
     if args.timeout is not None:
-        if not args.timeout > 0:
-            raise SystemExit(f"--timeout must be positive, got {args.timeout}")
         config = dataclasses.replace(config, timeout_s=float(args.timeout))
     if args.dry_run:
         tasks = config.tasks()
@@ -194,6 +317,35 @@ def _sweep(args: argparse.Namespace) -> int:
           f"already done, {report.wall_s:.1f} s on {report.workers} {report.backend} workers")
     print(f"wrote {args.out}/results.jsonl, summary.md, summary.csv, summary.json, summary.png")
     return 1 if report.errors else 0
+
+
+def _sweep_summary(args: argparse.Namespace) -> int:
+    summarize(args.dir)
+    print((Path(args.dir) / "summary.md").read_text())
+    print(f"wrote {args.dir}/summary.md, summary.csv, summary.json, summary.png")
+    return 0
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "demo": _demo, "identify": _identify, "control": _control, "train": _train,
+    "rl-table": _rl_table, "sweep": _sweep, "sweep-summary": _sweep_summary,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``spacecraft`` console script.
+
+    Errors of the user's making (a bad value that only the run can detect, a
+    locked sweep directory, a missing file) end with a one-line message and
+    exit status 2; anything else is a bug and keeps its traceback.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except (ValueError, FileNotFoundError, PermissionError, SweepLockedError) as exc:
+        parser.exit(2, f"spacecraft {args.command}: error: {exc}\n")
+    return 2   # not reached: parser.exit raises SystemExit
 
 
 if __name__ == "__main__":

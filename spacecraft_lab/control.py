@@ -28,6 +28,7 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
+from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ENV_IDS, DockingModule, DockingScenario, SolarRotationScenario, env_id
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
@@ -82,6 +83,7 @@ def scenario_override(module_mass: float | None = None,
     return {}
 
 
+@single_threaded_blas
 def control_task(*, controller: str, seed: int, scenario: str = "docking", task: str = "slew",
                  module_mass: float | None = None, rotation_rate: float | None = None,
                  max_torque: float | None = None, snr_db: float | None = 40.0,

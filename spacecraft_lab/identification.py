@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from identifiers import (
@@ -51,7 +50,7 @@ from identifiers import (
     paper_test_inputs,
     vaf,
 )
-from spacecraft_conventions import NOMINAL_TORQUE
+from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.paper import PAPER_TABLES
 from spacecraft_lab.plots import plot_identification_modal, plot_identification_responses
@@ -258,7 +257,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Pa
     times = {m: [] for m in methods}
     seed0: dict[str, ModelSequence] = {}
     bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_threaded_blas:
         for seed in range(seeds):
             records = identification_records(truth, seed, n_samples, snr_db)
             for name in methods:
@@ -317,6 +316,7 @@ def _records(scenario: str, n_modes: int, seed: int, n_samples: int,
     return out
 
 
+@single_threaded_blas
 def identify_task(*, method: str, seed: int, scenario: str = "docking",
                   order: int | None = None, n_modes: int = 2, p: int = 15,
                   forgetting: float = 0.98, snr_db: float | None = 40.0,
@@ -326,9 +326,10 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
 
     The same keywords as :func:`run_identification`, for a single method and
     seed; the records are those of :func:`identification_records`, so the
-    result is a function of the arguments alone (bit-identical in any
-    process when BLAS runs single-threaded). The truth model and records are
-    cached per process, so tasks sharing a seed share the simulation.
+    result is a function of the arguments alone: bit-identical in any
+    process and whatever the caller's BLAS threads (the whole task runs
+    single-threaded). The truth model and records are cached per process,
+    so tasks sharing a seed share the simulation.
 
     Parameters
     ----------
@@ -368,9 +369,7 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
     ident = make_identifier(method, truth.n, int(p), float(forgetting), **nominal_scales(truth),
                             regularization=float(regularization),
                             warmup=None if warmup is None else int(warmup))
-    with threadpool_limits(limits=1, user_api="blas"):
-        score = score_identifier(ident, records, (u_test, y_test),
-                                 round(convergence_s / truth.dt))
+    score = score_identifier(ident, records, (u_test, y_test), round(convergence_s / truth.dt))
     e, v = score.test_error_pct, score.vaf_pct
 
     def channel_mean(x: np.ndarray) -> float | None:

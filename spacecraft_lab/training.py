@@ -33,8 +33,13 @@ from spacecraft_env import env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 
-__all__ = ["NormalizedPolicy", "run_training"]
+__all__ = ["ALGORITHMS", "EVAL_SEEDS", "FEATURES", "NormalizedPolicy", "run_training"]
 
+#: stable-baselines3 algorithms the job trains.
+ALGORITHMS = ("ppo", "sac")
+#: Observation features the agent may get on top of the env's.
+FEATURES = ("none", "identified")
+#: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
 
 
@@ -81,11 +86,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    algos = {"ppo": PPO, "sac": SAC}
+    algos = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
     if algo not in algos:
-        raise ValueError(f"algo must be one of {sorted(algos)}, got {algo!r}")
-    if features not in ("none", "identified"):
-        raise ValueError(f"features must be 'none' or 'identified', got {features!r}")
+        raise ValueError(f"algo must be one of {ALGORITHMS}, got {algo!r}")
+    if features not in FEATURES:
+        raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1:

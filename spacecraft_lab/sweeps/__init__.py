@@ -17,8 +17,8 @@ from spacecraft_lab.sweeps.backends import (
     make_backend,
 )
 from spacecraft_lab.sweeps.config import Reference, SummarySpec, SweepConfig, Task, load_config
-from spacecraft_lab.sweeps.runner import SweepReport, pending_tasks, run_sweep
-from spacecraft_lab.sweeps.store import ResultStore
+from spacecraft_lab.sweeps.runner import SweepLockedError, SweepReport, pending_tasks, run_sweep
+from spacecraft_lab.sweeps.store import ResultStore, parse_record
 from spacecraft_lab.sweeps.summary import group_statistics, summarize
 from spacecraft_lab.sweeps.tasks import TASKS, execute, resolve_task
 
@@ -32,12 +32,14 @@ __all__ = [
     "SerialBackend",
     "SummarySpec",
     "SweepConfig",
+    "SweepLockedError",
     "SweepReport",
     "Task",
     "execute",
     "group_statistics",
     "load_config",
     "make_backend",
+    "parse_record",
     "pending_tasks",
     "resolve_task",
     "run_sweep",

@@ -263,14 +263,30 @@ class SweepConfig:
     timeout_s: float | None = None
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], name: str | None = None) -> SweepConfig:
+    def from_dict(cls, data: Mapping[str, Any], name: str | None = None, *,
+                  allow_custom_tasks: bool = False, validate: bool = True) -> SweepConfig:
         """Build and validate a configuration from a parsed file.
+
+        Parameters
+        ----------
+        data : mapping
+            The parsed file.
+        name : str, optional
+            Default sweep name (the file's stem).
+        allow_custom_tasks : bool
+            Accept ``"module:function"`` task kinds; their modules are
+            imported (and their top-level code run) to check the parameter
+            names. A sweep file is trusted input.
+        validate : bool
+            Check parameter names against the task functions (imports them);
+            False only re-reads a configuration this package wrote itself.
 
         Raises
         ------
         ValueError, TypeError
-            Unknown keys, an unknown task kind, parameters the task function
-            does not take, a parameter set twice, empty grid axes, bad seeds.
+            Unknown keys, an unknown task kind, a custom kind without
+            permission, parameters the task function does not take, a
+            parameter set twice, empty grid axes, bad seeds.
         """
         if not isinstance(data, Mapping):
             raise TypeError("a sweep file must hold a table/mapping at the top level")
@@ -295,10 +311,11 @@ class SweepConfig:
                      summary=SummarySpec.from_dict(data.get("summary")),
                      description=str(data.get("description", "")),
                      timeout_s=_timeout(data.get("timeout_s")))
-        config._validate()
+        if validate:
+            config._validate(allow_custom_tasks)
         return config
 
-    def _validate(self) -> None:
+    def _validate(self, allow_custom_tasks: bool) -> None:
         for i, case in enumerate(self.cases):
             where = f"[[cases]] #{i}"
             own = {k for k in case if k not in ("label", "task")}
@@ -311,7 +328,7 @@ class SweepConfig:
             if "seed" in own | set(self.params) | set(self.grid):
                 raise ValueError("'seed' is set by 'seeds', not as a parameter")
             kind = str(case.get("task", self.task))
-            fn = resolve_task(kind)
+            fn = resolve_task(kind, allow_custom_tasks)
             sig = inspect.signature(fn)
             takes_any = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
             names = own | set(self.params) | set(self.grid) | {"seed"}
@@ -354,14 +371,18 @@ class SweepConfig:
                 "cases": list(self.cases), "summary": self.summary.to_dict()}
 
 
-def load_config(path: str | Path) -> SweepConfig:
+def load_config(path: str | Path, *, allow_custom_tasks: bool = False) -> SweepConfig:
     """Read a sweep file (``.toml``, ``.yaml``/``.yml`` or ``.json``).
+
+    A sweep file is trusted input: with ``allow_custom_tasks`` it may name
+    any importable ``"module:function"``, whose module is imported here.
 
     Raises
     ------
     FileNotFoundError
     ValueError
-        Unsupported extension, a parse error, or an invalid sweep.
+        Unsupported extension, a parse error, an invalid sweep, or a custom
+        task kind without ``allow_custom_tasks``.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -373,4 +394,4 @@ def load_config(path: str | Path) -> SweepConfig:
         data = parse(text)
     except Exception as exc:  # TOMLDecodeError, JSONDecodeError, yaml.YAMLError
         raise ValueError(f"{path}: cannot parse: {exc}") from exc
-    return SweepConfig.from_dict(data, name=path.stem)
+    return SweepConfig.from_dict(data, name=path.stem, allow_custom_tasks=allow_custom_tasks)

@@ -13,6 +13,12 @@ Running the same command again resumes: tasks with a record are skipped
 (tasks that failed too, unless ``retry_errors``), so an interrupted sweep
 only redoes the tasks that were in flight, and a sweep file extended with
 more seeds or grid values only runs the new tasks.
+
+One driver at a time: the directory is locked (``.sweep.lock``, an OS file
+lock released even if the driver is killed) for the whole run, and a second
+driver on the same directory stops at once with :class:`SweepLockedError`
+instead of running every task again and racing the first on the results
+file.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from filelock import FileLock, Timeout
 from tqdm import tqdm
 
 from spacecraft_lab.sweeps.backends import make_backend
@@ -34,7 +41,14 @@ from spacecraft_lab.sweeps.store import ResultStore
 from spacecraft_lab.sweeps.summary import summarize as write_summary
 from spacecraft_lab.sweeps.tasks import execute, identity
 
-__all__ = ["SweepReport", "pending_tasks", "run_sweep"]
+__all__ = ["LOCK_NAME", "SweepLockedError", "SweepReport", "pending_tasks", "run_sweep"]
+
+#: Lock file of a sweep directory.
+LOCK_NAME = ".sweep.lock"
+
+
+class SweepLockedError(RuntimeError):
+    """Another driver is running a sweep on the same output directory."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +112,7 @@ def pending_tasks(tasks: list[Task], store: ResultStore,
 def run_sweep(config: SweepConfig | str | Path, out: str | Path, backend: str = "local", *,
               workers: int | None = None, address: str | None = None,
               retry_errors: bool = False, ship_code: bool = False, summarize: bool = True,
-              progress: bool = True) -> SweepReport:
+              progress: bool = True, allow_custom_tasks: bool = False) -> SweepReport:
     """Run every pending task of a sweep and record the results.
 
     Parameters
@@ -121,15 +135,39 @@ def run_sweep(config: SweepConfig | str | Path, out: str | Path, backend: str = 
         Write the summary tables and plots at the end.
     progress : bool
         Show a progress bar.
+    allow_custom_tasks : bool
+        When ``config`` is a path: accept custom ``"module:function"`` task
+        kinds (see :func:`spacecraft_lab.sweeps.config.load_config`).
 
     Returns
     -------
     SweepReport
+
+    Raises
+    ------
+    SweepLockedError
+        If another sweep is running on ``out``.
     """
     if not isinstance(config, SweepConfig):
-        config = load_config(config)
+        config = load_config(config, allow_custom_tasks=allow_custom_tasks)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(out / LOCK_NAME)
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        raise SweepLockedError(f"another sweep is running on {out} (it holds {out / LOCK_NAME}); "
+                               "wait for it to finish or use another output directory") from None
+    try:
+        return _run_locked(config, out, backend, workers, address, retry_errors, ship_code,
+                           summarize, progress)
+    finally:
+        lock.release()
+
+
+def _run_locked(config: SweepConfig, out: Path, backend: str, workers: int | None,
+                address: str | None, retry_errors: bool, ship_code: bool, summarize: bool,
+                progress: bool) -> SweepReport:
     (out / "sweep.json").write_text(json.dumps(config.to_dict(), indent=2))
     store = ResultStore(out / "results.jsonl")
     store.repair()

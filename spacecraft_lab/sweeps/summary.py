@@ -196,7 +196,7 @@ def summarize(out: str | Path, spec: SummarySpec | None = None) -> dict[str, Any
     ignored = 0
     config_path = out / "sweep.json"
     if config_path.exists():
-        config = SweepConfig.from_dict(json.loads(config_path.read_text()))
+        config = SweepConfig.from_dict(json.loads(config_path.read_text()), validate=False)
         order = {t.task_id: i for i, t in enumerate(config.tasks())}
         ignored = sum(1 for k in records if k not in order)
         records = {k: records[k] for k in sorted(set(records) & set(order), key=order.get)}

@@ -11,7 +11,12 @@ kinds are
   episode: attitude error, vibration, effort, stability).
 
 Any importable ``"package.module:function"`` with that contract is a kind
-too; it must be importable on every worker.
+too; it must be importable on every worker. **A sweep file is trusted
+input**: naming a custom kind imports its module, which runs that module's
+top-level code (as Hydra's ``_target_`` does), even for ``--dry-run``. So
+custom kinds are refused unless explicitly allowed
+(``allow_custom_tasks=True``, ``spacecraft sweep --allow-custom-tasks``);
+the built-in kinds need no permission.
 
 :func:`execute` runs one task and never raises: an exception becomes an
 ``"error"`` record with its traceback, so a sweep goes on past a bad task.
@@ -51,19 +56,32 @@ THREAD_ENV: dict[str, str] = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1
                               "MKL_NUM_THREADS": "1"}
 
 
-def resolve_task(kind: str) -> Callable[..., dict]:
+def resolve_task(kind: str, allow_custom: bool = False) -> Callable[..., dict]:
     """The function of a task kind (a :data:`TASKS` key or ``"module:function"``).
+
+    Parameters
+    ----------
+    kind : str
+    allow_custom : bool
+        Permit ``"module:function"`` kinds, whose import runs code named by
+        the sweep file (see the module docstring).
 
     Raises
     ------
     ValueError
-        Unknown kind or a path that does not import.
+        Unknown kind, a custom kind without permission, or a path that does
+        not import.
     """
     path = TASKS.get(kind, kind)
     module, sep, name = path.partition(":")
     if not sep or not module or not name:
         raise ValueError(f"unknown task kind {kind!r}; expected one of {sorted(TASKS)} "
                          "or 'package.module:function'")
+    if kind not in TASKS and not allow_custom:
+        raise ValueError(f"task kind {kind!r} is not built in ({sorted(TASKS)}); a custom "
+                         "'module:function' kind imports and runs that module's code, so it "
+                         "needs explicit permission: --allow-custom-tasks on the command line, "
+                         "allow_custom_tasks=True in Python")
     try:
         fn = getattr(importlib.import_module(module), name)
     except (ImportError, AttributeError) as exc:
@@ -134,7 +152,7 @@ def execute(task: dict[str, Any]) -> dict[str, Any]:
     record = {**identity(task), "host": platform.node(), "pid": os.getpid(), "started": _now()}
     start = time.perf_counter()
     try:
-        fn = resolve_task(task["kind"])
+        fn = resolve_task(task["kind"], allow_custom=True)   # the driver checked the kind
         with _Deadline(task.get("timeout_s")), threadpool_limits(limits=1):
             out = fn(**task["params"])
         if not isinstance(out, dict) or not isinstance(out.get("metrics"), dict):

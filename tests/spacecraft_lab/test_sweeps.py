@@ -50,7 +50,7 @@ TINY_CONTROL = {
 def _affine(**over) -> SweepConfig:
     data = {"name": "affine", "task": "sweep_tasks:affine", "seeds": 4,
             "grid": {"slope": [1.0, 2.0]}, **over}
-    return SweepConfig.from_dict(data)
+    return SweepConfig.from_dict(data, allow_custom_tasks=True)
 
 
 def _metrics(out: Path) -> dict[str, dict]:
@@ -126,7 +126,7 @@ def test_task_ids_are_stable_and_ignore_labels():
 ])
 def test_bad_configs_raise_before_running(data, match):
     with pytest.raises((ValueError, TypeError), match=match):
-        SweepConfig.from_dict(data)
+        SweepConfig.from_dict(data, allow_custom_tasks=True)
 
 
 def test_bad_files(tmp_path):
@@ -146,20 +146,21 @@ def test_bad_files(tmp_path):
 
 def test_store_survives_a_torn_last_line(tmp_path):
     store = ResultStore(tmp_path / "r.jsonl")
-    store.append({"task_id": "a", "status": "ok", "metrics": {"v": 1}})
-    store.append({"task_id": "b", "status": "error"})
+    head = {"kind": "k", "params": {"seed": 0}}
+    store.append({"task_id": "a", **head, "status": "ok", "metrics": {"v": 1}})
+    store.append({"task_id": "b", **head, "status": "error"})
     with open(store.path, "a") as fh:
         fh.write('{"task_id": "c", "status": "o')  # killed mid-write
     with pytest.warns(RuntimeWarning, match="incomplete record"):
         assert set(store.load()) == {"a", "b"}
-    store.append({"task_id": "b", "status": "ok"})  # retried: last record wins
+    store.append({"task_id": "b", **head, "status": "ok", "metrics": {}})  # retried: last wins
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("ignore")
         loaded = store.load()
     assert loaded["b"]["status"] == "ok" and set(loaded) == {"a", "b"}
     assert store.path.read_text().count("\n") == 4
     with pytest.raises(ValueError):
-        store.append({"task_id": "d", "metrics": {"v": float("nan")}})
+        store.append({"task_id": "d", **head, "metrics": {"v": float("nan")}})
 
 
 # --- execution -------------------------------------------------------------------------------
@@ -171,7 +172,8 @@ def test_execute_records_errors_instead_of_raising():
     assert "RuntimeError" in rec["traceback"] and rec["wall_s"] >= 0
     ok = execute(_affine().tasks()[2].to_dict())
     assert ok["status"] == "ok" and ok["metrics"]["value"] == 2.0
-    bad = SweepConfig.from_dict({"task": "sweep_tasks:not_a_dict", "seeds": 1}).tasks()[0]
+    bad = SweepConfig.from_dict({"task": "sweep_tasks:not_a_dict", "seeds": 1},
+                                allow_custom_tasks=True).tasks()[0]
     assert "expected" in execute(bad.to_dict())["error"]
 
 
@@ -250,7 +252,8 @@ def test_killed_driver_leaves_no_workers_and_resumes(tmp_path, sig):
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parent)}
     proc = subprocess.Popen([sys.executable, "-m", "spacecraft_lab.cli", "sweep", "--config",
-                             str(cfg), "--out", str(out), "--workers", "2"], env=env,
+                             str(cfg), "--out", str(out), "--workers", "2",
+                             "--allow-custom-tasks"], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     results = out / "results.jsonl"
     deadline = time.monotonic() + 60
@@ -266,14 +269,15 @@ def test_killed_driver_leaves_no_workers_and_resumes(tmp_path, sig):
     while time.monotonic() < deadline and any(_alive(p) for p in pids):
         time.sleep(0.2)
     assert not any(_alive(p) for p in pids)
-    config = load_config(cfg)
+    config = load_config(cfg, allow_custom_tasks=True)
     report = run_sweep(config, out, "local", workers=2, progress=False, summarize=False)
     assert report.skipped == len(done) and report.ran == 8 - len(done)
 
 
 def test_a_dead_worker_fails_its_task_not_the_sweep(tmp_path):
     config = SweepConfig.from_dict({"task": "sweep_tasks:affine", "seeds": 3, "cases": [
-        {"label": "ok"}, {"label": "crash", "task": "sweep_tasks:crash"}]})
+        {"label": "ok"}, {"label": "crash", "task": "sweep_tasks:crash"}]},
+        allow_custom_tasks=True)
     report = run_sweep(config, tmp_path, "local", workers=2, progress=False, summarize=False)
     records = ResultStore(tmp_path / "results.jsonl").load()
     assert len(records) == 6 and report.ran == 6
@@ -367,15 +371,17 @@ def test_cli_sweep_dry_run_run_and_summary(tmp_path, capsys):
     cfg = tmp_path / "affine.yaml"
     cfg.write_text("task: 'sweep_tasks:affine'\nseeds: 3\ngrid: {slope: [1.0, 3.0]}\n")
     out = tmp_path / "out"
-    assert main(["sweep", "--config", str(cfg), "--out", str(out), "--dry-run"]) == 0
+    allow = "--allow-custom-tasks"
+    assert main(["sweep", "--config", str(cfg), "--out", str(out), "--dry-run", allow]) == 0
     assert "6 tasks, 0 done, 6 to run" in capsys.readouterr().out
-    assert main(["sweep", "--config", str(cfg), "--out", str(out), "--backend", "serial"]) == 0
+    assert main(["sweep", "--config", str(cfg), "--out", str(out), "--backend", "serial",
+                 allow]) == 0
     text = capsys.readouterr().out
     assert "6 tasks run (6 ok, 0 failed)" in text and "## value" in text
     assert main(["sweep-summary", str(out)]) == 0
     assert "wrote" in capsys.readouterr().out
     with pytest.raises(SystemExit):
-        main(["sweep", "--config", str(cfg), "--out", str(out), "--backend", "mpi"])
+        main(["sweep", "--config", str(cfg), "--out", str(out), "--backend", "mpi", allow])
 
 
 def test_make_backend_validates():
@@ -421,7 +427,8 @@ def test_ray_cluster_address_with_shipped_code(tmp_path):
 @pytest.mark.parametrize("backend", ["serial", "local"])
 def test_a_task_over_its_time_limit_is_recorded_and_the_sweep_goes_on(tmp_path, backend):
     config = SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 2, "timeout_s": 0.5,
-                                    "grid": {"duration": [0.05, 30.0]}})
+                                    "grid": {"duration": [0.05, 30.0]}},
+                                   allow_custom_tasks=True)
     start = time.monotonic()
     report = run_sweep(config, tmp_path, backend, workers=2, progress=False, summarize=False)
     assert time.monotonic() - start < 20  # the 30 s tasks were cut at 0.5 s
@@ -432,7 +439,9 @@ def test_a_task_over_its_time_limit_is_recorded_and_the_sweep_goes_on(tmp_path, 
     assert all(r["wall_s"] < 5 for r in slow)
     # the limit is not part of a task's identity: same ids with another limit
     relaxed = SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 2,
-                                     "grid": {"duration": [0.05, 30.0]}})
+                                     "grid": {"duration": [0.05, 30.0]}},
+                                    allow_custom_tasks=True)
     assert [t.task_id for t in relaxed.tasks()] == [t.task_id for t in config.tasks()]
     with pytest.raises(ValueError, match="timeout_s"):
-        SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 1, "timeout_s": 0})
+        SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 1, "timeout_s": 0},
+                              allow_custom_tasks=True)
