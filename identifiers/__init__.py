@@ -6,6 +6,8 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
 
 * :func:`default_identifier`: the recommended identifier for the
   spacecraft's outputs, with its settings.
+* :class:`RigidFlexibleIdentifier`: known rigid-body kinematics, estimated
+  inverse inertia and flexible modes, change detection; the default.
 * :class:`ImprovedRPBSID`: the paper's improved recursive PBSID (affine
   projection sign state update), for reproduction.
 * :class:`MomentRefitRPBSID`: recursive VARX plus batch-equivalent refits of
@@ -24,6 +26,7 @@ from identifiers.base import (
     SystemRLSIdentifier,
 )
 from identifiers.batch import PBSIDResult, pbsid
+from identifiers.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
 from identifiers.classical import ClassicalRPBSID
 from identifiers.defaults import DEFAULT_SETTINGS, default_identifier
 from identifiers.evaluation import (
@@ -35,17 +38,25 @@ from identifiers.evaluation import (
     vaf,
 )
 from identifiers.improved import ImprovedRPBSID
+from identifiers.kalman import KalmanPredictor, steady_state_gain
+from identifiers.modal_basis import ModalFilterBank, Resonator
+from identifiers.modal_discovery import discover_resonators, merge_resonators
 from identifiers.model import ModelSequence, StateSpaceModel, observability_basis
 from identifiers.moment_refit import MomentRefitRPBSID
 from identifiers.predictor import PredictorRPBSID
+from identifiers.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.rls import RecursiveLeastSquares
 from identifiers.windowed import WindowedPBSID
 from spacecraft_conventions import __version__
 
 __all__ = [
     "DEFAULT_SETTINGS",
+    "ChangeEvent",
     "ClassicalRPBSID",
     "ImprovedRPBSID",
+    "InnovationCUSUM",
+    "KalmanPredictor",
+    "ModalFilterBank",
     "ModelSequence",
     "MomentRefitRPBSID",
     "OnlineIdentifier",
@@ -54,17 +65,23 @@ __all__ = [
     "PredictorRPBSID",
     "RecursiveLeastSquares",
     "RecursiveVARXIdentifier",
+    "RegressionGLR",
+    "Resonator",
+    "RigidFlexibleIdentifier",
     "StateSpaceModel",
     "SystemRLSIdentifier",
     "WindowedPBSID",
     "__version__",
     "add_measurement_noise",
     "default_identifier",
+    "discover_resonators",
     "identification_inputs",
+    "merge_resonators",
     "normalized_error",
     "observability_basis",
     "one_step_predictions",
     "paper_test_inputs",
     "pbsid",
+    "steady_state_gain",
     "vaf",
 ]

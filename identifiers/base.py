@@ -115,6 +115,8 @@ class OnlineIdentifier(ABC):
     n_skipped : int
         Samples that were skipped: NaN/inf, beyond ``max_abs``, or rejected
         as outliers (see :meth:`update`).
+    n_outliers : int
+        Of those, the ones rejected by the outlier guard.
     n_inputs, n_outputs : int or None
         r and m, inferred from the first sample.
     """
@@ -147,16 +149,22 @@ class OnlineIdentifier(ABC):
         self.n_outputs: int | None = None
         self.n_samples = 0
         self.n_skipped = 0
+        self.n_outliers = 0
         self._k = 0            # samples processed by the estimator
         self._quiet = 0
         self._phi = None
         self._su = self._sy = None
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
 
-    def _init_sizes(self, r: int, m: int) -> None:
+    def _check_sizes(self, r: int, m: int) -> None:
+        """Reject sizes the method cannot identify an order-n model from (the
+        past-window methods need ``p m >= n``)."""
         if self.p * m < self.n:
             raise ValueError(f"p * m = {self.p * m} must be >= n = {self.n} "
                              f"(m = {m} outputs); increase p")
+
+    def _init_sizes(self, r: int, m: int) -> None:
+        self._check_sizes(r, m)
         su, sy = self._user_scales
         if su is not None and su.shape != (r,):
             raise ValueError(f"input_scale must have shape ({r},), got {su.shape}")
@@ -266,6 +274,7 @@ class OnlineIdentifier(ABC):
         usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
         usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs)
         if usable_u.all() and usable_y.all() and not self._admissible(u, y):
+            self.n_outliers += 1
             usable_y[:] = False                      # an outlier: predict every output
         if usable_u.all() and usable_y.all():
             learn = self._quiet == 0 and self._k >= self.p
@@ -302,8 +311,9 @@ class OnlineIdentifier(ABC):
         Returns
         -------
         ModelSequence
-            Entry k is the model after sample k (None while warming up);
-            identical to calling :meth:`update` in a loop.
+            Entry k is the model after sample k (None while warming up),
+            with the state estimate ``x_{k+1|k}`` in ``states``; identical to
+            calling :meth:`update` in a loop.
         """
         u = np.asarray(U, dtype=float)
         y = np.asarray(Y, dtype=float)
@@ -314,18 +324,29 @@ class OnlineIdentifier(ABC):
             return self._fit(u, y)
 
     def _fit(self, u: np.ndarray, y: np.ndarray) -> ModelSequence:
-        N, r, m, n = u.shape[0], u.shape[1], y.shape[1], self.n
-        mats = [np.full((N, *s), np.nan) for s in ((n, n), (n, r), (m, n), (m, r), (n, m))]
+        N = u.shape[0]
+        mats: list[np.ndarray] = []
+        states = np.empty((N, 0))
         valid = np.zeros(N, dtype=bool)
         for k in range(N):
             self.update(u[k], y[k])
             if self.n_samples >= self.warmup and self._su is not None:
                 cur = self._matrices()
-                if cur is not None:
+                x = self._current_state()
+                if cur is not None and x is not None:
+                    if not mats:       # the model order is known once there is a model
+                        mats = [np.full((N, *mat.shape), np.nan) for mat in cur]
+                        states = np.full((N, x.shape[0]), np.nan)
                     valid[k] = True
+                    states[k] = x
                     for arr, mat in zip(mats, self._physical(cur), strict=True):
                         arr[k] = mat
-        return ModelSequence(*mats, valid, self.dt, self.consistent_basis)
+        if not mats:
+            n, r, m = self.n, u.shape[1], y.shape[1]
+            mats = [np.full((N, *shape), np.nan)
+                    for shape in ((n, n), (n, r), (m, n), (m, r), (n, m))]
+            states = np.full((N, n), np.nan)
+        return ModelSequence(*mats, valid, self.dt, self.consistent_basis, states=states)
 
     # ------------------------------------------------------------ results
     @property
@@ -397,8 +418,9 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         :class:`~identifiers.rls.RecursiveLeastSquares`). A VARX with
         p (r + m) regressors on an order-n plant has many weakly excited
         directions in which noise is fitted with huge cancelling
-        coefficients; the floor keeps its Markov parameters sane. 0 turns it
-        off (the paper's algorithm).
+        coefficients; the floor keeps its Markov parameters sane. With 0 the
+        floor is the RLS default, the prior ``1 / P_0 = alpha_1``, which
+        only keeps the covariance bounded where nothing is excited.
     outlier_threshold : float, optional
         Reject samples whose one-step innovation exceeds this many running
         RMS on any channel (see :meth:`_admissible`); default None (off).
@@ -428,12 +450,12 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     def reset(self) -> None:
         super().reset()
         self._varx = None
-        self.n_outliers = 0
         self._innovation_ms: np.ndarray | None = None    # running mean square, per channel
 
     def _allocate(self, r: int, m: int) -> None:
+        # information floor of the VARX: c / (1 - beta_1), or the prior 1 / P_0
         floor = (self.regularization / (1.0 - self.varx_forgetting)
-                 if self.varx_forgetting < 1.0 else 0.0)
+                 if self.regularization > 0 and self.varx_forgetting < 1.0 else None)
         self._varx = RecursiveLeastSquares(m, self.p * (r + m), self.varx_forgetting,
                                            1.0 / self.varx_init, regularization=floor)
 
@@ -451,8 +473,8 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         With ``outlier_threshold = c``, once warmed up a sample whose VARX
         innovation ``y - Xi phi`` exceeds ``c`` times its running RMS (per
         channel, memory 1 / (1 - varx_forgetting)) on any channel is
-        rejected and counted in ``n_outliers``; accepted samples update the
-        running RMS.
+        rejected (the base class counts it in ``n_outliers``); accepted
+        samples update the running RMS.
         """
         if self.outlier_threshold is None or self._k < self.p:
             return True
@@ -460,7 +482,6 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         ms = self._innovation_ms
         if ms is not None and self._k >= self.warmup and np.any(
                 innovation_sq > self.outlier_threshold**2 * ms):
-            self.n_outliers += 1
             return False
         lam = self.varx_forgetting
         self._innovation_ms = (innovation_sq if ms is None

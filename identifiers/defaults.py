@@ -9,21 +9,20 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from identifiers.base import OnlineIdentifier
-from identifiers.moment_refit import MomentRefitRPBSID
-from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
+from identifiers.rigid_flexible import RigidFlexibleIdentifier
+from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["DEFAULT_SETTINGS", "default_identifier"]
 
-#: Settings of the recommended identifier (normalized by the nominal
-#: sensor levels): a long memory (forgetting 0.9995, about 2000 samples)
-#: with a Tikhonov floor on the VARX, a 50 s warm-up, and samples whose
-#: one-step innovation exceeds 100 running RMS rejected as outliers; see
-#: docs/design/identification.md for the measurements behind them.
-DEFAULT_SETTINGS: dict[str, Any] = {"p": 15, "forgetting": 0.9995, "regularization": 0.001,
-                                    "warmup": 500, "outlier_threshold": 100.0}
+#: Settings of the recommended identifier, the rigid-flexible one: the
+#: rigid body's kinematics known, its inverse inertia and the flexible
+#: couplings estimated with a 50 s memory (forgetting 0.998), flexible
+#: modes found from the first 50 s of data, changes detected and reacted
+#: to; see docs/design/identification.md for the measurements behind them.
+DEFAULT_SETTINGS: dict[str, Any] = {"forgetting": 0.998, "warmup": 500, "highpass": 0.99,
+                                    "change_threshold": 6.0, "discount": 10.0,
+                                    "outlier_threshold": 100.0}
 
 
 def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
@@ -35,24 +34,19 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
     layout : OutputLayout
         Which sensor groups the identifier receives, in order (default: the
         environments' standard 10 outputs: attitude, rate, four tip
-        deflections). Its nominal levels normalize the outputs; torques are
-        normalized by :data:`~spacecraft_conventions.NOMINAL_TORQUE`.
+        deflections). Attitude and rate are required. Its nominal levels
+        normalize the outputs; torques are normalized by 1 N m.
     n : int
-        Model order (22 for two modes per appendage).
+        Model order (22: the rigid body and eight flexible modes).
     dt : float
         Sample time, s.
     **options
-        Overrides of :data:`DEFAULT_SETTINGS` or any other keyword of the
-        identifier class.
+        Overrides of :data:`DEFAULT_SETTINGS` or any other keyword of
+        :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier` (e.g.
+        ``prior=`` a nominal structural model's modes).
 
     Returns
     -------
     OnlineIdentifier
     """
-    sensors = layout.sensors()
-    settings: dict[str, Any] = {**DEFAULT_SETTINGS, "dt": dt,
-                                "input_scale": np.full(3, NOMINAL_TORQUE),
-                                "output_scale": sensors.scales(), **options}
-    p = settings.pop("p")
-    forgetting = settings.pop("forgetting")
-    return MomentRefitRPBSID(n, p, forgetting, **settings)
+    return RigidFlexibleIdentifier(layout, n=n, dt=dt, **{**DEFAULT_SETTINGS, **options})

@@ -192,6 +192,10 @@ class ModelSequence(Sequence):
     A, B, C, D, K : ndarray
         Stacked matrices, shape ``(N, ...)``; NaN where not warmed up.
     valid : (N,) bool ndarray
+    states : (N, n) ndarray or None
+        The identifier's state estimate after sample k, ``x_{k+1|k}``, in
+        model k's coordinates (NaN where not warmed up); what h-step-ahead
+        predictions start from.
     consistent_basis : bool
         True when every model uses the same state coordinates (every
         identifier of this package: the recursive ones by construction, the
@@ -201,11 +205,16 @@ class ModelSequence(Sequence):
     """
 
     def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, K: ArrayLike,
-                 valid: ArrayLike, dt: float, consistent_basis: bool = True) -> None:
+                 valid: ArrayLike, dt: float, consistent_basis: bool = True,
+                 states: ArrayLike | None = None) -> None:
         self.A, self.B, self.C, self.D, self.K = (np.asarray(v) for v in (A, B, C, D, K))
         self.valid = np.asarray(valid, dtype=bool)
         self.dt = float(dt)
         self.consistent_basis = bool(consistent_basis)
+        self.states = None if states is None else np.asarray(states, dtype=float)
+        if self.states is not None and self.states.shape != (len(self.valid), self.A.shape[1]):
+            raise ValueError(f"states must have shape ({len(self.valid)}, {self.A.shape[1]}), "
+                             f"got {self.states.shape}")
 
     @classmethod
     def from_models(cls, models: Sequence[StateSpaceModel | None],

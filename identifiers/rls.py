@@ -7,41 +7,57 @@ Exponentially weighted RLS for a matrix regression ``y_k = Theta phi_k + e_k``
     Theta_k = Theta_{k-1} + (y_k - Theta_{k-1} phi_k) g_k^T
     P_k     = (P_{k-1} - g_k phi_k^T P_{k-1}) / lambda
 
-``P`` is stored as ``s Q`` with a scalar ``s``: forgetting only rescales
-``s``, and the rank-1 correction is an in-place BLAS update (``dger``) of the
-Fortran-ordered ``Q``, so a step costs two O(d^2) passes (``Q phi`` and the
-rank-1 update) and no d x d temporaries.
+Symmetric by construction
+    Only the upper triangle of ``P`` is stored and used: ``P phi`` is a
+    symmetric matrix-vector product (``dsymv``) and the correction
+    ``- (P phi)(P phi)^T / denom`` a symmetric rank-1 update (``dsyr``) of
+    that triangle. The plain update lets the non-symmetric part of ``P``
+    grow by ``1 / lambda`` per step until ``P`` turns indefinite; with one
+    triangle there is no non-symmetric part to grow, and the symmetric
+    recursion is numerically stable for ``lambda < 1`` (Verhaegen, 1989).
+    ``P`` is kept as a scalar times a matrix, so forgetting is a rescale.
 
-Anti-windup: when the regressor carries no new information the division by
-``lambda`` would inflate ``P`` without bound (``P / lambda^k``), and later
-gains along those directions would explode. The trace of ``P`` (an O(d)
-diagonal sum) is checked every step and forgetting is suspended while it
-exceeds ``max_trace`` (default:
-the trace of ``P_0``), so the covariance never grows past the prior's and
-stays bounded under zero excitation.
+Forgetting that really forgets, with a bounded covariance
+    Forgetting is applied at every step, in every direction. Where data
+    carry no excitation, plain forgetting would inflate ``P`` as
+    ``P / lambda^k`` (wind-up). Instead, *regularized forgetting* keeps an
+    information floor: the information matrix obeys ::
 
-Regularization: with ``lambda < 1`` the prior ``P_0`` is forgotten like any
-other data, and a regression with many weakly excited directions (a VARX
-with p (r + m) = 195 regressors on a plant of order 22) then fits noise with
-huge cancelling coefficients. ``regularization = delta > 0`` keeps a
-constant information floor, ``P^-1 >= delta I`` in steady state (Tikhonov
-regularized forgetting): each step adds one pseudo-observation
-``0 = Theta (w e_i)`` along a coordinate ``e_i`` cycling through all d, with
-``w^2 = d (1 - lambda) delta``, which over d steps adds ``(1 - lambda) delta I``
-per step to the information and pulls unexcited coefficients to zero.
-It costs one more O(d^2) rank-1 update per step.
+        R_k = lambda R_{k-1} + phi_k phi_k^T + (1 - lambda) delta I      (on average)
+
+    so forgotten information is replaced by the prior ``delta I``, not by
+    nothing, and ``P`` is pulled back toward the fixed bound ``I / delta``
+    in unexcited directions while excited ones track the data with memory
+    ``1 / (1 - lambda)``. The default ``delta = 1 / initial_covariance``
+    pulls ``P`` back to ``P_0``. The floor is added one coordinate per step
+    as a pseudo-observation ``0 = Theta (w e_i)`` with ``w^2 = d (1 - lambda)
+    delta``, cycling through all d coordinates, which over any d steps adds
+    the same information as ``(1 - lambda) delta I`` per step, at the cost of
+    one more O(d^2) rank-1 update. It is exactly Tikhonov-regularized
+    exponentially weighted least squares with those pseudo-rows; with
+    ``regularization=0`` the primitive is plain exponentially weighted least
+    squares (tests compare both with the closed form over 20,000 samples).
+
+Corrupt data never enter
+    An update whose gain or error is not finite, or whose products could
+    overflow, is refused before anything changes (counted in
+    ``n_rejected``), so ``Theta`` and ``P`` stay finite.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.blas import dger
+from numpy.typing import ArrayLike
+from scipy.linalg.blas import dger, dsymv, dsyr
 
 __all__ = ["RecursiveLeastSquares"]
 
+#: Products larger than this are refused (their sums could overflow).
+_OVERFLOW_GUARD = 1e150
+
 
 class RecursiveLeastSquares:
-    """Exponentially weighted recursive least squares for ``y = Theta phi``.
+    """Exponentially weighted, regularized recursive least squares for ``y = Theta phi``.
 
     Parameters
     ----------
@@ -50,41 +66,43 @@ class RecursiveLeastSquares:
     n_regressors : int
         Columns d of ``Theta`` (size of ``phi``).
     forgetting : float
-        Forgetting factor lambda in (0, 1].
+        Forgetting factor lambda in (0, 1]: memory ``1 / (1 - lambda)`` samples.
     initial_covariance : float
         ``P_0 = initial_covariance * I`` (the paper's ``I / alpha``).
-    max_trace : float, optional
-        Forgetting is suspended while ``trace(P)`` exceeds this; default
-        ``trace(P_0) = d * initial_covariance``.
-    regularization : float
-        Information floor delta (0: none), see the module docstring.
+    regularization : float or (d,) array_like, optional
+        Information floor delta (>= 0) that forgotten information is
+        replaced by; ``P`` is bounded by about ``I / delta`` where the data
+        carry no excitation. A vector gives each regressor its own floor
+        (``diag(delta)``). Default ``1 / initial_covariance`` (pull ``P``
+        back to ``P_0``); 0 gives plain exponentially weighted least squares,
+        whose ``P`` grows without bound when nothing is excited.
 
     Attributes
     ----------
     theta : (q, d) ndarray
         Current estimate.
-    P : (d, d) ndarray
-        Current (scaled) covariance, Fortran-ordered.
+    n_rejected : int
+        Updates refused because they would have made the estimate non-finite.
     """
 
     def __init__(self, n_outputs: int, n_regressors: int, forgetting: float = 1.0,
-                 initial_covariance: float = 1.0, max_trace: float | None = None,
-                 regularization: float = 0.0) -> None:
+                 initial_covariance: float = 1.0, regularization: float | None = None) -> None:
         if n_outputs < 1 or n_regressors < 1:
             raise ValueError("n_outputs and n_regressors must be >= 1")
         if not 0.0 < forgetting <= 1.0:
             raise ValueError(f"forgetting must be in (0, 1], got {forgetting}")
-        if not np.isfinite(initial_covariance) or initial_covariance <= 0:
+        if not (np.isfinite(initial_covariance) and initial_covariance > 0):
             raise ValueError(f"initial_covariance must be positive, got {initial_covariance}")
         self.forgetting = float(forgetting)
         self.initial_covariance = float(initial_covariance)
-        self.max_trace = (n_regressors * self.initial_covariance if max_trace is None
-                          else float(max_trace))
-        if not np.isfinite(regularization) or regularization < 0:
-            raise ValueError(f"regularization must be >= 0, got {regularization}")
-        self.regularization = float(regularization)
-        self._pseudo_weight = float(np.sqrt(n_regressors * (1.0 - self.forgetting)
-                                            * self.regularization))
+        if regularization is None:
+            regularization = 1.0 / self.initial_covariance
+        delta = np.broadcast_to(np.asarray(regularization, dtype=float), (n_regressors,))
+        if not (np.all(np.isfinite(delta)) and np.all(delta >= 0)):
+            raise ValueError(f"regularization must be >= 0 (a scalar or ({n_regressors},)), "
+                             f"got {regularization}")
+        self.regularization = delta.copy()
+        self._pseudo_weights = np.sqrt(n_regressors * (1.0 - self.forgetting) * delta)
         self.theta = np.zeros((n_outputs, n_regressors), order="F")
         self.reset()
 
@@ -95,60 +113,80 @@ class RecursiveLeastSquares:
 
     @property
     def P(self) -> np.ndarray:
-        """Current (scaled) covariance, (d, d)."""
-        return self._scale * self._q
+        """Current covariance, (d, d), exactly symmetric (a copy)."""
+        upper = np.triu(self._q)
+        return self._scale * (upper + np.triu(upper, 1).T)
 
     def predict(self, phi: np.ndarray) -> np.ndarray:
         """``Theta phi``."""
         return self.theta @ phi
 
-    def update(self, phi: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def update(self, phi: np.ndarray, y: np.ndarray) -> np.ndarray | None:
         """One RLS step; returns the a-priori error ``y - Theta_{k-1} phi``.
 
         Parameters
         ----------
         phi : (d,) ndarray
-            Regressor (finite; callers validate).
+            Regressor.
         y : (q,) ndarray
             Target.
+
+        Returns
+        -------
+        (q,) ndarray or None
+            The a-priori error, or None if the update was refused (a
+            non-finite or overflowing gain or error; nothing changed).
         """
         scale = self._scale
-        p_phi = self._q @ phi
-        p_phi *= scale                                   # P phi
+        p_phi = dsymv(scale, self._q, phi, lower=0)          # P phi, upper triangle only
         denom = self.forgetting + phi @ p_phi
-        gain = p_phi / denom
         err = y - self.theta @ phi
+        if not self._safe(p_phi, denom, err):
+            self.n_rejected += 1
+            return None
+        gain = p_phi / denom
         self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
-        # P <- P - g (P phi)^T, i.e. Q <- Q - g (P phi)^T / s, in place
-        self._q = dger(-1.0 / scale, gain, p_phi, a=self._q, overwrite_a=True)
-        if self._pseudo_weight > 0.0:
-            self._pseudo_update()
-        if self.forgetting < 1.0 and self._scale * self._q.trace() < self.max_trace:
+        # P <- P - (P phi)(P phi)^T / denom, i.e. Q <- Q - (P phi)(P phi)^T / (s denom)
+        self._q = dsyr(-1.0 / (scale * denom), p_phi, a=self._q, lower=0, overwrite_a=True)
+        if self.forgetting < 1.0:
             self._scale /= self.forgetting
-            if self._scale > 1e6:
+            if self._pseudo_weights[self._cycle] > 0.0:
+                self._pseudo_update()
+            else:
+                self._cycle = (self._cycle + 1) % self.theta.shape[1]
+            if self._scale > 1e8:
                 self._renormalize()
         return err
+
+    @staticmethod
+    def _safe(p_phi: np.ndarray, denom: float, err: np.ndarray) -> bool:
+        """Finite, positive denominator and no product that could overflow."""
+        if not (np.isfinite(denom) and denom > 0):
+            return False
+        peak_p = np.abs(p_phi).max()
+        peak_e = np.abs(err).max()
+        if not (np.isfinite(peak_p) and np.isfinite(peak_e)):
+            return False
+        return peak_p * peak_p / denom < _OVERFLOW_GUARD and peak_e * peak_p / denom \
+            < _OVERFLOW_GUARD
 
     def _pseudo_update(self) -> None:
         """Rank-1 pseudo-observation ``0 = Theta (w e_i)`` (regularized forgetting)."""
         i = self._cycle
         self._cycle = (i + 1) % self.theta.shape[1]
-        w = self._pseudo_weight
-        p_phi = self._q[:, i] * (self._scale * w)        # P (w e_i), no matvec needed
+        w = self._pseudo_weights[i]
+        q = self._q
+        column = np.concatenate((q[:i, i], q[i, i:]))        # column i of the symmetric Q
+        p_phi = column * (self._scale * w)                   # P (w e_i)
         denom = 1.0 + w * p_phi[i]
         gain = p_phi / denom
         err = -w * self.theta[:, i]
         self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
-        self._q = dger(-1.0 / self._scale, gain, p_phi, a=self._q, overwrite_a=True)
+        self._q = dsyr(-1.0 / (self._scale * denom), p_phi, a=q, lower=0, overwrite_a=True)
 
     def _renormalize(self) -> None:
         self._q *= self._scale
         self._scale = 1.0
-
-    def symmetrize(self) -> None:
-        """Restore exact symmetry of ``P`` (round-off drifts it slowly)."""
-        self._renormalize()
-        self._q = np.asfortranarray(0.5 * (self._q + self._q.T))
 
     def reset(self) -> None:
         """Back to ``Theta = 0``, ``P = P_0``."""
@@ -157,3 +195,20 @@ class RecursiveLeastSquares:
         self._q = np.asfortranarray(np.eye(d) * self.initial_covariance)
         self._scale = 1.0
         self._cycle = 0
+        self.n_rejected = 0
+
+    def set_covariance(self, covariance: ArrayLike) -> None:
+        """Replace ``P`` (symmetric positive definite, (d, d)), e.g. to inflate it
+        after a detected change.
+
+        Raises
+        ------
+        ValueError
+            For a wrong shape or a non-symmetric / non-finite matrix.
+        """
+        p = np.asarray(covariance, dtype=float)
+        d = self.theta.shape[1]
+        if p.shape != (d, d) or not np.all(np.isfinite(p)) or not np.allclose(p, p.T):
+            raise ValueError(f"covariance must be a finite symmetric ({d}, {d}) matrix")
+        self._q = np.asfortranarray(p)
+        self._scale = 1.0

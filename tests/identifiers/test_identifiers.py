@@ -13,7 +13,6 @@ from identifiers import (
     ModelSequence,
     MomentRefitRPBSID,
     PredictorRPBSID,
-    RecursiveLeastSquares,
     StateSpaceModel,
     WindowedPBSID,
     normalized_error,
@@ -43,38 +42,6 @@ def _innovation_system(seed: int = 0, n_samples: int = 3000, noise: float = 0.1)
 
 
 TRUE_POLES = np.array([0.5, 0.7, 0.8, 0.9])
-
-
-# ------------------------------------------------------------------ RLS
-def test_rls_matches_weighted_least_squares():
-    rng = np.random.default_rng(1)
-    lam = 0.99
-    x = rng.normal(size=(400, 5))
-    theta = rng.normal(size=(2, 5))
-    y = x @ theta.T + 0.01 * rng.normal(size=(400, 2))
-    rls = RecursiveLeastSquares(2, 5, lam, initial_covariance=1e8)
-    for k in range(400):
-        rls.update(x[k], y[k])
-    w = np.sqrt(lam ** np.arange(399, -1, -1))[:, None]
-    batch = np.linalg.lstsq(x * w, y * w, rcond=None)[0].T
-    np.testing.assert_allclose(rls.theta, batch, atol=1e-6)
-
-
-def test_rls_scalar_closed_form():
-    """One step from theta = 0, P = p0: theta = p0 phi y / (lambda + p0 phi^2)."""
-    rls = RecursiveLeastSquares(1, 1, forgetting=0.9, initial_covariance=2.0)
-    rls.update(np.array([3.0]), np.array([6.0]))
-    assert rls.theta[0, 0] == pytest.approx(2.0 * 3 * 6 / (0.9 + 2.0 * 9))
-    assert rls.P[0, 0] == pytest.approx((2.0 - 2.0 * 9 * 2.0 / (0.9 + 18)) / 0.9)
-
-
-def test_rls_covariance_bounded_without_excitation():
-    rls = RecursiveLeastSquares(3, 20, forgetting=0.98, initial_covariance=1.0)
-    zero = np.zeros(20)
-    for _ in range(10_000):
-        rls.update(zero, np.zeros(3))
-    assert np.all(np.isfinite(rls.P))
-    assert np.trace(rls.P) <= 20 * 1.0 / 0.98 + 1e-9
 
 
 # ------------------------------------------------------------------ VARX algebra

@@ -1,0 +1,223 @@
+"""Detecting abrupt changes of a plant from the residuals of its model.
+
+Two tests:
+
+* :class:`RegressionGLR` watches a linear regression ``y = Theta phi``
+  estimated recursively: a change of ``Theta`` in the span of some
+  regressors (the rigid-body gain, after a docking) shows as a correlation
+  between the a-priori errors and those regressors, which the generalized
+  likelihood-ratio statistic accumulates over a short window. It detects a
+  20 % inertia change that one-step innovations, absorbed sample by sample
+  by a Kalman filter, never reveal.
+* :class:`InnovationCUSUM` is the generic test on a filter's normalized
+  innovations.
+
+InnovationCUSUM
+---------------
+A structural change (a docking, a capture) makes the current model wrong:
+its one-step innovations grow beyond what their predicted covariance
+allows. :class:`InnovationCUSUM` is Page's CUSUM test on the normalized
+innovation energy ``s_k = e_k^T S_k^-1 e_k / m`` (about 1 while the model
+is right)::
+
+    g_k = max(0, g_{k-1} + s_k - 1 - drift),      alarm when g_k > threshold
+
+The statistic is scaled by a slowly learned factor (the mean of ``s_k`` in
+calm periods), so a filter whose ``S_k`` is consistently optimistic or
+pessimistic does not raise alarms by itself; after an alarm the test waits
+``holdoff`` samples before it can fire again. Each alarm is recorded as a
+:class:`ChangeEvent` with the estimated start of the change (the last time
+``g`` was zero).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ChangeEvent", "InnovationCUSUM", "RegressionGLR"]
+
+
+@dataclass(frozen=True)
+class ChangeEvent:
+    """A detected change.
+
+    Attributes
+    ----------
+    sample : int
+        Sample at which the test fired.
+    onset : int
+        Estimated first sample of the change (when the statistic last left 0).
+    time : float
+        ``sample * dt``, s.
+    statistic : float
+        CUSUM value at the alarm.
+    """
+
+    sample: int
+    onset: int
+    time: float
+    statistic: float
+
+
+class InnovationCUSUM:
+    """CUSUM on normalized innovations.
+
+    Parameters
+    ----------
+    threshold : float
+        Alarm level of the cumulative sum (larger: fewer false alarms, later
+        detection).
+    drift : float
+        Allowance subtracted per sample: excess normalized energy that is
+        not accumulated.
+    holdoff : int
+        Samples after an alarm (and after start) before the next can fire.
+    calibration : float
+        Forgetting of the calm-period scale of ``s_k``.
+    dt : float
+        Sample time, s (to stamp events).
+    """
+
+    def __init__(self, threshold: float = 40.0, drift: float = 0.5, holdoff: int = 150,
+                 calibration: float = 0.998, dt: float = 0.1) -> None:
+        if not (threshold > 0 and drift >= 0 and holdoff >= 0 and 0 < calibration < 1):
+            raise ValueError("threshold > 0, drift >= 0, holdoff >= 0, calibration in (0, 1)")
+        self.threshold, self.drift = float(threshold), float(drift)
+        self.holdoff, self.calibration, self.dt = int(holdoff), float(calibration), float(dt)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the statistic, the scale and the events."""
+        self.g = 0.0
+        self.scale = 1.0
+        self.k = 0
+        self._quiet_until = self.holdoff
+        self._calibration_start = 0
+        self._onset = 0
+        self.events: list[ChangeEvent] = []
+
+    def update(self, innovation: np.ndarray, covariance: np.ndarray) -> ChangeEvent | None:
+        """Feed one innovation ``e`` (m,) with its predicted covariance ``S`` (m, m).
+
+        Returns
+        -------
+        ChangeEvent or None
+            The event if the test fired at this sample.
+        """
+        k = self.k
+        self.k += 1
+        try:
+            energy = float(innovation @ np.linalg.solve(covariance, innovation)) / innovation.size
+        except np.linalg.LinAlgError:
+            return None
+        if not np.isfinite(energy):
+            return None
+        if k < self._quiet_until:          # (re)calibration after start or an alarm: an average
+            seen = k - self._calibration_start
+            self.scale = energy if seen == 0 else self.scale + (energy - self.scale) / (seen + 1)
+            return None
+        s = energy / self.scale
+        self.g = max(0.0, self.g + s - 1.0 - self.drift)
+        if self.g == 0.0:
+            self._onset = k + 1
+            self.scale = self.calibration * self.scale + (1 - self.calibration) * energy
+            return None
+        if self.g > self.threshold:
+            event = ChangeEvent(sample=k, onset=self._onset, time=k * self.dt, statistic=self.g)
+            self.events.append(event)
+            self.g = 0.0
+            self._quiet_until = k + 1 + self.holdoff
+            self._calibration_start = k + 1
+            return event
+        return None
+
+
+class RegressionGLR:
+    """Generalized likelihood-ratio test for a change of regression parameters.
+
+    For ``e_k = y_k - Theta phi_k`` (the a-priori errors of a recursive
+    estimate) and the regressors ``phi_k`` in which a change is expected,
+    the exponentially weighted statistic ::
+
+        c_k = sum lam^(k-i) phi_i e_i^T,     R_k = sum lam^(k-i) phi_i phi_i^T
+        T_k = sum_j c_k[:, j]^T R_k^-1 c_k[:, j] / sigma_j^2
+
+    is chi-square with ``d q`` degrees of freedom while ``Theta`` is right
+    (``d`` regressors, ``q`` outputs) and grows with a parameter jump. It is
+    divided by its calm-period mean times ``d q`` (so coloured residuals do
+    not raise alarms by themselves): the mean is learned over the second
+    half of the initial ``holdoff`` and then follows slow drifts while the
+    statistic stays below 1. An alarm fires when the ratio exceeds
+    ``threshold``; the next one can fire ``holdoff`` samples later.
+
+    Parameters
+    ----------
+    window : float
+        Forgetting of the statistic (memory ``1 / (1 - window)`` samples).
+    threshold : float
+        Alarm level as a multiple of the degrees of freedom.
+    holdoff : int
+        Samples after start and after an alarm during which the test only
+        recalibrates.
+    dt : float
+        Sample time, s.
+    """
+
+    def __init__(self, window: float = 0.98, threshold: float = 4.0, holdoff: int = 200,
+                 dt: float = 0.1) -> None:
+        if not (0 < window < 1 and threshold > 1 and holdoff >= 0):
+            raise ValueError("window in (0, 1), threshold > 1, holdoff >= 0")
+        self.window, self.threshold = float(window), float(threshold)
+        self.holdoff, self.dt = int(holdoff), float(dt)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the statistic and the events."""
+        self._c = self._r = None
+        self.k = 0
+        self.scale = 1.0
+        self._calibrated = 0
+        self._quiet_until = self.holdoff
+        self.statistic = 0.0
+        self.events: list[ChangeEvent] = []
+
+    def update(self, phi: np.ndarray, error: np.ndarray, variance: np.ndarray,
+               sample: int | None = None) -> ChangeEvent | None:
+        """Feed one regressor ``phi`` (d,), a-priori error ``e`` (q,) and the
+        error variances (q,) of sample ``sample`` (default: a running count);
+        returns the event if the test fired."""
+        k = self.k
+        self.k += 1
+        sample = k if sample is None else int(sample)
+        lam = self.window
+        outer = np.outer(phi, error)
+        if self._c is None:
+            self._c, self._r = outer, np.outer(phi, phi)
+        else:
+            self._c = lam * self._c + outer
+            self._r = lam * self._r + np.outer(phi, phi)
+        try:
+            proj = np.linalg.solve(self._r + 1e-9 * np.trace(self._r) * np.eye(phi.size),
+                                   self._c)
+        except np.linalg.LinAlgError:
+            return None
+        dof = self._c.size
+        level = float(np.sum(self._c * proj / np.maximum(variance, 1e-30)[None, :])) / dof
+        if k < self.holdoff:                       # initial calibration, settled half only
+            if k >= self.holdoff // 2:
+                self._calibrated += 1
+                self.scale += (level - self.scale) / self._calibrated
+            return None
+        self.statistic = level / max(self.scale, 1e-12)
+        if self.statistic < 1.0:                   # calm: follow slow drifts of the level
+            self.scale = 0.999 * self.scale + 0.001 * level
+        if k < self._quiet_until or self.statistic <= self.threshold:
+            return None
+        onset = max(0, sample - round(1.0 / (1.0 - lam)))
+        event = ChangeEvent(sample=sample, onset=onset, time=sample * self.dt,
+                            statistic=self.statistic)
+        self.events.append(event)
+        self._quiet_until = k + 1 + self.holdoff
+        return event

@@ -1,0 +1,143 @@
+"""Kalman filtering on a (possibly changing) linear model.
+
+:class:`KalmanPredictor` is a time-varying Kalman filter in predictor form
+for ``x_{k+1} = A x_k + B u_k + w_k``, ``y_k = C x_k + v_k`` with
+``w ~ N(0, Q)``, ``v ~ N(0, R)``. Each :meth:`~KalmanPredictor.update`
+takes the model of that step, so the filter follows a model that an
+identifier refines every sample; its covariance adapts with it (no
+steady-state gain to recompute when the model moves). The predictor gain
+``K_k = A P C^T (C P C^T + R)^-1`` turns the filter into the innovation form
+that identified models carry.
+
+:func:`steady_state_gain` solves the filtering Riccati equation once, for a
+fixed model (the fixed LQG of the controllers).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.linalg import solve_discrete_are
+
+from spacecraft_conventions import single_threaded_blas
+
+__all__ = ["KalmanPredictor", "steady_state_gain"]
+
+
+@single_threaded_blas
+def steady_state_gain(a: ArrayLike, c: ArrayLike, q: ArrayLike,
+                      r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state Kalman filter of ``(A, C)`` with noise covariances ``Q``, ``R``.
+
+    Returns
+    -------
+    L : (n, m) ndarray
+        Filter (measurement-update) gain: ``x_{k|k} = x_{k|k-1} + L (y_k - C x_{k|k-1})``.
+    P : (n, n) ndarray
+        Prior (one-step-ahead) error covariance.
+
+    Raises
+    ------
+    ValueError
+        If the Riccati equation has no stabilizing solution.
+    """
+    a, c = np.asarray(a, dtype=float), np.asarray(c, dtype=float)
+    q, r = np.atleast_2d(np.asarray(q, dtype=float)), np.atleast_2d(np.asarray(r, dtype=float))
+    try:
+        p = solve_discrete_are(a.T, c.T, q, r)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ValueError(f"no stabilizing filter Riccati solution: {exc}") from None
+    return p @ c.T @ np.linalg.inv(c @ p @ c.T + r), p
+
+
+class KalmanPredictor:
+    """Time-varying Kalman filter in one-step predictor form.
+
+    Parameters
+    ----------
+    n : int
+        State dimension.
+    initial_covariance : float
+        ``P_0 = initial_covariance * I`` around the initial state 0.
+
+    Attributes
+    ----------
+    x : (n,) ndarray
+        ``x_{k+1|k}`` after the last update (``x_{0|-1} = 0`` initially).
+    P : (n, n) ndarray
+        Its error covariance.
+    gain : (n, m) ndarray or None
+        The last predictor gain ``K_k``.
+    innovation, innovation_covariance : ndarray or None
+        The last ``e_k = y_k - C x_{k|k-1}`` and ``S_k = C P C^T + R``.
+    """
+
+    def __init__(self, n: int, initial_covariance: float = 1.0) -> None:
+        self.n = int(n)
+        self.initial_covariance = float(initial_covariance)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to ``x = 0``, ``P = P_0``."""
+        self.x = np.zeros(self.n)
+        self.P = np.eye(self.n) * self.initial_covariance
+        self.gain: np.ndarray | None = None
+        self.innovation: np.ndarray | None = None
+        self.innovation_covariance: np.ndarray | None = None
+
+    def update(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, q: np.ndarray,
+               r: np.ndarray, u: np.ndarray, y: np.ndarray | None) -> np.ndarray:
+        """One step: measurement ``y_k`` (None or NaN entries: skipped), then time update.
+
+        Parameters
+        ----------
+        a, b, c : ndarray
+            Model of this step.
+        q : (n, n) ndarray
+            Process noise covariance.
+        r : (m,) ndarray
+            Measurement noise variances (diagonal ``R``).
+        u : (r,) ndarray
+            Input applied at this step.
+        y : (m,) ndarray or None
+            Measurement; non-finite entries are not used.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_{k+1|k}``.
+        """
+        x, p = self.x, self.P
+        if y is not None:
+            seen = np.isfinite(y)
+            if seen.any():
+                cs = c[seen]
+                pct = p @ cs.T
+                s = cs @ pct + np.diag(r[seen])
+                e = y[seen] - cs @ x
+                try:
+                    gain = np.linalg.solve(s, pct.T).T            # filter gain L
+                except np.linalg.LinAlgError:
+                    gain = np.zeros_like(pct)
+                x = x + gain @ e
+                p = p - gain @ pct.T
+                full = np.zeros((self.n, c.shape[0]))
+                full[:, seen] = a @ gain
+                self.gain = full
+                self.innovation = np.full(c.shape[0], np.nan)
+                self.innovation[seen] = e
+                self.innovation_covariance = s if seen.all() else None
+        x = a @ x + b @ u
+        p = a @ p @ a.T + q
+        self.x = x
+        self.P = 0.5 * (p + p.T)
+        return x
+
+    def inflate(self, covariance: ArrayLike) -> None:
+        """Add ``covariance`` to ``P`` (state uncertainty after a detected change)."""
+        self.P = self.P + np.asarray(covariance, dtype=float)
+
+    def transform(self, t: np.ndarray) -> None:
+        """Change coordinates: ``x <- T x``, ``P <- T P T^T``."""
+        self.x = t @ self.x
+        self.P = t @ self.P @ t.T

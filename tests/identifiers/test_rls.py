@@ -1,0 +1,118 @@
+"""The shared RLS primitive against exponentially weighted least squares in closed form."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from identifiers import RecursiveLeastSquares
+
+LAM = 0.98
+
+
+def _data(n: int = 20_000, d: int = 12, q: int = 2, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    phi = rng.normal(size=(n, d)) * np.linspace(0.1, 3.0, d)   # unevenly excited
+    theta = rng.normal(size=(q, d))
+    y = phi @ theta.T + 0.01 * rng.normal(size=(n, q))
+    return phi, theta, y
+
+
+def _closed_form(phi, y, k, p0, extra=None):
+    """EWLS estimate after k samples: (lam^k / p0 I + sum lam^(k-i) phi phi^T (+ extra))^-1 r."""
+    w = LAM ** np.arange(k - 1, -1, -1)
+    info = LAM**k / p0 * np.eye(phi.shape[1]) + (phi[:k] * w[:, None]).T @ phi[:k]
+    if extra is not None:
+        info = info + extra
+    return np.linalg.solve(info, (phi[:k] * w[:, None]).T @ y[:k]).T
+
+
+def test_scalar_closed_form():
+    """One step from theta = 0, P = p0, phi = 3, y = 6, lambda = 0.9."""
+    plain = RecursiveLeastSquares(1, 1, forgetting=0.9, initial_covariance=2.0,
+                                  regularization=0.0)
+    plain.update(np.array([3.0]), np.array([6.0]))
+    assert plain.theta[0, 0] == pytest.approx(2.0 * 3 * 6 / (0.9 + 2.0 * 9))
+    # with the default floor 1 / p0 the pseudo-row w^2 = (1 - 0.9) / 2 joins the
+    # information lambda / p0 + phi^2 = 0.45 + 9
+    rls = RecursiveLeastSquares(1, 1, forgetting=0.9, initial_covariance=2.0)
+    rls.update(np.array([3.0]), np.array([6.0]))
+    info = 0.9 / 2.0 + 9.0 + 0.1 / 2.0
+    assert rls.P[0, 0] == pytest.approx(1.0 / info)
+    assert rls.theta[0, 0] == pytest.approx(3.0 * 6.0 / info)
+
+
+def test_plain_forgetting_equals_weighted_least_squares_over_20000_samples():
+    phi, _, y = _data()
+    rls = RecursiveLeastSquares(2, 12, LAM, 1.0, regularization=0.0)
+    for k in range(len(phi)):
+        rls.update(phi[k], y[k])
+        if k + 1 in (1000, 5000, 20_000):
+            ref = _closed_form(phi, y, k + 1, 1.0)
+            assert np.linalg.norm(rls.theta - ref) / np.linalg.norm(ref) < 1e-8
+    np.testing.assert_array_equal(rls.P, rls.P.T)
+    assert np.linalg.eigvalsh(rls.P).min() > 0
+
+
+def test_regularized_forgetting_equals_its_closed_form():
+    """The floor is Tikhonov pseudo-rows w e_i (one coordinate per step): the
+    closed form with those rows, over 20,000 samples."""
+    phi, _, y = _data()
+    d, p0 = 12, 0.5
+    rls = RecursiveLeastSquares(2, d, LAM, p0)                 # default floor: 1 / p0
+    w2 = d * (1 - LAM) / p0
+    extra = np.zeros((d, d))
+    for k in range(len(phi)):
+        rls.update(phi[k], y[k])
+        extra *= LAM
+        extra[k % d, k % d] += w2
+    ref = _closed_form(phi, y, len(phi), p0, extra)
+    assert np.linalg.norm(rls.theta - ref) / np.linalg.norm(ref) < 1e-8
+
+
+def test_reconverges_after_a_parameter_jump_within_a_few_memories():
+    phi, theta, y = _data(n=6000)
+    rng = np.random.default_rng(7)
+    jumped = theta + rng.normal(size=theta.shape)
+    y = y.copy()
+    y[3000:] = phi[3000:] @ jumped.T + 0.01 * rng.normal(size=(3000, 2))
+    rls = RecursiveLeastSquares(2, 12, LAM, 1.0)
+    for k in range(3000 + 5 * 50):                    # five memories of 1 / (1 - 0.98)
+        rls.update(phi[k], y[k])
+    # judged where the data carry information: the prediction error on fresh regressors
+    excited = np.linspace(0.1, 3.0, 12)
+    assert np.linalg.norm((rls.theta - jumped) * excited) \
+        / np.linalg.norm(jumped * excited) < 0.02
+
+
+def test_covariance_stays_bounded_without_excitation():
+    rls = RecursiveLeastSquares(3, 20, forgetting=LAM, initial_covariance=1.0)
+    phi, _, y = _data(n=500, d=20, q=3)
+    for k in range(500):
+        rls.update(phi[k], y[k])
+    for _ in range(10_000):
+        rls.update(np.zeros(20), np.zeros(3))
+    eig = np.linalg.eigvalsh(rls.P)
+    # pulled back toward P0 = I; the one-coordinate-per-step floor keeps every
+    # direction within (1 - lam^d) / (d (1 - lam) lam^d) of it
+    bound = (1 - LAM**20) / (20 * (1 - LAM) * LAM**20)
+    assert eig.max() <= bound * 1.0001 and eig.min() > 0
+
+
+def test_plain_forgetting_winds_up_without_excitation():
+    """The floor is what bounds P: without it P grows as lambda^-k (documented)."""
+    rls = RecursiveLeastSquares(1, 4, LAM, 1.0, regularization=0.0)
+    for _ in range(500):
+        rls.update(np.zeros(4), np.zeros(1))
+    assert np.linalg.eigvalsh(rls.P).max() == pytest.approx(LAM**-500, rel=1e-9)
+
+
+def test_non_finite_or_overflowing_updates_change_nothing():
+    rls = RecursiveLeastSquares(2, 3, LAM, 1.0)
+    rls.update(np.ones(3), np.ones(2))
+    before = rls.theta.copy(), rls.P
+    assert rls.update(np.array([np.nan, 0, 0]), np.ones(2)) is None
+    assert rls.update(np.ones(3), np.array([1e300, 0.0])) is None
+    assert rls.n_rejected == 2
+    np.testing.assert_array_equal(rls.theta, before[0])
+    np.testing.assert_array_equal(rls.P, before[1])
