@@ -6,6 +6,9 @@
    VAF on a held-out record, with two regularization strengths.
 2. The VARX's first Markov parameters (rate rows) against the truth, with and
    without Tikhonov regularization.
+
+The comparison with other packages (SRIM, N4SID, MOESP, online ARX) is
+``benchmarks/bench_peers.py``.
 """
 
 import numpy as np
@@ -54,37 +57,3 @@ with single_threaded_blas:
                 errs.append(np.linalg.norm((est - true)[3:6]) / np.linalg.norm(true[3:6]))
             print(f"SNR {snr!s:>5} dB, ridge {delta:>5}: j = 0, 1, 5 -> "
                   + ", ".join(f"{e:.3g}" for e in errs))
-
-print("\n3. Peer check on 40 dB LTI data (2500 samples, n = 22, 15 block rows):"
-      " held-out one-step VAF and run time")
-import time  # noqa: E402
-
-import pandas as pd  # noqa: E402
-from nfoursid.nfoursid import NFourSID  # noqa: E402
-from scipy.linalg import solve_discrete_are  # noqa: E402
-
-from identifiers import StateSpaceModel  # noqa: E402
-
-u = identification_inputs(2500, np.random.default_rng(0))
-y = add_measurement_noise(truth.simulate(u)[1], 40.0, np.random.default_rng(1))
-with single_threaded_blas:
-    start = time.perf_counter()
-    ours = pbsid(u, y, truth.n, 15, regularization=0.01 * 2500)
-    t_ours = time.perf_counter() - start
-    cols_u, cols_y = [f"u{i}" for i in range(3)], [f"y{i}" for i in range(10)]
-    frame = pd.DataFrame(np.hstack([u, y]), columns=cols_u + cols_y)
-    start = time.perf_counter()
-    n4 = NFourSID(frame, output_columns=cols_y, input_columns=cols_u, num_block_rows=15)
-    n4.subspace_identification()
-    sys_, cov = n4.system_identification(rank=truth.n)
-    t_theirs = time.perf_counter() - start
-n = truth.n
-p_ric = solve_discrete_are(sys_.a.T, sys_.c.T, cov[:n, :n], cov[n:, n:], s=cov[:n, n:])
-gain = (sys_.a @ p_ric @ sys_.c.T + cov[:n, n:]) @ np.linalg.inv(
-    sys_.c @ p_ric @ sys_.c.T + cov[n:, n:])
-theirs = StateSpaceModel(sys_.a, sys_.b, sys_.c, sys_.d, gain)
-with np.errstate(all="ignore"):
-    v_ours = vaf(y2[100:], ours.predict(u2, y2)[100:]).mean()
-    v_theirs = vaf(y2[100:], theirs.predict(u2, y2)[100:]).mean()
-print(f"pbsid (regularized): VAF {v_ours:.2f} %, {t_ours:.3f} s | nfoursid N4SID: VAF "
-      f"{v_theirs:.2f} %, {t_theirs:.3f} s")

@@ -30,11 +30,19 @@ from identifiers.change_detection import ChangeEvent, InnovationCUSUM, Regressio
 from identifiers.classical import ClassicalRPBSID
 from identifiers.defaults import DEFAULT_SETTINGS, default_identifier
 from identifiers.evaluation import (
+    HORIZONS,
     add_measurement_noise,
+    h_step_predictions,
     identification_inputs,
+    modal_errors,
     normalized_error,
     one_step_predictions,
     paper_test_inputs,
+    persistence_predictions,
+    prediction_vaf,
+    relative_gain_error,
+    rigid_body_gain,
+    unstable_share,
     vaf,
 )
 from identifiers.improved import ImprovedRPBSID
@@ -51,6 +59,7 @@ from spacecraft_conventions import __version__
 
 __all__ = [
     "DEFAULT_SETTINGS",
+    "HORIZONS",
     "ChangeEvent",
     "ClassicalRPBSID",
     "ImprovedRPBSID",
@@ -75,13 +84,20 @@ __all__ = [
     "add_measurement_noise",
     "default_identifier",
     "discover_resonators",
+    "h_step_predictions",
     "identification_inputs",
     "merge_resonators",
+    "modal_errors",
     "normalized_error",
     "observability_basis",
     "one_step_predictions",
     "paper_test_inputs",
     "pbsid",
+    "persistence_predictions",
+    "prediction_vaf",
+    "relative_gain_error",
+    "rigid_body_gain",
     "steady_state_gain",
+    "unstable_share",
     "vaf",
 ]

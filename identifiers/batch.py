@@ -10,11 +10,13 @@ refits on a sliding window.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from identifiers.model import StateSpaceModel
 from identifiers.varx import predictor_product, regressor_matrix
+from spacecraft_conventions import single_threaded_blas
 
-__all__ = ["PBSIDResult", "pbsid"]
+__all__ = ["DEFAULT_PAST", "DEFAULT_RIDGE", "PBSIDResult", "pbsid"]
 
 
 class PBSIDResult:
@@ -53,9 +55,17 @@ def _check_data(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, y
 
 
-def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
+#: Default past window: long enough to keep the rigid body's double
+#: integrators near ``z = 1`` (with p = 15 only 1-5 of the 6 survive).
+DEFAULT_PAST = 40
+#: Default Tikhonov term of the VARX normal equations, per sample.
+DEFAULT_RIDGE = 1e-4
+
+
+@single_threaded_blas
+def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | None = None, *,
           dt: float = 0.1, weighted: bool = True, feedthrough: bool = False,
-          regularization: float = 0.0, weights: np.ndarray | None = None,
+          regularization: float | None = None, weights: ArrayLike | None = None,
           normalize: bool = True, full_output: bool = False) -> StateSpaceModel | PBSIDResult:
     """Batch PBSID of an innovation-form model from one input-output record.
 
@@ -67,8 +77,10 @@ def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
         Outputs.
     n : int
         Model order.
-    p : int
-        Past window (VARX lags); needs ``p m >= n``.
+    p : int, optional
+        Past window (VARX lags); needs ``p m >= n``. Default
+        :data:`DEFAULT_PAST` (40), shortened when the record is too short
+        for that many regressors.
     f : int, optional
         Future window (rows of LK, in samples); default ``p``.
     dt : float
@@ -77,8 +89,11 @@ def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
         Use the weighted predictor product (closed-loop consistent).
     feedthrough : bool
         Estimate D (default: D = 0, strictly proper).
-    regularization : float
+    regularization : float, optional
         Tikhonov term added to the VARX normal equations (0: plain LS).
+        Default ``DEFAULT_RIDGE * N`` (1e-4 per sample): without it the
+        weakly excited directions of the VARX fit noise and the default
+        batch call diverges on 40 dB data.
     weights : (N,) array_like, optional
         Non-negative weight of each sample's equation in every least-squares
         step (e.g. exponential forgetting over a window); default uniform.
@@ -95,6 +110,10 @@ def pbsid(U: np.ndarray, Y: np.ndarray, n: int, p: int, f: int | None = None, *,
     """
     u, y = _check_data(U, Y)
     r, m = u.shape[1], y.shape[1]
+    if p is None:
+        p = max(1, min(DEFAULT_PAST, (u.shape[0] - 1) // (r + m + 1) - 1))
+    if regularization is None:
+        regularization = DEFAULT_RIDGE * u.shape[0]
     f = p if f is None else int(f)
     if n < 1 or p < 1 or f < 1:
         raise ValueError("n, p and f must be >= 1")

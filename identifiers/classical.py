@@ -41,7 +41,7 @@ class ClassicalRPBSID(PredictionStateIdentifier):
     :class:`~identifiers.predictor.PredictorRPBSID` avoids.
     """
 
-    def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *,
+    def __init__(self, n: int, p: int = 15, forgetting: float = 0.9995, *,
                  weighted: bool = True, **kwargs: Any) -> None:
         self.weighted = bool(weighted)
         kwargs.setdefault("f", p)

@@ -179,6 +179,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._mats = None
         self._phases: dict[tuple[int, int], np.ndarray] = {}
         self._resvar: np.ndarray | None = None
+        self._noise_var: np.ndarray | None = None
+        self._last_innovation: np.ndarray | None = None
         self._real = True
 
     def _check_sizes(self, r: int, m: int) -> None:
@@ -279,6 +281,9 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         if self._mats is not None:
             a, b, c, _, _ = self._mats
             self._kf.update(a, b, c, self._process_noise(), self._r, u, y if real else None)
+            innovation = self._kf.innovation
+            if real and innovation is not None and np.all(np.isfinite(innovation)):
+                self._measurement_noise(innovation)
         if learn and real:
             err = self._rls.update(phi, y_f)
             if (err is not None and self.detect_changes and replay_k is None
@@ -291,10 +296,24 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             if err is not None:
                 e2 = err**2
                 self._resvar = e2 if self._resvar is None else 0.995 * self._resvar + 0.005 * e2
-                self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
+                if self._last_innovation is None:       # before the filter runs
+                    self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
         bank.step(u)
         if (k + 1) % self.refresh == 0 or self._mats is None:
             self._export()
+
+    def _measurement_noise(self, innovation: np.ndarray) -> None:
+        """Sensor noise variance from the filter's innovations: white noise shows in
+        their first difference (``E[(e_k - e_{k-1})^2] / 2 = R`` for white ``e``),
+        slow model error barely does, so the filter keeps trusting the sensors
+        where the model is wrong instead of mistaking model error for noise."""
+        last = self._last_innovation
+        self._last_innovation = innovation
+        if last is None:
+            return
+        d2 = 0.5 * (innovation - last) ** 2
+        self._noise_var = d2 if self._noise_var is None else 0.998 * self._noise_var + 0.002 * d2
+        self._r = np.maximum(self._noise_var, 1e-12)
 
     def _process_noise(self) -> np.ndarray:
         """Unmodelled torque through B, plus an attitude random walk at half the noise."""

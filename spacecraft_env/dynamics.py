@@ -413,6 +413,31 @@ class FlexibleSpacecraftModel:
         order = np.argsort(wn)
         return wn[order] / (2 * np.pi), -s.real[order] / wn[order]
 
+    def modal_residues(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frequencies (Hz), damping ratios and input-output weights of the modes at ``t``.
+
+        The weight of a mode is the norm of its residue from the torques to
+        the model's outputs, relative to the largest flexible one. Modes that
+        hub torque hardly excites (the appendages' symmetric modes: their
+        frequency stays at the cantilever value) have small weights and are
+        barely identifiable from input-output data.
+
+        Returns
+        -------
+        freq_hz, damping, weight : (k,) ndarray
+            Sorted by frequency, as :meth:`modal`.
+        """
+        a, b = self._continuous(self.configuration(t), t)
+        vals, vecs = np.linalg.eig(a)
+        left = np.linalg.inv(vecs)
+        keep = np.flatnonzero(vals.imag > 1e-9)
+        wn = np.abs(vals[keep])
+        order = np.argsort(wn)
+        keep, wn = keep[order], wn[order]
+        weight = np.array([np.linalg.norm(np.outer(self.C @ vecs[:, j], left[j] @ b))
+                           for j in keep])
+        return wn / (2 * np.pi), -vals[keep].real / wn, weight / weight.max()
+
     def _discrete_ab(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Cached zero-order-hold ``(A_d, B_d)`` at time ``t`` (read-only arrays)."""
         key = self._key(t)

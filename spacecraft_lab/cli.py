@@ -40,7 +40,7 @@ from spacecraft_conventions import __version__
 from spacecraft_env import SCENARIOS
 from spacecraft_lab.control import SCENARIO_NAMES, run_control, scenario_override
 from spacecraft_lab.demo import run_demo
-from spacecraft_lab.identification import METHODS, run_identification
+from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.reporting import rl_table
 from spacecraft_lab.sweeps import (
     BACKENDS,
@@ -165,20 +165,18 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--out", type=_output_directory, default="results/identify",
                        help="output directory")
     ident.add_argument("--methods", nargs="+", default=None, choices=sorted(METHODS),
-                       help="methods to run (default: all)")
+                       help="methods to run (default: all but the slow windowed-svd)")
+    ident.add_argument("--preset", choices=PRESETS, default="default",
+                       help="the methods' settings: the package's defaults, or the source "
+                            "paper's constants (p = 15, forgetting 0.98, ...)")
     ident.add_argument("--snr-db", type=_snr, default=40.0,
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
     ident.add_argument("--modes", type=_integer(1), default=2,
                        help="modes per appendage, 1..8 (order n = 6 + 8 k)")
-    ident.add_argument("--p", type=_integer(1), default=15, help="past window (paper: 15)")
-    ident.add_argument("--forgetting", type=_forgetting, default=0.98,
-                       help="forgetting factor of every stage, (0, 1] (paper: 0.98)")
-    ident.add_argument("--regularization", type=_number(0.0), default=0.0,
-                       help="VARX Tikhonov floor, fraction of the effective memory (paper: 0)")
-    ident.add_argument("--convergence", type=_number(0.0), default=50.0,
-                       help="start of the held-out VAF window, s")
-    ident.add_argument("--warmup", type=_integer(1), default=None,
-                       help="warm-up samples of the recursive methods (default: theirs)")
+    ident.add_argument("--samples", type=_integer(200), default=2500,
+                       help="record length, samples of 0.1 s (paper: 2500)")
+    ident.add_argument("--convergence", type=_number(0.0), default=150.0,
+                       help="start of the scored window, s")
 
     ctl = sub.add_parser("control", help="closed-loop comparison of the controllers",
                          formatter_class=fmt)
@@ -260,12 +258,11 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _identify(args: argparse.Namespace) -> int:
     metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
-                                 snr_db=args.snr_db, n_modes=args.modes, p=args.p,
-                                 forgetting=args.forgetting, regularization=args.regularization,
-                                 warmup=args.warmup, convergence_s=args.convergence)
+                                 preset=args.preset, snr_db=args.snr_db, n_modes=args.modes,
+                                 n_samples=args.samples, convergence_s=args.convergence)
     print((Path(args.out) / "table.md").read_text())
-    print(f"wrote {args.out}/metrics.json, table.md, responses.png, modal.png "
-          f"({len(metrics['methods'])} methods, {args.seeds} seeds)")
+    print(f"wrote {args.out}/metrics.json, table.md, prediction.png, gain.png, modal.png, "
+          f"responses.png ({len(metrics['methods'])} rows, {args.seeds} seeds)")
     return 0
 
 

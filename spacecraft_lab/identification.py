@@ -1,27 +1,35 @@
-"""The paper's identification experiment (Sec. 4), run for every method.
+"""The identification experiment: every method on the spacecraft, judged by what users need.
 
 ``spacecraft identify --scenario docking --seeds 10 --out DIR`` calls
-:func:`run_identification`: for each noise seed it simulates the ETS-VIII
-truth model under identification torques (random-phase multisines, our
-stand-in for the paper's Fig. 2), adds white measurement noise at the given
-SNR per channel (paper: 40 dB), runs every identifier on the record, and
-scores the identified time-varying sequence:
+:func:`run_identification`. For each seed it simulates the ETS-VIII truth
+model under identification torques (random-phase multisines, a stand-in
+for the paper's Fig. 2), adds white measurement noise at the given SNR per
+channel (paper: 40 dB), runs every identifier on the record and scores it
+(docs/design/evaluation.md):
 
-* test-response normalized error (%) per attitude and rate channel, the
-  paper's Tables 3/4 metric (docs/design/evaluation.md): the paper's test
-  torques from zero state through the true plant and through
-  ``{A_k, B_k, C_k}``;
-* one-step-ahead prediction VAF (%) on a held-out noisy record (new input
-  and noise realization, same scenario), after convergence (t >= 50 s);
-* wall time of the identification run.
+* **h-step-ahead prediction VAF** (h = 0.1, 1, 5, 10 s) from the
+  identifier's own state and model at each sample, driven by the true
+  future torques, against the noise-free outputs, from ``convergence_s``
+  on; beside **persistence** (``y_{k+h} = y_k``, the trivial baseline) and
+  the **true model frozen at k with the true state** (the ceiling);
+* the **rigid-body gain** ``J(t)^-1`` read from the identified model, before
+  the first docking and from 20 s after each one;
+* the **frequencies of the dominant flexible modes** (those the torques
+  excite: the first paddle and antenna modes) against the truth's;
+* the **share of models with a pole outside** ``|z| = 1.001``;
+* the paper's **test-response error** (Sec. 4.3, Tables 3-4);
+* one-step-ahead VAF on a held-out record (a column, never the headline:
+  persistence scores 99 % there);
+* run time.
 
-Every identifier normalizes signals by the nominal sensor levels
-(:mod:`spacecraft_conventions.sensors`) rather than by statistics of data
-it has not seen yet.
+``preset="paper"`` runs the recursive PBSID methods with the source
+paper's constants (their ``paper()`` preset) to reproduce its tables.
 
-It writes ``metrics.json``, ``table.md`` (our numbers beside the paper's),
-``responses.png`` (true vs identified test responses, seed 0) and
-``modal.png`` (identified vs true natural frequencies over time, seed 0).
+It writes ``metrics.json``, ``table.md``, and figures: ``prediction.png``
+(VAF against horizon, median and spread over seeds), ``gain.png``
+(identified vs true inverse inertia over time, seed 0), ``modal.png``
+(identified vs true modal frequencies, zoomed to the modes, seed 0) and
+``responses.png`` (test responses, seed 0).
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ import functools
 import json
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -37,6 +46,7 @@ import numpy as np
 from tqdm import tqdm
 
 from identifiers import (
+    HORIZONS,
     ClassicalRPBSID,
     ImprovedRPBSID,
     ModelSequence,
@@ -45,20 +55,36 @@ from identifiers import (
     PredictorRPBSID,
     WindowedPBSID,
     add_measurement_noise,
+    default_identifier,
+    h_step_predictions,
     identification_inputs,
+    modal_errors,
     normalized_error,
     paper_test_inputs,
+    persistence_predictions,
+    prediction_vaf,
+    relative_gain_error,
+    rigid_body_gain,
+    unstable_share,
     vaf,
 )
 from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.paper import PAPER_TABLES
-from spacecraft_lab.plots import plot_identification_modal, plot_identification_responses
+from spacecraft_lab.plots import (
+    plot_identification_modal,
+    plot_identification_responses,
+    plot_prediction_horizons,
+    plot_rigid_gain,
+)
 from spacecraft_lab.reporting import identification_table
 
 __all__ = [
+    "BASELINES",
     "METHODS",
-    "IdentificationScore",
+    "PRESETS",
+    "IdentificationRecord",
+    "dominant_modes",
     "identification_records",
     "identify_task",
     "make_identifier",
@@ -66,19 +92,15 @@ __all__ = [
     "paper_test_response",
     "run_identification",
     "score_identifier",
+    "truth_sequence",
 ]
 
-#: Method name -> factory ``(n, p, forgetting, **kwargs) -> identifier``.
-#: ``warmup=None`` keeps a method's own warm-up; the sliding-window SVD
-#: method always keeps its own (the window fills first) and ignores it.
-METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
-    "moment-refit": MomentRefitRPBSID,
-    "predictor": PredictorRPBSID,
-    "improved": ImprovedRPBSID,
-    "classical": ClassicalRPBSID,
-    "windowed-svd": lambda n, p, lam, regularization=0.0, warmup=None, **kw: WindowedPBSID(
-        n, p, window=500, regularization=regularization, **kw),
-}
+#: Method presets: the package's defaults, or the source paper's constants.
+PRESETS = ("default", "paper")
+#: Rows that are not identifiers: the trivial baseline and the ceiling.
+BASELINES = ("persistence", "truth frozen at k")
+#: Sampling period (samples) of the gain and modal tracks.
+TRACK_EVERY = 10
 
 
 def nominal_scales(truth: FlexibleSpacecraftModel) -> dict[str, np.ndarray]:
@@ -88,62 +110,97 @@ def nominal_scales(truth: FlexibleSpacecraftModel) -> dict[str, np.ndarray]:
             "output_scale": truth.output_layout.scales()}
 
 
-def make_identifier(name: str, n: int, p: int, forgetting: float,
-                    **kwargs: Any) -> OnlineIdentifier:
-    """Build a method of :data:`METHODS` by name (``kwargs``: scales,
-    regularization, ``warmup`` (None: the method's default))."""
-    if kwargs.get("warmup") is None:
-        kwargs.pop("warmup", None)
-    try:
-        factory = METHODS[name]
-    except KeyError:
-        raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}") from None
-    return factory(n, p, forgetting, **kwargs)
+def _recursive(cls: type) -> Callable[..., OnlineIdentifier]:
+    def build(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> OnlineIdentifier:
+        kwargs = {**nominal_scales(truth), "dt": truth.dt, **options}
+        return cls.paper(truth.n, **kwargs) if preset == "paper" else cls(truth.n, **kwargs)
+    return build
 
 
-class IdentificationScore(NamedTuple):
-    """One identifier scored on one seed (:func:`score_identifier`).
+def _rigid_flexible(truth: FlexibleSpacecraftModel, preset: str,
+                    **options: Any) -> OnlineIdentifier:
+    return default_identifier(truth.output_layout, n=truth.n, dt=truth.dt, **options)
+
+
+def _windowed(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> OnlineIdentifier:
+    kwargs = {**nominal_scales(truth), "dt": truth.dt, **options}
+    if preset != "paper":
+        kwargs.setdefault("regularization", 1e-4)
+    return WindowedPBSID(truth.n, 15, **kwargs)
+
+
+#: Method name -> builder ``(truth, preset, **options) -> identifier``. The
+#: paper's method is ``improved`` (its "improved RPBSID").
+METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
+    "rigid-flexible": _rigid_flexible,
+    "moment-refit": _recursive(MomentRefitRPBSID),
+    "predictor": _recursive(PredictorRPBSID),
+    "improved": _recursive(ImprovedRPBSID),
+    "classical": _recursive(ClassicalRPBSID),
+    "windowed-svd": _windowed,
+}
+#: Methods run when none are named (the sliding-window SVD takes ~30 s a run).
+DEFAULT_METHODS = ("rigid-flexible", "moment-refit", "predictor", "improved", "classical")
+
+
+def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "default",
+                    **options: Any) -> OnlineIdentifier:
+    """Build a method of :data:`METHODS` for ``truth``'s outputs.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method or preset.
+    """
+    if name not in METHODS:
+        raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}")
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
+    return METHODS[name](truth, preset, **options)
+
+
+class IdentificationRecord(NamedTuple):
+    """One seed's data.
 
     Attributes
     ----------
-    models : ModelSequence
-        The identified sequence ``{A_k, B_k, C_k}``.
-    test_error_pct : ndarray, shape (6,)
-        Test-response normalized error per attitude and rate channel, %;
-        ``inf`` where the identified response diverged.
-    vaf_pct : ndarray, shape (n_outputs,)
-        Held-out one-step-ahead VAF per output channel, %; ``-inf`` where
-        the prediction diverged.
-    time_s : float
-        Wall time of the identification run (``fit``), s.
+    u : (N, 3) ndarray
+        Identification torques, N m.
+    y : (N, m) ndarray
+        Noisy outputs.
+    y_clean : (N, m) ndarray
+        Noise-free outputs (the targets of the h-step VAF).
+    states : (N + 1, n) ndarray
+        True states.
+    u_held_out, y_held_out : ndarray
+        A second record (new input and noise) for the one-step VAF.
     """
 
-    models: ModelSequence
-    test_error_pct: np.ndarray
-    vaf_pct: np.ndarray
-    time_s: float
+    u: np.ndarray
+    y: np.ndarray
+    y_clean: np.ndarray
+    states: np.ndarray
+    u_held_out: np.ndarray
+    y_held_out: np.ndarray
 
 
 def identification_records(truth: FlexibleSpacecraftModel, seed: int, n_samples: int = 2500,
-                           snr_db: float | None = 40.0) -> tuple[np.ndarray, ...]:
+                           snr_db: float | None = 40.0) -> IdentificationRecord:
     """The identification and held-out records of one seed.
 
     Both are the truth model driven by random-phase multisine torques with
-    white measurement noise at ``snr_db`` per channel, drawn in this order
-    from ``np.random.default_rng(seed)``; the same seed gives the same
-    records in any process.
-
-    Returns
-    -------
-    u_id, y_id, u_ho, y_ho : ndarray
-        Inputs ``(n_samples, 3)`` and noisy outputs ``(n_samples, n_outputs)``.
+    white measurement noise at ``snr_db`` per channel (relative to the
+    channel's RMS, as in the paper), drawn in this order from
+    ``np.random.default_rng(seed)``: the same seed gives the same records in
+    any process.
     """
     rng = np.random.default_rng(seed)
-    u_id = identification_inputs(n_samples, rng, truth.dt)
-    y_id = add_measurement_noise(truth.simulate(u_id)[1], snr_db, rng)
+    u = identification_inputs(n_samples, rng, truth.dt)
+    states, y_clean = truth.simulate(u)
+    y = add_measurement_noise(y_clean, snr_db, rng)
     u_ho = identification_inputs(n_samples, rng, truth.dt)
     y_ho = add_measurement_noise(truth.simulate(u_ho)[1], snr_db, rng)
-    return u_id, y_id, u_ho, y_ho
+    return IdentificationRecord(u, y, y_clean, states, u_ho, y_ho)
 
 
 def paper_test_response(truth: FlexibleSpacecraftModel,
@@ -154,150 +211,188 @@ def paper_test_response(truth: FlexibleSpacecraftModel,
     return u_test, truth.simulate(u_test)[1]
 
 
-def score_identifier(ident: OnlineIdentifier, records: Sequence[np.ndarray],
-                     test: tuple[np.ndarray, np.ndarray], k_conv: int) -> IdentificationScore:
-    """Run ``ident`` on an identification record and score it.
+def truth_sequence(truth: FlexibleSpacecraftModel, states: np.ndarray) -> ModelSequence:
+    """The ceiling: the true model of each sample with the true next state
+    ``x_{k+1}`` (what an identifier's ``x_{k+1|k}`` estimates)."""
+    n_samples = states.shape[0] - 1
+    mats = [truth.discrete(k * truth.dt) for k in range(n_samples)]
+    a = np.array([m.A for m in mats])
+    b = np.array([m.B for m in mats])
+    c = np.broadcast_to(truth.C, (n_samples, *truth.C.shape))
+    d = np.zeros((n_samples, truth.n_outputs, truth.n_inputs))
+    k = np.zeros((n_samples, truth.n, truth.n_outputs))
+    return ModelSequence(a, b, c, d, k, np.ones(n_samples, dtype=bool), truth.dt,
+                         states=states[1:])
 
-    Parameters
+
+def dominant_modes(truth: FlexibleSpacecraftModel, t: float,
+                   min_weight: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies and damping of the modes the torques excite (input-output
+    weight >= ``min_weight``; the first paddle and antenna modes here)."""
+    freq, zeta, weight = truth.modal_residues(t)
+    keep = weight >= min_weight
+    return freq[keep], zeta[keep]
+
+
+@dataclass
+class IdentificationScore:
+    """One identifier (or baseline) scored on one seed (:func:`score_identifier`).
+
+    Attributes
     ----------
-    ident : OnlineIdentifier
-        A fresh identifier.
-    records : (u_id, y_id, u_ho, y_ho)
-        From :func:`identification_records`.
-    test : (u_test, y_test)
-        From :func:`paper_test_response`.
-    k_conv : int
-        First sample of the held-out VAF window (convergence time / dt).
+    h_step_vaf : dict
+        Horizon (samples) -> per-channel VAF (%), ``-inf`` where diverged.
+    test_error_pct : ndarray or None
+        Paper's test-response error per attitude and rate channel (%).
+    held_out_vaf : ndarray or None
+        One-step VAF on the held-out record per channel (%).
+    gain_track : (K, 2) ndarray or None
+        ``(time, relative error of J^-1)`` every :data:`TRACK_EVERY` samples.
+    gain_history : (K, 4) ndarray or None
+        ``(time, G_xx, G_yy, G_zz)`` of the identified inverse inertia.
+    modal_track : (K, 2) ndarray or None
+        ``(time, largest relative frequency error of the dominant modes)``.
+    frequency_history : list
+        ``(time, identified frequencies)`` pairs (seed-0 plots).
+    unstable_share : float
+    time_s : float
+    events : tuple of float
+        Times of the changes the identifier detected, s.
+    models : ModelSequence or None
     """
-    u_id, y_id, u_ho, y_ho = records
-    u_test, y_test = test
+
+    h_step_vaf: dict[int, np.ndarray]
+    test_error_pct: np.ndarray | None = None
+    held_out_vaf: np.ndarray | None = None
+    gain_track: np.ndarray | None = None
+    gain_history: np.ndarray | None = None
+    modal_track: np.ndarray | None = None
+    frequency_history: list = field(default_factory=list)
+    unstable_share: float = float("nan")
+    time_s: float = float("nan")
+    events: tuple[float, ...] = ()
+    models: ModelSequence | None = None
+
+
+def _tracks(seq: ModelSequence, truth: FlexibleSpacecraftModel,
+            start: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    rate = truth.output_layout.slice("rate")
+    gains, history, modal, freqs = [], [], [], []
+    for k in range(start, len(seq), TRACK_EVERY):
+        if not seq.valid[k]:
+            continue
+        t = k * truth.dt
+        model = seq[k]
+        with np.errstate(all="ignore"):
+            g = rigid_body_gain(model, rate)
+        gains.append((t, relative_gain_error(g, np.linalg.inv(truth.inertia(t)))))
+        history.append((t, *np.diag(g)))
+        f_true, z_true = dominant_modes(truth, t)
+        errors, _ = modal_errors(model, f_true, z_true)
+        modal.append((t, float(np.nanmax(errors)) if np.isfinite(errors).any() else np.inf))
+        freqs.append((t, model.modal()[0]))
+    return (np.array(gains).reshape(-1, 2), np.array(history).reshape(-1, 4),
+            np.array(modal).reshape(-1, 2), freqs)
+
+
+def score_identifier(ident: OnlineIdentifier, record: IdentificationRecord,
+                     truth: FlexibleSpacecraftModel, test: tuple[np.ndarray, np.ndarray],
+                     k_conv: int, horizons: Sequence[int] = HORIZONS) -> IdentificationScore:
+    """Run a fresh ``ident`` on ``record`` and score it (see the module docstring)."""
     start = time.perf_counter()
-    seq = ident.fit(u_id, y_id)
+    seq = ident.fit(record.u, record.y)
     elapsed = time.perf_counter() - start
+    u_test, y_test = test
     with np.errstate(all="ignore"):
-        e = normalized_error(seq.simulate(u_test), y_test)
-        yhat = seq.predict(u_ho, y_ho, start=k_conv)
-        v = vaf(y_ho[k_conv:], yhat[k_conv:])
-    return IdentificationScore(seq, np.where(np.isfinite(e), e, np.inf),
-                               np.where(np.isfinite(v), v, -np.inf), elapsed)
+        h_vaf = prediction_vaf(record.y_clean, h_step_predictions(seq, record.u, horizons),
+                               k_conv)
+        err = normalized_error(seq.simulate(u_test), y_test)[:6]
+        yhat = seq.predict(record.u_held_out, record.y_held_out, start=k_conv)
+        held = vaf(record.y_held_out[k_conv:], yhat[k_conv:])
+    first = int(np.flatnonzero(seq.valid)[0]) if seq.valid.any() else len(seq)
+    gain, history, modal, freqs = _tracks(seq, truth, first)
+    events = tuple(e.time for e in getattr(ident, "events", ()))
+    return IdentificationScore(h_vaf, np.where(np.isfinite(err), err, np.inf),
+                               np.where(np.isfinite(held), held, -np.inf), gain, history,
+                               modal, freqs, unstable_share(seq, first), elapsed, events, seq)
 
 
-def _finite(values: np.ndarray) -> list[float | None]:
-    return [float(v) if np.isfinite(v) else None for v in np.asarray(values, dtype=float)]
+def _baselines(record: IdentificationRecord, truth: FlexibleSpacecraftModel, k_conv: int,
+               horizons: Sequence[int]) -> dict[str, IdentificationScore]:
+    pers = prediction_vaf(record.y_clean, persistence_predictions(record.y, horizons), k_conv)
+    ceiling = prediction_vaf(record.y_clean,
+                             h_step_predictions(truth_sequence(truth, record.states), record.u,
+                                                horizons), k_conv)
+    return {"persistence": IdentificationScore(pers),
+            "truth frozen at k": IdentificationScore(ceiling, unstable_share=0.0)}
 
 
-def _summary(values: np.ndarray) -> dict:
-    """Mean, std, median over seeds (axis 0) with divergent runs counted."""
+def _window_stats(track: np.ndarray, windows: Sequence[tuple[float, float]]) -> dict[str, Any]:
+    if track is None or not len(track):
+        return {"median": None, "p90": None}
+    mask = np.zeros(len(track), dtype=bool)
+    for lo, hi in windows:
+        mask |= (track[:, 0] >= lo) & (track[:, 0] < hi)
+    vals = track[mask, 1]
+    if not vals.size:
+        return {"median": None, "p90": None}
+    with np.errstate(invalid="ignore"):
+        return {"median": _finite(np.median(vals)), "p90": _finite(np.percentile(vals, 90))}
+
+
+def _finite(values: Any) -> Any:
     arr = np.asarray(values, dtype=float)
-    ok = np.all(np.isfinite(arr), axis=tuple(range(1, arr.ndim)))
-    good = arr[ok]
-    nan = np.full(arr.shape[1:], np.nan)
-    return {
-        "mean": _finite(good.mean(axis=0)) if good.size else _finite(nan),
-        "std": _finite(good.std(axis=0)) if good.size else _finite(nan),
-        "median": _finite(np.median(arr, axis=0)),
-        "diverged_runs": int((~ok).sum()),
-    }
+    if arr.ndim == 0:
+        return float(arr) if np.isfinite(arr) else None
+    return [float(v) if np.isfinite(v) else None for v in arr]
 
 
-def run_identification(scenario: str = "docking", seeds: int = 10, out: str | Path = "results",
-                       *, methods: Sequence[str] | None = None, snr_db: float | None = 40.0,
-                       n_modes: int = 2, p: int = 15, forgetting: float = 0.98,
-                       n_samples: int = 2500, convergence_s: float = 50.0,
-                       regularization: float = 0.0, warmup: int | None = None,
-                       progress: bool = True) -> dict:
-    """Run the identification experiment and write its artefacts.
+def summarize_score(score: IdentificationScore, truth: FlexibleSpacecraftModel,
+                    end_s: float, convergence_s: float) -> dict[str, Any]:
+    """Scalar metrics of one score (JSON-able): VAF by horizon and output group,
+    gain error before the first event and from 20 s after each, dominant-mode
+    frequency error, unstable share, test error, held-out VAF, run time."""
+    layout = truth.output_layout
+    groups = {name: rows for name, rows in layout}
+    out: dict[str, Any] = {"h_step_vaf": {
+        str(h): {g: _finite(np.mean(v[rows])) for g, rows in groups.items()}
+        for h, v in score.h_step_vaf.items()}}
+    events = list(truth.scenario.event_times())
+    if score.gain_track is not None:
+        before = [(events[0] - 20.0, events[0])] if events else [(convergence_s, end_s)]
+        after = [(ev + 20.0, nxt) for ev, nxt in zip(events, [*events[1:], end_s], strict=True)]
+        out["gain_error_before_event"] = _window_stats(score.gain_track, before)
+        out["gain_error_after_events"] = _window_stats(score.gain_track,
+                                                       after or [(convergence_s, end_s)])
+        out["modal_error"] = _window_stats(score.modal_track, [(convergence_s, end_s)])
+        scored = score.modal_track[score.modal_track[:, 0] >= convergence_s, 1]
+        out["modal_error"]["max"] = _finite(np.max(scored)) if scored.size else None
+        out["test_error_pct"] = {"attitude": _finite(score.test_error_pct[:3]),
+                                 "rate": _finite(score.test_error_pct[3:6])}
+        out["held_out_vaf"] = {g: _finite(np.mean(score.held_out_vaf[rows]))
+                               for g, rows in groups.items()}
+        out["unstable_share"] = _finite(score.unstable_share)
+        out["time_s"] = score.time_s
+        out["events_s"] = list(score.events)
+    return out
 
-    Parameters
-    ----------
-    scenario : str
-        Truth-model scenario (``"docking"``, ``"solar_rotation"``, ...).
-    seeds : int
-        Noise/input seeds 0 .. seeds-1.
-    out : path
-        Output directory.
-    methods : sequence of str, optional
-        Subset of :data:`METHODS` (default all).
-    snr_db : float or None
-        Measurement SNR per channel (paper: 40 dB); None for noiseless.
-    n_modes : int
-        Modes per appendage (order n = 2 (3 + 4 n_modes)).
-    p, forgetting : int, float
-        Past window and forgetting factor (paper: 15 and 0.98).
-    n_samples : int
-        Record length (paper: 2500 = 250 s).
-    convergence_s : float
-        Start of the held-out VAF window, s.
-    regularization : float
-        VARX Tikhonov floor as a fraction of the effective memory (0: the
-        paper's algorithms; see ``RecursivePBSIDBase``), for every method.
-    warmup : int, optional
-        Warm-up samples of the recursive methods (default: theirs).
 
-    Returns
-    -------
-    dict
-        The content of ``metrics.json``.
-    """
-    methods = list(methods or METHODS)
-    for name in methods:
-        if name not in METHODS:
-            raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    truth = FlexibleSpacecraftModel(ets8_parameters(n_modes), scenario=scenario)
-    n = truth.n
-    dt = truth.dt
-    u_test, y_test = paper_test_response(truth, n_samples)
-    k_conv = round(convergence_s / dt)
-    scales = {**nominal_scales(truth), "regularization": regularization, "warmup": warmup}
-
-    err = {m: [] for m in methods}
-    vafs = {m: [] for m in methods}
-    times = {m: [] for m in methods}
-    seed0: dict[str, ModelSequence] = {}
-    bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
-    with single_threaded_blas:
-        for seed in range(seeds):
-            records = identification_records(truth, seed, n_samples, snr_db)
-            for name in methods:
-                ident = make_identifier(name, n, p, forgetting, **scales)
-                score = score_identifier(ident, records, (u_test, y_test), k_conv)
-                err[name].append(score.test_error_pct)
-                vafs[name].append(score.vaf_pct)
-                times[name].append(score.time_s)
-                if seed == 0:
-                    seed0[name] = score.models
-                bar.update()
-    bar.close()
-
-    labels = truth.output_labels
-    results = {}
-    for name in methods:
-        e = np.array(err[name])
-        v = np.array(vafs[name])
-        results[name] = {
-            "test_error_pct": {"attitude": _summary(e[:, :3]), "rate": _summary(e[:, 3:6])},
-            "one_step_vaf_pct": {
-                "attitude": _summary(v[:, :3]), "rate": _summary(v[:, 3:6]),
-                "deflection": _summary(v[:, 6:]),
-            },
-            "run_time_s": {"mean": float(np.mean(times[name])),
-                           "std": float(np.std(times[name]))},
-        }
-    metrics = {
-        "scenario": scenario, "seeds": seeds, "snr_db": snr_db, "order_n": n, "p": p,
-        "forgetting": forgetting, "regularization": regularization, "warmup": warmup,
-        "n_samples": n_samples,
-        "dt": dt,
-        "convergence_s": convergence_s, "output_labels": list(labels),
-        "methods": results, "paper": PAPER_TABLES.get(scenario),
-    }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    (out / "table.md").write_text(identification_table(metrics))
-    plot_identification_responses(out / "responses.png", u_test, y_test, seed0, scenario, dt)
-    plot_identification_modal(out / "modal.png", truth, seed0, scenario)
-    return metrics
+def _aggregate(per_seed: list[dict[str, Any]]) -> Any:
+    """Median [min, max] over seeds of every numeric leaf."""
+    first = per_seed[0]
+    if isinstance(first, dict):
+        return {k: _aggregate([s[k] for s in per_seed]) for k in first
+                if k not in ("events_s",)}
+    if isinstance(first, list):
+        return [_aggregate([s[i] for s in per_seed]) for i in range(len(first))]
+    vals = np.array([np.nan if v is None else v for v in per_seed], dtype=float)
+    finite = vals[np.isfinite(vals)]
+    if not finite.size:
+        return {"median": None, "min": None, "max": None, "diverged": len(vals)}
+    return {"median": float(np.median(vals)) if np.all(np.isfinite(vals)) else
+            float(np.median(np.where(np.isfinite(vals), vals, -np.inf))),
+            "min": float(finite.min()), "max": float(finite.max()),
+            "diverged": int(len(vals) - finite.size)}
 
 
 @functools.lru_cache(maxsize=4)
@@ -305,31 +400,132 @@ def _truth(scenario: str, n_modes: int) -> FlexibleSpacecraftModel:
     return FlexibleSpacecraftModel(ets8_parameters(n_modes), scenario=scenario)
 
 
-@functools.lru_cache(maxsize=8)
-def _records(scenario: str, n_modes: int, seed: int, n_samples: int,
-             snr_db: float | None) -> tuple[np.ndarray, ...]:
+def run_identification(scenario: str = "docking", seeds: int = 10,
+                       out: str | Path = "results/identify", *,
+                       methods: Sequence[str] | None = None, preset: str = "default",
+                       snr_db: float | None = 40.0, n_modes: int = 2, n_samples: int = 2500,
+                       convergence_s: float = 150.0, progress: bool = True) -> dict[str, Any]:
+    """Run the identification experiment and write its artefacts.
+
+    Parameters
+    ----------
+    scenario : str
+        Truth-model scenario (``"docking"``, ``"solar_rotation"``, ...).
+    seeds : int
+        Input and noise seeds 0 .. seeds-1.
+    out : path
+        Output directory.
+    methods : sequence of str, optional
+        Subset of :data:`METHODS` (default :data:`DEFAULT_METHODS`).
+    preset : {"default", "paper"}
+        The methods' settings.
+    snr_db : float or None
+        Measurement SNR per channel (paper: 40 dB); None for noiseless.
+    n_modes : int
+        Modes per appendage (order n = 2 (3 + 4 n_modes)).
+    n_samples : int
+        Record length (paper: 2500 = 250 s).
+    convergence_s : float
+        Start of the scored window (prediction, gain, modes), s.
+
+    Returns
+    -------
+    dict
+        The content of ``metrics.json``.
+    """
+    methods = list(methods or DEFAULT_METHODS)
+    for name in methods:
+        if name not in METHODS:
+            raise ValueError(f"unknown method {name!r}; expected one of {sorted(METHODS)}")
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     truth = _truth(scenario, n_modes)
-    out = (*identification_records(truth, seed, n_samples, snr_db),
-           *paper_test_response(truth, n_samples))
-    for arr in out:
-        arr.setflags(write=False)
-    return out
+    test = paper_test_response(truth, n_samples)
+    k_conv = round(convergence_s / truth.dt)
+    end_s = n_samples * truth.dt
+    rows = [*BASELINES, *methods]
+    per_seed: dict[str, list[dict[str, Any]]] = {name: [] for name in rows}
+    raw: dict[str, list[IdentificationScore]] = {name: [] for name in rows}
+    bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
+    with single_threaded_blas:
+        for seed in range(seeds):
+            record = identification_records(truth, seed, n_samples, snr_db)
+            scores = _baselines(record, truth, k_conv, HORIZONS)
+            for name in methods:
+                scores[name] = score_identifier(make_identifier(name, truth, preset), record,
+                                                truth, test, k_conv)
+                bar.update()
+            for name in rows:
+                score = scores[name]
+                per_seed[name].append(summarize_score(score, truth, end_s, convergence_s))
+                if seed == 0:
+                    raw[name].append(score)
+                else:                       # keep only what the figures need
+                    raw[name].append(IdentificationScore(score.h_step_vaf))
+    bar.close()
+    metrics = {
+        "scenario": scenario, "seeds": seeds, "snr_db": snr_db, "preset": preset,
+        "order_n": truth.n, "n_samples": n_samples, "dt": truth.dt,
+        "convergence_s": convergence_s, "horizons_samples": list(HORIZONS),
+        "output_labels": list(truth.output_labels), "events_s": list(truth.scenario.event_times()),
+        "methods": {name: {"summary": _aggregate(per_seed[name]), "per_seed": per_seed[name]}
+                    for name in rows},
+        "paper": PAPER_TABLES.get(scenario),
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    (out / "table.md").write_text(identification_table(metrics))
+    seed0 = {name: raw[name][0] for name in methods}
+    plot_prediction_horizons(out / "prediction.png", metrics, raw, truth.output_layout)
+    plot_rigid_gain(out / "gain.png", truth, seed0, scenario)
+    plot_identification_modal(out / "modal.png", truth, seed0, scenario)
+    plot_identification_responses(out / "responses.png", *test,
+                                  {n: s.models for n, s in seed0.items()}, scenario, truth.dt)
+    return metrics
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_records(scenario: str, n_modes: int, seed: int, n_samples: int,
+                    snr_db: float | None) -> tuple[IdentificationRecord,
+                                                   tuple[np.ndarray, np.ndarray]]:
+    truth = _truth(scenario, n_modes)
+    return (identification_records(truth, seed, n_samples, snr_db),
+            paper_test_response(truth, n_samples))
+
+
+def _scalar(metrics: dict[str, Any]) -> dict[str, Any]:
+    """The flat scalar metrics a sweep tabulates."""
+    flat: dict[str, Any] = {}
+    for h, groups in metrics["h_step_vaf"].items():
+        for g, v in groups.items():
+            flat[f"vaf_h{h}_{g}"] = v
+    for key in ("gain_error_before_event", "gain_error_after_events", "modal_error"):
+        for stat, v in metrics.get(key, {}).items():
+            flat[f"{key}_{stat}"] = v
+    test = metrics.get("test_error_pct", {})
+    for g in ("attitude", "rate"):
+        vals = [v for v in test.get(g, []) if v is not None]
+        flat[f"test_error_{g}_pct"] = float(np.mean(vals)) if len(vals) == 3 else None
+    flat["unstable_share"] = metrics.get("unstable_share")
+    for g, v in metrics.get("held_out_vaf", {}).items():
+        flat[f"held_out_vaf_{g}"] = v
+    return flat
 
 
 @single_threaded_blas
 def identify_task(*, method: str, seed: int, scenario: str = "docking",
-                  order: int | None = None, n_modes: int = 2, p: int = 15,
-                  forgetting: float = 0.98, snr_db: float | None = 40.0,
-                  n_samples: int = 2500, convergence_s: float = 50.0,
-                  regularization: float = 0.0, warmup: int | None = None) -> dict:
+                  order: int | None = None, n_modes: int = 2, preset: str = "default",
+                  snr_db: float | None = 40.0, n_samples: int = 2500,
+                  convergence_s: float = 150.0, baselines: bool = False) -> dict[str, Any]:
     """One identification run: one method on one seed (a sweep task).
 
-    The same keywords as :func:`run_identification`, for a single method and
-    seed; the records are those of :func:`identification_records`, so the
-    result is a function of the arguments alone: bit-identical in any
+    The result is a function of the arguments alone: bit-identical in any
     process and whatever the caller's BLAS threads (the whole task runs
-    single-threaded). The truth model and records are cached per process,
-    so tasks sharing a seed share the simulation.
+    single-threaded). Records are cached per process, so tasks sharing a
+    seed share the simulation.
 
     Parameters
     ----------
@@ -338,22 +534,20 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
     seed : int
         Input and noise seed.
     order : int, optional
-        System order n = 22, 30, 38, 46, ... (``6 + 8 k``); overrides
-        ``n_modes`` (k modes per appendage) when given.
+        System order n = 14, 22, 30, 38, 46, ... (``6 + 8 k``); overrides
+        ``n_modes`` (k modes per appendage).
+    preset : {"default", "paper"}
+    baselines : bool
+        Also score persistence and the frozen truth on the same record
+        (prefixed ``persistence_`` and ``ceiling_``).
 
     Returns
     -------
     dict
-        ``{"metrics": {...}, "timings": {"time_s": ...}}``. Metrics:
-        ``order_n``; ``test_error_attitude_pct`` / ``test_error_rate_pct``
-        (channel means of the test-response error, None if diverged);
-        ``vaf_attitude_pct`` / ``vaf_rate_pct`` / ``vaf_deflection_pct``
-        (channel means of the held-out one-step VAF, None if diverged);
-        ``nonfinite`` (the identified test response or prediction overflowed);
-        ``within_5pct`` (every attitude and rate test-response error below
-        5 %, the paper's accuracy level); and the per-channel lists
-        ``test_error_pct``,
-        ``vaf_pct``. ``time_s`` is the wall time of ``fit``.
+        ``{"metrics": {...}, "timings": {"time_s": ...}}`` with the flat
+        metrics of :func:`summarize_score` (``vaf_h{h}_{group}``,
+        ``gain_error_*``, ``modal_error_*``, ``test_error_*_pct``,
+        ``unstable_share``, ``held_out_vaf_*``) plus ``order_n``.
     """
     if order is not None:
         k, rem = divmod(int(order) - 6, 8)
@@ -361,31 +555,19 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
             raise ValueError(f"order must be 6 + 8 k for k >= 1 (14, 22, 30, 38, 46, ...), "
                              f"got {order!r}")
         n_modes = k
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {sorted(METHODS)}")
     truth = _truth(scenario, int(n_modes))
-    *records, u_test, y_test = _records(scenario, int(n_modes), int(seed), int(n_samples),
-                                        None if snr_db is None else float(snr_db))
-    ident = make_identifier(method, truth.n, int(p), float(forgetting), **nominal_scales(truth),
-                            regularization=float(regularization),
-                            warmup=None if warmup is None else int(warmup))
-    score = score_identifier(ident, records, (u_test, y_test), round(convergence_s / truth.dt))
-    e, v = score.test_error_pct, score.vaf_pct
-
-    def channel_mean(x: np.ndarray) -> float | None:
-        m = float(np.mean(x))
-        return m if np.isfinite(m) else None
-
-    metrics = {
-        "order_n": truth.n,
-        "test_error_attitude_pct": channel_mean(e[:3]),
-        "test_error_rate_pct": channel_mean(e[3:6]),
-        "vaf_attitude_pct": channel_mean(v[:3]),
-        "vaf_rate_pct": channel_mean(v[3:6]),
-        "vaf_deflection_pct": channel_mean(v[6:]),
-        "nonfinite": bool(not (np.all(np.isfinite(e)) and np.all(np.isfinite(v)))),
-        "within_5pct": bool(np.all(e[:6] < 5.0)),
-        "test_error_pct": _finite(e),
-        "vaf_pct": _finite(v),
-    }
+    ident = make_identifier(method, truth, preset)
+    record, test = _cached_records(scenario, int(n_modes), int(seed), int(n_samples),
+                                   None if snr_db is None else float(snr_db))
+    k_conv = round(convergence_s / truth.dt)
+    end_s = n_samples * truth.dt
+    score = score_identifier(ident, record, truth, test, k_conv)
+    metrics = {"order_n": truth.n, **_scalar(summarize_score(score, truth, end_s,
+                                                             convergence_s))}
+    if baselines:
+        for name, base in _baselines(record, truth, k_conv, HORIZONS).items():
+            prefix = "persistence_" if name == "persistence" else "ceiling_"
+            for key, v in _scalar(summarize_score(base, truth, end_s, convergence_s)).items():
+                if key.startswith("vaf_h"):
+                    metrics[prefix + key] = v
     return {"metrics": metrics, "timings": {"time_s": score.time_s}}
