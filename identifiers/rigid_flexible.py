@@ -3,36 +3,52 @@
 A recursive subspace identifier estimates everything, even what physics
 already fixes, and on this plant it scatters the three double integrators
 (a Jordan block at ``z = 1``) over ``1 +- 0.002``, which ruins every
-long-horizon prediction. :class:`RigidFlexibleIdentifier` uses two facts:
+long-horizon prediction. :class:`RigidFlexibleIdentifier` uses what is
+known:
 
-1. **Known:** attitude integrates rate, and rate integrates torque through
-   the inverse inertia: exact ZOH double integrators per axis with an
-   unknown gain ``G = J(t)^-1``. The flexible modes are resonators whose
-   frequencies are found from data (:mod:`identifiers.modal_discovery`) or
-   given as a prior; their couplings are unknown gains. Given the
-   frequencies, the model is *linear* in every unknown
-   (:mod:`identifiers.modal_basis`), so one recursive least squares
-   (:class:`~identifiers.rls.RecursiveLeastSquares`) on high-passed signals
-   estimates ``G`` and the modal couplings together.
-2. **Changes are abrupt:** a docking shows in the model's innovations. A
-   CUSUM test (:mod:`identifiers.change_detection`) flags it; the RLS
-   covariance is then inflated by the expected parameter jump and the
-   initial-condition regressors restart, so the estimates re-converge on
-   post-change data. Events are exposed in :attr:`events`.
+1. **Kinematics.** Attitude integrates rate, and rate integrates torque
+   through the inverse inertia: exact ZOH double integrators per axis with
+   an unknown gain ``G = J(t)^-1``.
+2. **Modal structure.** The flexible modes are resonators whose frequencies
+   are found from data (:mod:`identifiers.modal_discovery`) or given as a
+   prior. Given the frequencies, every output is *linear* in the unknown
+   gains (:mod:`identifiers.modal_basis`). A displacement sensor (attitude,
+   deflection) sees a mode through its coordinate and a velocity sensor
+   (rate) through its rate, and deflections see no rigid-body term
+   (:data:`spacecraft_conventions.MEASURES`), so each sensor group has its
+   own recursive least squares over the regressors physics allows it
+   (:class:`~identifiers.rls.RecursiveLeastSquares`, on high-passed signals
+   that remove the constants and ramps of unknown initial conditions). The
+   rigid gains forget faster than the modal couplings (vector forgetting).
+3. **Modes are resolved by long records.** Modes 2 % apart need hundreds of
+   seconds to separate. The warm-up's modes are a start; every 50 s the
+   search is run again on the record kept so far (up to 300 s), and when
+   the modes found have moved, the estimator is rebuilt on them and the
+   record replayed.
+4. **Changes are abrupt.** A docking shows in the rate regression's
+   errors. A generalized likelihood-ratio test
+   (:mod:`identifiers.change_detection`) flags it; the covariance of the
+   rigid gains is inflated and the initial-condition regressors restart.
+   Events are exposed in :attr:`~RigidFlexibleIdentifier.events`.
 
 Model exported at every sample (innovation form, order ``n``): the state is
 ``[psi (3); omega (3); one complex mode per resonator rank as 2 real
 states]``; each resonator's couplings are factored into input and output
 vectors by a complex SVD (exact for a non-classically damped mode, whose
 residue is complex rank one), with input vectors of unit norm and their
-phase aligned from one export to the next so the state keeps its meaning.
-The state estimate is a time-varying Kalman filter
-(:class:`~identifiers.kalman.KalmanPredictor`) on the current model; its
-predictor gain is the model's ``K``.
+phase aligned from one export to the next so the state keeps its meaning
+(until the modes are rebuilt). The state estimate is a time-varying Kalman
+filter (:class:`~identifiers.kalman.KalmanPredictor`) on the current
+model, with the sensor noise estimated from its innovations; its predictor
+gain is the model's ``K``.
+
+The design, the choices and their measured effect are in
+``docs/design/identification.md``.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -44,9 +60,16 @@ from identifiers.kalman import KalmanPredictor
 from identifiers.modal_basis import HighPass, ModalFilterBank, Resonator
 from identifiers.modal_discovery import discover_resonators, merge_resonators
 from identifiers.rls import RecursiveLeastSquares
-from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
+from spacecraft_conventions import MEASURES, NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["RigidFlexibleIdentifier"]
+__all__ = ["FLEXIBLE_FLOOR", "RESOLUTION", "RigidFlexibleIdentifier"]
+
+#: Tikhonov floor of the flexible couplings (unit-RMS regressors): the
+#: information a coupling keeps when the data stop exciting it.
+FLEXIBLE_FLOOR = 1e-2
+#: Smallest relative error (of the high-passed signal's RMS) the change test
+#: treats as evidence: 1e-3, a 60 dB signal-to-error ratio.
+RESOLUTION = 1e-3
 
 
 def _spend_rank(resonators: list[Resonator], budget: int) -> list[Resonator]:
@@ -64,6 +87,15 @@ def _spend_rank(resonators: list[Resonator], budget: int) -> list[Resonator]:
         spare -= max(extra, 0)
         out.append(Resonator(r.frequency_hz, r.damping, r.rank + max(extra, 0)))
     return out
+
+
+def _same_modes(a: Sequence[Resonator], b: Sequence[Resonator],
+                tolerance: float = 0.005) -> bool:
+    """Same number of resonators, same ranks, frequencies within ``tolerance`` (relative)."""
+    if len(a) != len(b):
+        return False
+    return all(x.rank == y.rank and abs(x.frequency_hz / y.frequency_hz - 1.0) <= tolerance
+               for x, y in zip(a, b, strict=True))
 
 
 def _highpass_noise_gain(rho: float) -> float:
@@ -92,13 +124,20 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     forgetting : float
         Forgetting of the gain estimates (memory ``1 / (1 - forgetting)``
         samples; default 0.998: 50 s).
+    rigid_forgetting : float
+        Forgetting of the rigid-body gains ``G`` (default 0.99: a 10 s
+        memory): they change at once at a docking, and three well-excited
+        gains per axis need little data. See
+        :class:`~identifiers.rls.RecursiveLeastSquares` (vector forgetting).
     warmup : int
         Samples collected before the modes are found and a model is given
         (default 500: 50 s at dt = 0.1 s).
     prior : sequence of Resonator, optional
         Flexible modes of a nominal structural model (frequencies, damping);
-        near-coincident ones are merged. Default: found from the warm-up
-        data by a batch PBSID.
+        near-coincident ones are merged. They are used from the end of the
+        warm-up until the first search of the data (``rediscover``) finds
+        others; with ``rediscover=None`` they are kept. Default: found from
+        the warm-up data by a batch PBSID.
     highpass : float
         Pole ``rho`` of the high-pass that removes constants and ramps.
     detect_changes : bool
@@ -115,6 +154,16 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     refresh : int
         Samples between exports of the minimal model (the Kalman filter
         runs every sample).
+    rediscover : int or None
+        Samples between searches for the modes in the longer record kept
+        since warm-up or the last detected change (default 500: 50 s). Close
+        modes that 50 s cannot separate are resolved as data accumulate; when
+        the modes found differ (frequency by more than 0.5 %, or their
+        number), the estimator is rebuilt on them and the kept record is
+        replayed (a cost of about a millisecond per kept sample, paid once).
+        None keeps the warm-up's modes.
+    history : int
+        Most recent samples kept for the searches (default 3000: 300 s).
     outlier_threshold : float, optional
         Reject samples whose normalized innovation exceeds this on any
         channel (default 100).
@@ -129,13 +178,17 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         The flexible modes in use (after warm-up).
     events : list of ChangeEvent
         Changes detected so far.
+    n_rediscoveries : int
+        Times the modes were found to have moved and the estimator rebuilt.
     """
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
-                 dt: float = 0.1, forgetting: float = 0.998, warmup: int = 500,
-                 prior: Sequence[Resonator] | None = None, highpass: float = 0.99,
+                 dt: float = 0.1, forgetting: float = 0.998, rigid_forgetting: float = 0.995,
+                 warmup: int = 500,
+                 prior: Sequence[Resonator] | None = None, highpass: float = 0.97,
                  detect_changes: bool = True, change_threshold: float = 6.0,
                  discount: float = 10.0, process_torque: float = 0.05, refresh: int = 10,
+                 rediscover: int | None = 500, history: int = 3000,
                  outlier_threshold: float | None = 100.0,
                  input_scale: ArrayLike | None = None, output_scale: ArrayLike | None = None,
                  max_abs: float = 1e6) -> None:
@@ -160,6 +213,11 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self.discount = _positive_float("discount", discount)
         self.process_torque = _positive_float("process_torque", process_torque)
         self.refresh = _positive_int("refresh", refresh)
+        if not 0 < rigid_forgetting <= 1:
+            raise ValueError(f"rigid_forgetting must be in (0, 1], got {rigid_forgetting}")
+        self.rigid_forgetting = float(rigid_forgetting)
+        self.rediscover = None if rediscover is None else _positive_int("rediscover", rediscover)
+        self.history = _positive_int("history", history)
         self.outlier_threshold = (None if outlier_threshold is None
                                   else _positive_float("outlier_threshold", outlier_threshold))
         scales = (np.full(3, NOMINAL_TORQUE) if input_scale is None else input_scale,
@@ -175,10 +233,17 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self.resonators: tuple[Resonator, ...] = ()
         self._bank: ModalFilterBank | None = None
         self._buffer: list[tuple[np.ndarray, np.ndarray, bool, bool]] = []
-        self._rls = self._kf = self._detector = None
+        self._fits: list[tuple[np.ndarray, np.ndarray, RecursiveLeastSquares]] = []
+        self._kf = self._detector = None
+        self._r: np.ndarray | None = None
+        self._history: deque[tuple[np.ndarray, np.ndarray, bool, bool]] = deque(
+            maxlen=self.history)
+        self._next_discovery = 0
+        self.n_rediscoveries = 0
         self._mats = None
         self._phases: dict[tuple[int, int], np.ndarray] = {}
         self._resvar: np.ndarray | None = None
+        self._sigvar: np.ndarray | None = None
         self._noise_var: np.ndarray | None = None
         self._last_innovation: np.ndarray | None = None
         self._real = True
@@ -228,28 +293,44 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _start(self) -> None:
         """End of warm-up: find the modes, build the estimator, replay the buffer."""
-        u = np.array([b[0] for b in self._buffer])
-        y = np.array([b[1] for b in self._buffer])
+        buffer, self._buffer = self._buffer, []
+        self._history.extend(buffer)
         budget = (self.n - 6) // 2
         if self.prior is not None:
-            resonators = merge_resonators([r.frequency_hz for r in self.prior],
-                                          [r.damping for r in self.prior], budget=budget)
+            start = merge_resonators([r.frequency_hz for r in self.prior],
+                                     [r.damping for r in self.prior], budget=budget)
         else:
-            cols = np.concatenate([self.layout.indices(g) for g in ("rate", "deflection")
-                                   if g in self.layout])
-            resonators = discover_resonators(u, y[:, cols], budget, self.dt) if budget else []
-            resonators = _spend_rank(resonators, budget)
+            start = self._find_resonators()
+        self._rebuild(start, len(buffer))
+
+    def _find_resonators(self) -> list[Resonator]:
+        """The flexible modes the kept history shows."""
+        budget = (self.n - 6) // 2
+        if not budget:
+            return []
+        u = np.array([h[0] for h in self._history])
+        y = np.array([h[1] for h in self._history])
+        keep = np.array([h[3] for h in self._history])      # samples whose y was real
+        cols = np.concatenate([self.layout.indices(g) for g in ("rate", "deflection")
+                               if g in self.layout])
+        return _spend_rank(discover_resonators(u[keep], y[keep][:, cols], budget, self.dt),
+                           budget)
+
+    def _rebuild(self, resonators: list[Resonator], replay: int) -> None:
+        """Build the estimator on ``resonators`` and replay the last ``replay`` samples."""
         self.resonators = tuple(resonators)
         self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
         size = self._bank.size
         m = self.n_outputs
         self._hp_x = HighPass(size, self.highpass)
         self._hp_y = HighPass(m, self.highpass)
-        # regressor scales: RMS of the high-passed warm-up regressors (unit-RMS columns)
+        samples = list(self._history)[-replay:]
+        # regressor scales: RMS of the high-passed regressors over the replayed
+        # samples (unit-RMS columns)
         probe_bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
         probe_hp = HighPass(size, self.highpass)
         rows = []
-        for uk in u:
+        for uk, *_ in samples:
             rows.append(probe_hp(probe_bank.regressor()))
             probe_bank.step(uk)
         scale = np.sqrt(np.mean(np.array(rows) ** 2, axis=0))
@@ -262,15 +343,40 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         # are few, well excited, and a floor would bias them through their
         # collinearity during transients
         floor = np.full(size, 1e-4)
-        floor[self._bank.slices["flexible"]] = 1.0
-        self._rls = RecursiveLeastSquares(m, size, self.forgetting, 1e4, regularization=floor)
+        floor[self._bank.slices["flexible"]] = FLEXIBLE_FLOOR
+        # the rigid gains forget faster than the rest: a docking changes them at once,
+        # and three well-excited gains per axis need little memory
+        lam = np.full(size, self.forgetting)
+        for block in ("attitude", "rate"):
+            lam[self._bank.slices[block]] = self.rigid_forgetting
+        self._fits = [(rows, cols, RecursiveLeastSquares(rows.size, cols.size, lam[cols],
+                                                         1e4, regularization=floor[cols]))
+                      for rows, cols in self._regression_groups()]
         self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
-        self._detector = RegressionGLR(threshold=self.change_threshold, dt=self.dt)
-        self._r = np.full(m, 1e-4)
-        buffer, self._buffer = self._buffer, []
-        start_k = self._k - len(buffer) + 1
-        for j, (uk, yk, learn, real) in enumerate(buffer):
+        if self._detector is None:
+            self._detector = RegressionGLR(threshold=self.change_threshold, dt=self.dt)
+        else:
+            self._detector.restart()
+        if self._r is None:
+            self._r = np.full(m, 1e-4)
+        self._mats = None
+        self._phases = {}
+        start_k = self._k - len(samples) + 1
+        for j, (uk, yk, learn, real) in enumerate(samples):
             self._sample(uk, yk, learn, real, replay_k=start_k + j)
+        self._next_discovery = self._k + 1 + (self.rediscover or 0)
+
+    def _maybe_rediscover(self) -> None:
+        """Look for the modes again in the longer history; rebuild if they moved."""
+        if (not self.rediscover or self._k + 1 < self._next_discovery
+                or len(self._history) < self.warmup):
+            return
+        self._next_discovery = self._k + 1 + self.rediscover
+        found = self._find_resonators()
+        if _same_modes(found, self.resonators):
+            return
+        self.n_rediscoveries += 1
+        self._rebuild(found, len(self._history))
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
                 replay_k: int | None = None) -> None:
@@ -285,22 +391,70 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             if real and innovation is not None and np.all(np.isfinite(innovation)):
                 self._measurement_noise(innovation)
         if learn and real:
-            err = self._rls.update(phi, y_f)
+            err = self._learn(phi, y_f)
             if (err is not None and self.detect_changes and replay_k is None
                     and self._resvar is not None):
                 rate = self.layout.slice("rate")      # a change of inertia shows here
-                event = self._detector.update(phi[bank.slices["rate"]], err[rate],
-                                              self._resvar[rate], sample=k)
+                # errors below RESOLUTION of the signal are not evidence of a change
+                # (on noise-free data the a-priori error is all slow model error)
+                variance = np.maximum(self._resvar[rate], RESOLUTION**2 * self._sigvar[rate])
+                event = self._detector.update(phi[bank.slices["rate"]], err[rate], variance,
+                                              sample=k)
                 if event is not None:
                     self._react(event)
             if err is not None:
-                e2 = err**2
-                self._resvar = e2 if self._resvar is None else 0.995 * self._resvar + 0.005 * e2
+                e2, s2 = err**2, y_f**2
+                if self._resvar is None:
+                    self._resvar, self._sigvar = e2, s2
+                else:
+                    self._resvar = 0.995 * self._resvar + 0.005 * e2
+                    self._sigvar = 0.995 * self._sigvar + 0.005 * s2
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
         bank.step(u)
         if (k + 1) % self.refresh == 0 or self._mats is None:
             self._export()
+        if replay_k is None:
+            self._history.append((u, y, learn, real))
+            self._maybe_rediscover()
+
+    def _regression_groups(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Rows of ``y`` and the regressor columns physics allows them, per sensor group.
+
+        A displacement sensor (attitude, deflection) sees a mode through its
+        coordinate ``q``, a velocity sensor (rate) through ``q'``; attitude
+        integrates the torques twice and rate once through ``G``; deflections
+        see no rigid-body term. With proportional damping this is exact, and
+        it halves the flexible couplings each output is fitted with.
+        """
+        bank = self._bank
+        idx = np.arange(bank.size)
+        flexible = idx[bank.slices["flexible"]].reshape(len(self.resonators), 3, 2)
+        initial = np.concatenate([idx[bank.slices[b]] for b in ("free", "step", "ramp")])
+        groups = []
+        for name, rows in self.layout:
+            velocity = MEASURES[name] == "velocity"
+            rigid = idx[bank.slices[name]] if name in ("attitude", "rate") else idx[:0]
+            cols = np.concatenate((rigid, flexible[:, :, int(velocity)].ravel(), initial))
+            groups.append((np.arange(rows.start, rows.stop), cols))
+        return groups
+
+    def _learn(self, phi: np.ndarray, y_f: np.ndarray) -> np.ndarray | None:
+        """One step of every group's RLS; the a-priori errors, or None if one refused."""
+        err = np.empty(self.n_outputs)
+        for rows, cols, rls in self._fits:
+            e = rls.update(phi[cols], y_f[rows])
+            if e is None:
+                return None
+            err[rows] = e
+        return err
+
+    def _theta(self) -> np.ndarray:
+        """All groups' estimates as one ``(m, size)`` matrix (zero where excluded)."""
+        theta = np.zeros((self.n_outputs, self._bank.size))
+        for rows, cols, rls in self._fits:
+            theta[np.ix_(rows, cols)] = rls.theta
+        return theta
 
     def _measurement_noise(self, innovation: np.ndarray) -> None:
         """Sensor noise variance from the filter's innovations: white noise shows in
@@ -324,21 +478,30 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         return q
 
     def _react(self, event: ChangeEvent) -> None:
-        """A detected change: discount the information gathered before it.
+        """A detected change: discount what was learnt of the rigid body before it.
 
-        The covariance is multiplied by ``discount`` (as if the old data had
-        been forgotten that many times faster), which keeps its structure
-        (the correlations between the rigid gains and the modal couplings)
-        while letting the post-change data dominate; the Kalman filter's
-        state uncertainty is doubled.
+        The covariance of the rigid-body gains and the initial-condition
+        terms is multiplied by ``discount`` (as if their old data had been
+        forgotten that much faster), the initial-condition regressors restart
+        (a docking makes the rates jump: momentum is conserved), and the
+        Kalman filter's state uncertainty is doubled. The flexible couplings
+        keep their memory: the modes move little at a docking and need long
+        records.
         """
-        self._rls.set_covariance(self._rls.P * self.discount)
+        bank = self._bank
+        idx = np.arange(bank.size)
+        touched = np.concatenate([idx[bank.slices[b]]
+                                  for b in ("attitude", "rate", "free", "step", "ramp")])
+        for _, cols, rls in self._fits:
+            factor = np.where(np.isin(cols, touched), np.sqrt(self.discount), 1.0)
+            rls.set_covariance(rls.P * np.outer(factor, factor))
+        bank.restart()
         self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))))
 
     # ------------------------------------------------------------ the model
     def _export(self) -> None:
         """Minimal innovation-form model from the current gains (normalized units)."""
-        theta = self._rls.theta / self._scale
+        theta = self._theta() / self._scale
         bank = self._bank
         att, rate = self.layout.slice("attitude"), self.layout.slice("rate")
         m = self.n_outputs

@@ -38,6 +38,17 @@ Forgetting that really forgets, with a bounded covariance
     ``regularization=0`` the primitive is plain exponentially weighted least
     squares (tests compare both with the closed form over 20,000 samples).
 
+Forgetting per parameter
+    ``forgetting`` may be a vector: parameter i then forgets at its own rate
+    ``lambda_i`` (*vector forgetting*): ``R_k = L R_{k-1} L + phi_k phi_k^T``
+    with ``L = diag(lambda)^(1/2)``, so fast-changing parameters (a
+    spacecraft's inertia at a docking) track with a short memory while
+    slowly identifiable ones (many weakly excited modal couplings) keep a
+    long one. The covariance is rescaled by ``L^-1 (.) L^-1`` before each
+    update (one elementwise product of the stored triangle); the floor's
+    pseudo-rows then carry ``(1 - lambda_i) delta_i`` each. With equal
+    entries it is the scalar recursion.
+
 Corrupt data never enter
     An update whose gain or error is not finite, or whose products could
     overflow, is refused before anything changes (counted in
@@ -65,8 +76,9 @@ class RecursiveLeastSquares:
         Rows q of ``Theta`` (size of ``y``).
     n_regressors : int
         Columns d of ``Theta`` (size of ``phi``).
-    forgetting : float
-        Forgetting factor lambda in (0, 1]: memory ``1 / (1 - lambda)`` samples.
+    forgetting : float or (d,) array_like
+        Forgetting factor lambda in (0, 1]: memory ``1 / (1 - lambda)``
+        samples; a vector gives every regressor its own (vector forgetting).
     initial_covariance : float
         ``P_0 = initial_covariance * I`` (the paper's ``I / alpha``).
     regularization : float or (d,) array_like, optional
@@ -85,15 +97,29 @@ class RecursiveLeastSquares:
         Updates refused because they would have made the estimate non-finite.
     """
 
-    def __init__(self, n_outputs: int, n_regressors: int, forgetting: float = 1.0,
+    def __init__(self, n_outputs: int, n_regressors: int, forgetting: float | ArrayLike = 1.0,
                  initial_covariance: float = 1.0, regularization: float | None = None) -> None:
         if n_outputs < 1 or n_regressors < 1:
             raise ValueError("n_outputs and n_regressors must be >= 1")
-        if not 0.0 < forgetting <= 1.0:
+        lam = np.asarray(forgetting, dtype=float)
+        if lam.ndim > 1 or (lam.ndim == 1 and lam.shape != (n_regressors,)):
+            raise ValueError(f"forgetting must be a scalar or ({n_regressors},), "
+                             f"got shape {lam.shape}")
+        if not (np.all(lam > 0.0) and np.all(lam <= 1.0)):
             raise ValueError(f"forgetting must be in (0, 1], got {forgetting}")
         if not (np.isfinite(initial_covariance) and initial_covariance > 0):
             raise ValueError(f"initial_covariance must be positive, got {initial_covariance}")
-        self.forgetting = float(forgetting)
+        lam = np.broadcast_to(lam, (n_regressors,))
+        #: The scalar forgetting, or None when parameters forget at their own rates.
+        self.forgetting: float | None = float(lam[0]) if np.all(lam == lam[0]) else None
+        self._lam = lam.copy()
+        # vector forgetting: Q <- Q * outer(s, s) with s = lambda^(-1/2), scaled so the
+        # largest lambda goes into the scalar (exact for the scalar case)
+        lam_max = float(lam.max())
+        self._lam_scalar = lam_max
+        root = np.sqrt(lam_max / lam)
+        self._rescale = (None if self.forgetting is not None
+                         else np.asfortranarray(np.outer(root, root)))
         self.initial_covariance = float(initial_covariance)
         if regularization is None:
             regularization = 1.0 / self.initial_covariance
@@ -102,7 +128,7 @@ class RecursiveLeastSquares:
             raise ValueError(f"regularization must be >= 0 (a scalar or ({n_regressors},)), "
                              f"got {regularization}")
         self.regularization = delta.copy()
-        self._pseudo_weights = np.sqrt(n_regressors * (1.0 - self.forgetting) * delta)
+        self._pseudo_weights = np.sqrt(n_regressors * (1.0 - self._lam) * delta)
         self.theta = np.zeros((n_outputs, n_regressors), order="F")
         self.reset()
 
@@ -137,19 +163,24 @@ class RecursiveLeastSquares:
             The a-priori error, or None if the update was refused (a
             non-finite or overflowing gain or error; nothing changed).
         """
+        if self._rescale is not None:
+            self._q *= self._rescale                             # per-parameter forgetting
         scale = self._scale
+        lam = self._lam_scalar
         p_phi = dsymv(scale, self._q, phi, lower=0)          # P phi, upper triangle only
-        denom = self.forgetting + phi @ p_phi
+        denom = lam + phi @ p_phi
         err = y - self.theta @ phi
         if not self._safe(p_phi, denom, err):
+            if self._rescale is not None:
+                self._q /= self._rescale
             self.n_rejected += 1
             return None
         gain = p_phi / denom
         self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
         # P <- P - (P phi)(P phi)^T / denom, i.e. Q <- Q - (P phi)(P phi)^T / (s denom)
         self._q = dsyr(-1.0 / (scale * denom), p_phi, a=self._q, lower=0, overwrite_a=True)
-        if self.forgetting < 1.0:
-            self._scale /= self.forgetting
+        if lam < 1.0:
+            self._scale /= lam
             if self._pseudo_weights[self._cycle] > 0.0:
                 self._pseudo_update()
             else:

@@ -17,6 +17,7 @@ from spacecraft_conventions.blas import single_threaded_blas
 from spacecraft_conventions.outputs import (
     AXES,
     LABEL_PREFIX,
+    MEASURES,
     OBSERVATION_GROUPS,
     OUTPUT_GROUPS,
     STANDARD_OUTPUTS,
@@ -32,6 +33,7 @@ __all__ = [
     "AXES",
     "DEG_PER_RAD",
     "LABEL_PREFIX",
+    "MEASURES",
     "NOMINAL_SCALE",
     "NOMINAL_TORQUE",
     "OBSERVATION_GROUPS",

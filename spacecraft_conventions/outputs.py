@@ -32,6 +32,7 @@ from spacecraft_conventions.sensors import NOMINAL_SCALE
 __all__ = [
     "AXES",
     "LABEL_PREFIX",
+    "MEASURES",
     "OBSERVATION_GROUPS",
     "OUTPUT_GROUPS",
     "STANDARD_OUTPUTS",
@@ -46,6 +47,13 @@ OUTPUT_GROUPS: tuple[str, ...] = ("attitude", "rate", "deflection")
 TASK_GROUPS: tuple[str, ...] = ("attitude_error", "reference")
 #: Every group an observation may hold.
 OBSERVATION_GROUPS: tuple[str, ...] = OUTPUT_GROUPS + TASK_GROUPS
+#: What each sensor group measures of the structure: a ``"displacement"``
+#: (a coordinate: angles, deflections) or a ``"velocity"`` (its time
+#: derivative: body rates). A flexible mode enters a displacement output
+#: through its modal coordinate and a velocity output through its rate.
+MEASURES: Mapping[str, str] = MappingProxyType({
+    "attitude": "displacement", "rate": "velocity", "deflection": "displacement",
+})
 #: The three body axes, roll / pitch / yaw.
 AXES: tuple[str, ...] = ("x", "y", "z")
 #: Label prefix of each group's channels.

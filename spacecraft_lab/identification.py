@@ -360,7 +360,8 @@ def summarize_score(score: IdentificationScore, truth: FlexibleSpacecraftModel,
     events = list(truth.scenario.event_times())
     if score.gain_track is not None:
         before = [(events[0] - 20.0, events[0])] if events else [(convergence_s, end_s)]
-        after = [(ev + 20.0, nxt) for ev, nxt in zip(events, [*events[1:], end_s], strict=True)]
+        after = [(ev + 20.0, nxt) for ev, nxt in zip(events, [*events[1:], end_s],
+                                                     strict=False)]
         out["gain_error_before_event"] = _window_stats(score.gain_track, before)
         out["gain_error_after_events"] = _window_stats(score.gain_track,
                                                        after or [(convergence_s, end_s)])

@@ -116,3 +116,64 @@ def test_non_finite_or_overflowing_updates_change_nothing():
     assert rls.n_rejected == 2
     np.testing.assert_array_equal(rls.theta, before[0])
     np.testing.assert_array_equal(rls.P, before[1])
+
+
+# ------------------------------------------------------------------ vector forgetting
+def test_vector_forgetting_with_equal_entries_is_the_scalar_recursion():
+    phi, _, y = _data(n=3000)
+    scalar = RecursiveLeastSquares(2, 12, LAM, 1.0)
+    vector = RecursiveLeastSquares(2, 12, np.full(12, LAM), 1.0)
+    for k in range(len(phi)):
+        scalar.update(phi[k], y[k])
+        vector.update(phi[k], y[k])
+    np.testing.assert_array_equal(vector.theta, scalar.theta)
+    assert vector.forgetting == LAM
+
+
+def test_vector_forgetting_follows_its_information_recursion():
+    """R_k = L R_{k-1} L + phi phi^T and R_k theta_k = L R_{k-1} L theta_{k-1} + phi y^T,
+    with L = diag(lambda)^(1/2): checked against the recursion on R run alongside."""
+    phi, _, y = _data(n=3000)
+    lam = np.where(np.arange(12) < 4, 0.95, 0.999)
+    rls = RecursiveLeastSquares(2, 12, lam, 1.0, regularization=0.0)
+    assert rls.forgetting is None
+    root = np.sqrt(lam)
+    info = np.eye(12)
+    theta = np.zeros((2, 12))
+    for k in range(len(phi)):
+        rls.update(phi[k], y[k])
+        prior = root[:, None] * info * root[None, :]
+        info = prior + np.outer(phi[k], phi[k])
+        theta = np.linalg.solve(info, prior @ theta.T + np.outer(phi[k], y[k])).T
+    np.testing.assert_allclose(rls.P @ info, np.eye(12), atol=1e-8)
+    np.testing.assert_allclose(rls.theta, theta, rtol=1e-8, atol=1e-10)
+    np.testing.assert_array_equal(rls.P, rls.P.T)
+
+
+def test_fast_forgetting_parameters_track_a_jump_the_slow_ones_do_not_lose():
+    """The four best-excited parameters jump at sample 3000. With forgetting 0.95
+    there and 0.999 elsewhere the model re-converges within five short memories
+    (judged by the prediction error on fresh regressors, where the data carry
+    information), which a long memory everywhere does not, and is more accurate
+    than a short memory everywhere."""
+    phi, theta, y = _data(n=4000)
+    rng = np.random.default_rng(3)
+    jumped = theta.copy()
+    jumped[:, 8:] += rng.normal(size=(2, 4))
+    y = y.copy()
+    y[3000:] = phi[3000:] @ jumped.T + 0.01 * rng.normal(size=(1000, 2))
+    runs = {"vector": np.where(np.arange(12) >= 8, 0.95, 0.999), "slow": 0.999, "fast": 0.95}
+    runs = {name: RecursiveLeastSquares(2, 12, lam, 1.0) for name, lam in runs.items()}
+    for k in range(3000 + 5 * 20):                    # five memories of 1 / (1 - 0.95)
+        for rls in runs.values():
+            rls.update(phi[k], y[k])
+    excited = np.linspace(0.1, 3.0, 12)
+    err = {name: np.linalg.norm((rls.theta - jumped) * excited)
+           / np.linalg.norm(jumped * excited) for name, rls in runs.items()}
+    assert err["vector"] < 0.02 and err["slow"] > 0.3 and err["fast"] > 1.5 * err["vector"]
+
+
+@pytest.mark.parametrize("lam", [np.full(3, 0.9), [0.9, 1.1, 0.9, 0.9], [0.0, 0.5, 0.5, 0.5]])
+def test_bad_vector_forgetting(lam):
+    with pytest.raises(ValueError, match="forgetting"):
+        RecursiveLeastSquares(1, 4, lam)

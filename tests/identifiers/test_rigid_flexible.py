@@ -1,0 +1,215 @@
+"""The package's default online identifier: exact where physics is exact, the
+streaming API, and what it must deliver on the spacecraft."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from identifiers import (
+    Resonator,
+    RigidFlexibleIdentifier,
+    add_measurement_noise,
+    default_identifier,
+    h_step_predictions,
+    identification_inputs,
+    persistence_predictions,
+    prediction_vaf,
+    relative_gain_error,
+    rigid_body_gain,
+    unstable_share,
+)
+from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
+from spacecraft_env import FlexibleSpacecraftModel
+
+RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
+RATE = STANDARD_OUTPUTS.slice("rate")
+
+
+def _rigid_body(inertia: np.ndarray, n_samples: int = 1500, dt: float = 0.1):
+    """Noise-free ZOH double integrators psi'' = J^-1 u (the rigid body alone)."""
+    rng = np.random.default_rng(0)
+    g = np.linalg.inv(inertia)
+    u = identification_inputs(n_samples, rng, dt)
+    psi, omega = np.zeros(3), np.zeros(3)
+    y = np.empty((n_samples, 6))
+    for k in range(n_samples):
+        y[k] = np.concatenate((psi, omega))
+        psi = psi + dt * omega + 0.5 * dt * dt * g @ u[k]
+        omega = omega + dt * g @ u[k]
+    return u, y
+
+
+def _spacecraft(scenario: str, seed: int, n_samples: int = 2500, snr_db: float | None = 40.0):
+    truth = FlexibleSpacecraftModel(scenario=scenario)
+    rng = np.random.default_rng(seed)
+    u = identification_inputs(n_samples, rng, truth.dt)
+    _states, y0 = truth.simulate(u)
+    return truth, u, y0, add_measurement_noise(y0, snr_db, rng)
+
+
+# --------------------------------------------------------------------- exact cases
+def test_rigid_body_gain_and_model_are_exact_on_a_noise_free_rigid_body():
+    inertia = np.array([[30_000.0, 500.0, 0.0], [500.0, 20_000.0, 0.0], [0.0, 0.0, 22_000.0]])
+    u, y = _rigid_body(inertia)
+    ident = RigidFlexibleIdentifier(RIGID, n=6, detect_changes=False)
+    seq = ident.fit(u, y)
+    model = seq[len(seq) - 1]
+    # exact up to the Tikhonov floor's pull and the high-pass start-up
+    assert relative_gain_error(rigid_body_gain(model, slice(3, 6)), np.linalg.inv(inertia)) \
+        < 1e-5
+    np.testing.assert_allclose(np.abs(np.linalg.eigvals(model.A)), 1.0, atol=1e-12)
+    vaf = prediction_vaf(y, h_step_predictions(seq, u, (100,)), start=600)[100]
+    assert vaf.min() > 99.999
+
+
+# --------------------------------------------------------------------- streaming API
+@pytest.fixture(scope="module")
+def constant_record():
+    return _spacecraft("constant", 0, n_samples=900)
+
+
+def test_fit_equals_the_update_loop_and_pickles_mid_run(constant_record):
+    _, u, _, y = constant_record
+    a = default_identifier()
+    seq = a.fit(u, y)
+    b = default_identifier()
+    for k in range(600):
+        b.update(u[k], y[k])
+    c = pickle.loads(pickle.dumps(b))
+    for k in range(600, len(u)):
+        b.update(u[k], y[k])
+        c.update(u[k], y[k])
+    for other in (b, c):
+        np.testing.assert_array_equal(other.model.A, seq[len(seq) - 1].A)
+        np.testing.assert_array_equal(other.state, seq.states[-1])
+
+
+def test_no_model_until_warm_up_then_a_full_state_space_model(constant_record):
+    _, u, _, y = constant_record
+    ident = default_identifier()
+    for k in range(499):
+        ident.update(u[k], y[k])
+    assert ident.model is None and ident.state is None
+    ident.update(u[499], y[499])
+    model = ident.model
+    assert model.A.shape == (22, 22) and model.B.shape == (22, 3)
+    assert model.C.shape == (10, 22) and model.K.shape == (22, 10)
+    assert ident.state.shape == (22,)
+
+
+def test_corrupt_samples_are_skipped_and_the_estimate_stays_finite(constant_record):
+    _, u, _, y = constant_record
+    y = y.copy()
+    y[[100, 550, 700], 3] = np.nan
+    y[650, 6] = 1e12
+    ident = default_identifier()
+    seq = ident.fit(u, y)
+    assert ident.n_skipped == 4
+    assert np.all(np.isfinite(seq.states[seq.valid]))
+
+
+def test_reset_starts_over(constant_record):
+    _, u, _, y = constant_record
+    ident = default_identifier()
+    first = ident.fit(u[:600], y[:600])
+    ident.reset()
+    again = ident.fit(u[:600], y[:600])
+    np.testing.assert_array_equal(first.A[-1], again.A[-1])
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"n": 7}, ValueError, "even order"),
+    ({"n": 4}, ValueError, "even order"),
+    ({"layout": OutputLayout.of(("attitude",), n_sensors=0)}, ValueError, "rate"),
+    ({"layout": "standard"}, TypeError, "OutputLayout"),
+    ({"prior": [0.1]}, TypeError, "Resonator"),
+    ({"rigid_forgetting": 1.5}, ValueError, "rigid_forgetting"),
+    ({"highpass": 1.0}, ValueError, "highpass"),
+    ({"rediscover": 0}, ValueError, "rediscover"),
+])
+def test_bad_constructor_arguments(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        RigidFlexibleIdentifier(**kwargs)
+
+
+def test_wrong_sample_sizes_raise():
+    ident = default_identifier()
+    with pytest.raises(ValueError, match="3 body torques"):
+        ident.update(np.zeros(2), np.zeros(10))
+    with pytest.raises(ValueError, match="10 entries"):
+        ident.update(np.zeros(3), np.zeros(9))
+
+
+# --------------------------------------------------------------------- on the spacecraft
+@pytest.fixture(scope="module")
+def docking_run():
+    truth, u, y0, y = _spacecraft("docking", 1)
+    ident = default_identifier()
+    return truth, u, y0, ident, ident.fit(u, y)
+
+
+def test_docking_is_detected_within_ten_seconds(docking_run):
+    truth, *_, ident, _ = docking_run
+    first_docking = truth.scenario.event_times()[0]
+    assert any(0 <= e.time - first_docking <= 10.0 for e in ident.events)
+    assert all(e.time >= 50.0 for e in ident.events)       # nothing during warm-up
+
+
+def test_no_identified_model_has_an_unstable_pole(docking_run):
+    *_, seq = docking_run
+    assert unstable_share(seq, seq.first_valid(), bound=1.001) == 0.0
+
+
+def test_ten_second_predictions_beat_persistence_by_far(docking_run):
+    _truth, u, y0, _, seq = docking_run
+    start = 1500                                            # t >= 150 s
+    ours = prediction_vaf(y0, h_step_predictions(seq, u, (100,)), start)[100]
+    pers = prediction_vaf(y0, persistence_predictions(y0, (100,)), start)[100]
+    for group, rows in STANDARD_OUTPUTS:
+        assert ours[rows].mean() > (99.0 if group != "deflection" else 60.0)
+        # at most a fifth of persistence's unexplained variance
+        assert 100.0 - ours[rows].mean() < (100.0 - pers[rows].mean()) / 5
+
+
+def test_rigid_gain_before_the_docking_within_three_percent(docking_run):
+    truth, *_, seq = docking_run
+    errors = [relative_gain_error(rigid_body_gain(seq[k], RATE),
+                                  np.linalg.inv(truth.inertia(k * truth.dt)))
+              for k in range(800, 1000, 20)]
+    assert max(errors) < 0.03
+
+
+def test_noise_free_data_are_no_harder_than_noisy_data():
+    """On exact data the change test has nothing to mistake for a change."""
+    _truth, u, y0, _ = _spacecraft("constant", 0, snr_db=None)
+    ident = default_identifier()
+    seq = ident.fit(u, y0)
+    vaf = prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
+    assert vaf[:6].min() > 99.9 and vaf[6:].mean() > 90.0
+
+
+@pytest.mark.parametrize("error", [-0.05, 0.10])
+def test_a_prior_off_by_five_to_ten_percent_still_predicts_well(error):
+    """The user's nominal model may be off; the data correct it."""
+    truth, u, y0, y = _spacecraft("constant", 2)
+    f, z = truth.modal(0.0)
+    prior = [Resonator((1 + error) * fi, zi) for fi, zi in zip(f, z, strict=True)]
+    seq = default_identifier(prior=prior).fit(u, y)
+    vaf = prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
+    assert vaf[STANDARD_OUTPUTS.slice("attitude")].mean() > 99.0
+    assert vaf[RATE].mean() > 99.0
+
+
+def test_modes_are_searched_again_and_move_toward_the_truth():
+    truth, u, _, y = _spacecraft("constant", 0)
+    ident = default_identifier()
+    ident.fit(u[:500], y[:500])
+    first = ident.resonators
+    ident.fit(u[500:], y[500:])          # fit() continues where the first call stopped
+    assert ident.n_rediscoveries >= 1 and ident.resonators != first
+    true_f = truth.modal(0.0)[0][:4]           # the paddle and antenna modes near 0.08-0.09 Hz
+    found = np.array([r.frequency_hz for r in ident.resonators])
+    assert max(np.abs(found / f - 1).min() for f in true_f[1:]) < 0.02
