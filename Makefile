@@ -5,7 +5,10 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SOURCES := spacecraft_conventions spacecraft_env identifiers controllers spacecraft_lab tests benchmarks examples
 
-.PHONY: demo test test-all lint bench clean
+PEERS_VENV  ?= .venv-peers
+PEERS_STAMP := $(PEERS_VENV)/.installed
+
+.PHONY: demo test test-all test-peers lint bench bench-peers clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -14,6 +17,13 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/pip install -c constraints.txt "torch==2.13.0"
 	$(BIN)/pip install -c constraints.txt -e ".[rl,dev]"
 	touch $(STAMP)
+
+# the peers live in their own environment: they are large and pin their own stacks
+$(PEERS_STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(PEERS_VENV)
+	$(PEERS_VENV)/bin/pip install --upgrade pip
+	$(PEERS_VENV)/bin/pip install -c constraints.txt -e ".[peers]" pytest
+	touch $(PEERS_STAMP)
 
 demo: $(STAMP)
 	$(BIN)/spacecraft demo --scenario docking --out results/demo
@@ -26,6 +36,12 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/pytest -q -m ""
 
+test-peers: $(PEERS_STAMP)
+	$(PEERS_VENV)/bin/pytest -q -p no:randomly -m slow tests/identifiers/test_peers.py
+
+bench-peers: $(PEERS_STAMP)
+	$(PEERS_VENV)/bin/python benchmarks/bench_peers.py
+
 lint: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)
 
@@ -37,4 +53,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_threads.py
 
 clean:
-	rm -rf $(VENV) results build *.egg-info
+	rm -rf $(VENV) $(PEERS_VENV) results build *.egg-info

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.linalg import solve_discrete_are
 
 from identifiers.model import StateSpaceModel
 from identifiers.varx import predictor_product, regressor_matrix
@@ -62,6 +63,25 @@ DEFAULT_PAST = 40
 DEFAULT_RIDGE = 1e-4
 
 
+def _riccati_gain(a: np.ndarray, c: np.ndarray, x: np.ndarray, u: np.ndarray,
+                  e: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Kalman predictor gain from the residual covariances (used when the regressed
+    ``K`` leaves ``A - K C`` unstable, which makes the predictor diverge).
+
+    ``w_k = x_{k+1} - A x_k - B u_k`` and ``v_k = e_k`` give ``Q``, ``R`` and
+    ``S``; the gain is that of the filtering Riccati equation, whose predictor
+    is stable whenever ``(A, C)`` is detectable.
+    """
+    w = x[1:] - x[:-1] @ a.T - u[:-1] @ b.T
+    v = e[:-1]
+    q, rr, s = w.T @ w / len(w), v.T @ v / len(v), w.T @ v / len(v)
+    try:
+        pr = solve_discrete_are(a.T, c.T, q, rr, s=s)
+        return (a @ pr @ c.T + s) @ np.linalg.inv(c @ pr @ c.T + rr)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.zeros_like(s)
+
+
 @single_threaded_blas
 def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | None = None, *,
           dt: float = 0.1, weighted: bool = True, feedthrough: bool = False,
@@ -107,6 +127,13 @@ def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | Non
     Returns
     -------
     StateSpaceModel or PBSIDResult
+
+    Notes
+    -----
+    ``K`` is regressed on the innovations as PBSID prescribes; when that
+    leaves the predictor ``A - K C`` unstable (it happens on short noisy
+    records), ``K`` is replaced by the Kalman gain of the residual
+    covariances, so the returned predictor never diverges.
     """
     u, y = _check_data(U, Y)
     r, m = u.shape[1], y.shape[1]
@@ -141,15 +168,26 @@ def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | Non
     z = np.hstack([u, y])
     phi = regressor_matrix(z, p)
     target = y[p:]
+    gram = phi.T @ phi
     if regularization > 0:
-        wphi = phi * (sw**2)[:, None]
-        gram = phi.T @ wphi + regularization * np.eye(phi.shape[1])
-        xi = np.linalg.solve(gram, wphi.T @ target).T
+        wphi = phi if weights is None else phi * (sw**2)[:, None]
+        wgram = gram if weights is None else phi.T @ wphi
+        xi = np.linalg.solve(wgram + regularization * np.eye(phi.shape[1]),
+                             wphi.T @ target).T
     else:
         xi = np.linalg.lstsq(phi * sw[:, None], target * sw[:, None], rcond=None)[0].T
     lk = predictor_product(xi, r, f, weighted)
-    _, s, right = np.linalg.svd(lk @ phi.T, full_matrices=False)
-    x = (np.sqrt(s[:n])[:, None] * right[:n]).T            # (N - p, n)
+    # SVD of LK Phi^T (f m x N) through its f m x f m Gram LK (Phi^T Phi) LK^T, which
+    # reuses the VARX's Gram: the left vectors U and s^2 from one small symmetric
+    # eigenproblem, and the states x = diag(s)^(-1/2) U^T LK Phi^T (the right vectors
+    # scaled by sqrt(s)), at a third of the cost of the thin SVD of the long matrix
+    eigval, eigvec = np.linalg.eigh(lk @ gram @ lk.T)
+    order = np.argsort(eigval)[::-1]
+    s = np.sqrt(np.maximum(eigval[order], 0.0))
+    # directions the data do not excite (s = 0) give zero states, as the SVD would
+    floor = s[0] * 1e-12 if s[0] > 0 else 0.0
+    scale = np.where(s[:n] > floor, 1.0 / np.sqrt(np.where(s[:n] > floor, s[:n], 1.0)), 0.0)
+    x = phi @ (lk.T @ (eigvec[:, order[:n]] * scale[None, :]))      # (N - p, n)
     reg = np.hstack([x, u[p:]]) if feedthrough else x
     cd = np.linalg.lstsq(reg * sw[:, None], target * sw[:, None], rcond=None)[0].T
     c = cd[:, :n]
@@ -159,6 +197,8 @@ def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | Non
     sw2 = sw[:-1, None]
     abk = np.linalg.lstsq(reg2 * sw2, x[1:] * sw2, rcond=None)[0].T
     a, b, k = abk[:, :n], abk[:, n:n + r], abk[:, n + r:]
+    if np.max(np.abs(np.linalg.eigvals(a - k @ c))) >= 1.0:
+        k = _riccati_gain(a, c, x, u[p:], e, b)
     next_state = a @ x[-1] + b @ u[-1] + k @ e[-1]
     model = StateSpaceModel(a, b / su, sy[:, None] * c, sy[:, None] * d / su, k / sy, dt)
     if not full_output:

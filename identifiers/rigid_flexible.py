@@ -62,11 +62,14 @@ from identifiers.modal_discovery import discover_resonators, merge_resonators
 from identifiers.rls import RecursiveLeastSquares
 from spacecraft_conventions import MEASURES, NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["FLEXIBLE_FLOOR", "RESOLUTION", "RigidFlexibleIdentifier"]
+__all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "RESOLUTION", "RigidFlexibleIdentifier"]
 
 #: Tikhonov floor of the flexible couplings (unit-RMS regressors): the
 #: information a coupling keeps when the data stop exciting it.
 FLEXIBLE_FLOOR = 1e-2
+#: Samples at the end of a replay over which the Kalman filter runs (the gains
+#: learn from the whole replay): its state settles within a few hundred.
+FILTER_TAIL = 300
 #: Smallest relative error (of the high-passed signal's RMS) the change test
 #: treats as evidence: 1e-3, a 60 dB signal-to-error ratio.
 RESOLUTION = 1e-3
@@ -361,9 +364,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             self._r = np.full(m, 1e-4)
         self._mats = None
         self._phases = {}
+        # replay: the gains learn from every sample; the Kalman filter (and the
+        # exports it needs) only over the last FILTER_TAIL, enough for its state
+        # to settle on the new model
         start_k = self._k - len(samples) + 1
+        tail = len(samples) - min(len(samples), FILTER_TAIL)
         for j, (uk, yk, learn, real) in enumerate(samples):
-            self._sample(uk, yk, learn, real, replay_k=start_k + j)
+            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail)
         self._next_discovery = self._k + 1 + (self.rediscover or 0)
 
     def _maybe_rediscover(self) -> None:
@@ -376,15 +383,19 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         if _same_modes(found, self.resonators):
             return
         self.n_rediscoveries += 1
-        self._rebuild(found, len(self._history))
+        # replay three memories of the couplings: older samples would carry no weight
+        self._rebuild(found, min(len(self._history), round(3.0 / (1.0 - self.forgetting))))
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
-                replay_k: int | None = None) -> None:
+                replay_k: int | None = None, filtering: bool = True) -> None:
+        """One sample: Kalman filter on the current model (if ``filtering``), the
+        gains' RLS, the change test (live samples only), the filter bank, and an
+        export every ``refresh`` samples (if ``filtering``)."""
         k = self._k if replay_k is None else replay_k
         bank = self._bank
         phi = self._hp_x(bank.regressor()) / self._scale
         y_f = self._hp_y(y)
-        if self._mats is not None:
+        if filtering and self._mats is not None:
             a, b, c, _, _ = self._mats
             self._kf.update(a, b, c, self._process_noise(), self._r, u, y if real else None)
             innovation = self._kf.innovation
@@ -412,7 +423,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
         bank.step(u)
-        if (k + 1) % self.refresh == 0 or self._mats is None:
+        if filtering and ((k + 1) % self.refresh == 0 or self._mats is None):
             self._export()
         if replay_k is None:
             self._history.append((u, y, learn, real))
