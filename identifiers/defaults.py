@@ -2,11 +2,16 @@
 
 Everything that needs "the identifier we recommend" (the adaptive
 controller, the RL features wrapper, the experiments) calls
-:func:`default_identifier`, so its settings are written once.
+:func:`default_identifier`. Its settings are the constructor defaults of
+:class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier`, written once
+there; :data:`DEFAULT_SETTINGS` lists them for display.
 """
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
 from identifiers.base import OnlineIdentifier
@@ -15,14 +20,13 @@ from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["DEFAULT_SETTINGS", "default_identifier"]
 
-#: Settings of the recommended identifier, the rigid-flexible one: the
-#: rigid body's kinematics known, its inverse inertia and the flexible
-#: couplings estimated with a 50 s memory (forgetting 0.998), flexible
-#: modes found from the first 50 s of data, changes detected and reacted
-#: to; see docs/design/identification.md for the measurements behind them.
-DEFAULT_SETTINGS: dict[str, Any] = {"forgetting": 0.998, "warmup": 500, "highpass": 0.99,
-                                    "change_threshold": 6.0, "discount": 10.0,
-                                    "outlier_threshold": 100.0}
+#: Settings of the recommended identifier (read from the constructor's
+#: defaults, which are the single source; docs/design/identification.md
+#: gives the measurements behind them).
+DEFAULT_SETTINGS: Mapping[str, Any] = MappingProxyType({
+    name: param.default
+    for name, param in inspect.signature(RigidFlexibleIdentifier).parameters.items()
+    if param.kind is param.KEYWORD_ONLY and name not in ("input_scale", "output_scale")})
 
 
 def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
@@ -41,7 +45,7 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
     dt : float
         Sample time, s.
     **options
-        Overrides of :data:`DEFAULT_SETTINGS` or any other keyword of
+        Overrides of :data:`DEFAULT_SETTINGS`, i.e. any keyword of
         :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier` (e.g.
         ``prior=`` a nominal structural model's modes).
 
@@ -49,4 +53,4 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
     -------
     OnlineIdentifier
     """
-    return RigidFlexibleIdentifier(layout, n=n, dt=dt, **{**DEFAULT_SETTINGS, **options})
+    return RigidFlexibleIdentifier(layout, n=n, dt=dt, **options)
