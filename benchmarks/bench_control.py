@@ -1,6 +1,6 @@
 """One adaptive control step at n = 22: identifier update + re-design + act.
 
-Runs the adaptive LQR in closed loop on the docking environment and times
+Runs the adaptive LQG in closed loop on the docking environment and times
 each ``act`` call (which feeds the identifier, re-designs the gain by the
 warm-started Riccati iteration and computes the torque), then, on the same
 identified models, times a from-scratch ``scipy.linalg.solve_discrete_are``
@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from controllers import AdaptiveLQR
+from controllers import AdaptiveLQG
 from spacecraft_conventions import single_threaded_blas
 
 
@@ -30,7 +30,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1500)
     args = parser.parse_args()
     env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v0")
-    ctrl = AdaptiveLQR(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     step_times, models = [], []
@@ -57,7 +57,7 @@ def main() -> None:
             dare.append(time.perf_counter() - start)
     dare = np.array(dare)
     med = np.median(adaptive) * 1e3
-    print(f"adaptive LQR step (identifier + warm-started re-design + act), n = "
+    print(f"adaptive LQG step (identifier + warm-started re-design + act), n = "
           f"{env.unwrapped.model.n}: median {med:.3f} ms, p90 "
           f"{np.percentile(adaptive, 90) * 1e3:.3f} ms -> {100 / med:.0f}x faster than real "
           f"time at dt = 0.1 s")

@@ -1,8 +1,13 @@
 """Attitude controllers for the flexible spacecraft and the closed-loop harness.
 
-* :class:`AdaptiveLQR`: LQR re-designed every step from an online identifier.
-* :class:`LQR` (fixed LQG, t = 0 design), :class:`OracleLQR` (true
-  time-varying model and state), :class:`PD`.
+* :class:`AdaptiveLQG`: certainty-equivalence LQG re-designed every step on
+  the model of an online identifier, with integral action, a designed
+  excitation and a physical acceptance test for every gain.
+* Baselines (:mod:`controllers.baselines`): :class:`PD`, :class:`FixedLQG`
+  (nominal design), :class:`RobustLQG` (rigid-body design behind notches),
+  :class:`ScheduledLQG` (on the measured paddle angle), :class:`OracleLQG`
+  (true model, Kalman filter: the fair reference) and :class:`OracleLQR`
+  (true model and state: a bound).
 * :class:`PolicyController`: any SB3 policy behind the same interface.
 * :func:`run_episode`, :func:`episode_metrics`, :func:`compare`: the
   closed-loop harness.
@@ -10,31 +15,58 @@
   component for RL agents.
 """
 
-from controllers.adaptive import AdaptiveLQR
+from controllers.acceptance import GainAcceptance, effective_gains
+from controllers.adaptive import AdaptiveLQG
 from controllers.base import Controller, PolicyController
-from controllers.baselines import LQR, PD, LQRWeights, OracleLQR, equilibrium_state
+from controllers.baselines import (
+    PD,
+    FixedLQG,
+    OracleLQG,
+    OracleLQR,
+    RobustLQG,
+    ScheduledLQG,
+    nominal_model,
+)
+from controllers.excitation import BinaryExcitation
 from controllers.features import IdentifiedModelFeatures
-from controllers.harness import Trajectory, compare, episode_metrics, run_episode
+from controllers.harness import (
+    Trajectory,
+    compare,
+    controller_shares,
+    episode_metrics,
+    run_episode,
+)
+from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
 from spacecraft_conventions import __version__
 
 __all__ = [
-    "LQR",
     "PD",
-    "AdaptiveLQR",
+    "AdaptiveLQG",
+    "BinaryExcitation",
     "Controller",
+    "FixedLQG",
+    "GainAcceptance",
     "IdentifiedModelFeatures",
+    "LQGLaw",
     "LQRWeights",
+    "OracleLQG",
     "OracleLQR",
     "PolicyController",
     "RiccatiTracker",
+    "RobustLQG",
+    "ScheduledLQG",
     "Trajectory",
     "__version__",
     "check_weights",
     "compare",
+    "controller_shares",
     "dlqr",
+    "effective_gains",
     "episode_metrics",
     "equilibrium_state",
+    "nominal_model",
+    "output_weight",
     "run_episode",
     "spectral_radius",
 ]

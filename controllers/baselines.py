@@ -1,79 +1,55 @@
-"""Baseline attitude controllers: PD, fixed LQG (t = 0 design), oracle LQR.
+"""Baseline attitude controllers: PD, fixed, robust and scheduled LQG, and the oracles.
 
 All read the observation layout, ``max_torque`` and the truth model from the
 environment they are built for (``env.unwrapped``), and return normalized
-torques in [-1, 1] (saturated).
+torques in [-1, 1] (saturated). The LQG designs share one control law
+(:class:`~controllers.lqg.LQGLaw`: LQR with integral action on the
+attitude error) and differ in the model they design on and the state
+estimate they feed it (docs/design/control.md):
 
-Weights (:class:`LQRWeights`) penalize outputs, ``Q = C^T Q_y C + eps I``
-(docs/design/control.md), relative to the nominal sensor levels that the
-environments' reward uses (1 deg, 0.1 deg/s, 1 cm) and ``R = r I`` per
-(N m)^2.
+==================  ==============================================  ===========================
+class               model                                           state
+==================  ==============================================  ===========================
+``PD``              none (per-axis inertia of the nominal design)   measured attitude and rate
+``FixedLQG``        true model in the nominal configuration         steady-state Kalman filter
+                    (paddles at 0 deg, nothing docked)
+``RobustLQG``       rigid body only, nominal inertia; notch on the  steady-state Kalman filter
+                    sensors at the first flexible modes             on the rigid model
+``ScheduledLQG``    true model at the measured paddle angle         Kalman filter of that design
+                    (drive encoder), nominal mass
+``OracleLQG``       true model at every step                        Kalman filter on it (the
+                                                                    fair reference)
+``OracleLQR``       true model at every step                        the true state (a bound)
+==================  ==============================================  ===========================
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import solve_discrete_are
+from scipy.signal import iirnotch
 
 from controllers.base import Controller
-from controllers.riccati import RiccatiTracker, dlqr
-from spacecraft_conventions import OutputLayout, match_groups, single_threaded_blas
+from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
+from controllers.riccati import RiccatiTracker
+from identifiers import KalmanPredictor
+from spacecraft_conventions import match_groups, single_threaded_blas
 
-__all__ = ["LQR", "PD", "LQRWeights", "OracleLQR", "equilibrium_state", "output_weight"]
+__all__ = ["PD", "FixedLQG", "OracleLQG", "OracleLQR", "RobustLQG", "ScheduledLQG",
+           "nominal_model"]
 
-
-@dataclass(frozen=True)
-class LQRWeights:
-    """Output and torque weights of the LQR designs.
-
-    ``Q_y = diag(attitude / (1 deg)^2 [x3], rate / (0.1 deg/s)^2 [x3],
-    deflection / (1 cm)^2 [per sensor])``, ``Q = C^T Q_y C + eps I``,
-    ``R = torque * I`` per (N m)^2. The defaults give a closed-loop attitude
-    bandwidth of roughly 0.1 rad/s, below the first flexible mode (0.48 rad/s).
-    """
-
-    attitude: float = 1.0
-    rate: float = 1.0
-    deflection: float = 0.1
-    torque: float = 0.3
-    eps: float = 1e-6
-
-    def __post_init__(self) -> None:
-        for name in ("attitude", "rate", "deflection", "eps"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"LQR weight {name} must be finite and >= 0")
-        if not np.isfinite(self.torque) or self.torque <= 0:
-            raise ValueError("LQR torque weight must be positive (R positive definite)")
+#: Torque-noise standard deviation (N m) the Kalman filters of the baselines assume.
+PROCESS_NOISE = 0.05
 
 
-def output_weight(layout: OutputLayout, weights: LQRWeights) -> np.ndarray:
-    """Diagonal output weight ``Q_y`` for the sensor groups of ``layout``.
-
-    Each channel's weight is its group's weight divided by the square of the
-    group's nominal level (:meth:`OutputLayout.scales`).
-    """
-    per_group = {"attitude": weights.attitude, "rate": weights.rate,
-                 "deflection": weights.deflection}
-    sensors = layout.sensors()
-    w = np.concatenate([np.full(size, per_group[g]) for g, size in sensors.groups])
-    return np.diag(w / sensors.scales() ** 2)
-
-
-def equilibrium_state(a: np.ndarray, c_att: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """Zero-input equilibrium with attitude ``reference``: ``(A - I) x = 0``, ``C_att x = ref``.
-
-    Least-squares solution (exact for the rigid-body equilibria of the true
-    model; the closest one for an identified model).
-    """
-    n = a.shape[0]
-    lhs = np.vstack([a - np.eye(n), c_att])
-    rhs = np.concatenate([np.zeros(n), reference])
-    return np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+def nominal_model(model: Any, paddle_angle_deg: float = 0.0) -> Any:
+    """The design model of a fixed controller: ``model``'s spacecraft (an env's truth
+    model, :class:`spacecraft_env.FlexibleSpacecraftModel`) with nothing docked and
+    the paddles at ``paddle_angle_deg`` (0: the nominal configuration)."""
+    return model.nominal(paddle_angle_deg)
 
 
 class _EnvController(Controller):
@@ -154,7 +130,7 @@ class PD(_EnvController):
         super().__init__(env)
         if not bandwidth > 0 or not damping > 0:
             raise ValueError("bandwidth and damping must be positive")
-        self.inertia = np.diag(self.env.model.inertia(0.0)).copy()
+        self.inertia = np.diag(nominal_model(self.env.model).inertia(0.0)).copy()
         self.kp = self.inertia * bandwidth**2
         self.kd = self.inertia * 2 * damping * bandwidth
 
@@ -166,67 +142,267 @@ class PD(_EnvController):
         return self._to_action(-self.kp * err - self.kd * obs[self._rate])
 
 
-class LQR(_EnvController):
-    """Fixed LQG: LQR and a steady-state Kalman filter designed on the t = 0 true model.
+class _LQGController(_EnvController):
+    """Shared plumbing of the LQG controllers: the law, the integral, saturation."""
+
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None) -> None:
+        super().__init__(env)
+        self.weights = weights or LQRWeights()
+        self.kf: KalmanPredictor | None = None
+        model = self.env.model
+        self._c = model.C[self._meas_rows]
+        self._c_att = model.C[model.output_layout.slice("attitude")]
+        self._noise_var = np.maximum(self.env.noise_std[self._meas_rows], 1e-9) ** 2
+        self.law = LQGLaw(output_weight(self.measured_layout, self.weights), self.weights,
+                          self.dt)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.law.reset()
+        self.kf = None
+        self._pending: tuple[np.ndarray, ...] | None = None
+
+    def _filter(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, qn: np.ndarray,
+                noise_var: np.ndarray, y: np.ndarray | None,
+                info: dict[str, Any] | None) -> np.ndarray:
+        """``x_{k|k}`` from the controller's Kalman filter on the model ``(a, b, c)``.
+
+        The time update of the previous step is done here, with the torque the
+        env reports as applied (``info["torque"]``: after saturation, and with
+        anything another controller added, such as an excitation); without it,
+        with this controller's own last action.
+        """
+        if self.kf is None or self.kf.n != a.shape[0]:
+            # initial attitudes of a few degrees: 1e-3 rad^2 of prior variance
+            self.kf = KalmanPredictor(a.shape[0], initial_covariance=1e-3)
+        elif self._pending is not None:
+            pa, pb, pq = self._pending
+            applied = (np.asarray(info["torque"], dtype=float)
+                       if info is not None and "torque" in info
+                       else self._last.astype(float) * self.max_torque)
+            self.kf.predict(pa, pb, pq, applied)
+        self._pending = (a, b, qn)
+        return self.kf.correct(c, noise_var, y, a=a)
+
+    def _apply(self, gain: np.ndarray, x: np.ndarray, a: np.ndarray, obs: np.ndarray,
+               info: dict[str, Any] | None) -> np.ndarray:
+        """Torque from the law for state ``x`` (model ``a``), integral advanced; the action."""
+        ref = self._reference(info)
+        torque = self.law.torque(gain, x, equilibrium_state(a, self._c_att, ref))
+        action = self._to_action(torque)
+        saturated = bool(np.any(np.abs(torque) > self.max_torque))
+        self.law.integrate(obs[self._att] - ref, saturated)
+        return action
+
+
+class FixedLQG(_LQGController):
+    """Fixed LQG: LQR with integral action and a steady-state Kalman filter, both
+    designed once on the nominal configuration (paddles at 0 deg, nothing docked),
+    as a fixed design is.
 
     Parameters
     ----------
     env : gymnasium.Env
     weights : LQRWeights
-    process_noise : float
-        Torque-noise standard deviation (N m) assumed by the Kalman filter.
+    paddle_angle_deg : float
+        Paddle angle of the design configuration (default 0: nominal).
     """
 
-    name = "LQR"
+    name = "fixed LQG"
 
     def __init__(self, env: gym.Env, weights: LQRWeights | None = None,
-                 process_noise: float = 0.05) -> None:
-        super().__init__(env)
-        self.weights = weights or LQRWeights()
-        model = self.env.model
-        sys_ = model.discrete(0.0)
-        self.a, self.b = sys_.A, sys_.B
-        self.c = sys_.C[self._meas_rows]
-        q = (self.c.T @ output_weight(self.measured_layout, self.weights) @ self.c
-             + self.weights.eps * np.eye(model.n))
-        self.gain, _ = dlqr(self.a, self.b, q, self.weights.torque * np.eye(3))
-        noise = np.maximum(self.env.noise_std[self._meas_rows], 1e-9)
-        qn = process_noise**2 * self.b @ self.b.T + 1e-14 * np.eye(model.n)
-        p = solve_discrete_are(self.a.T, self.c.T, qn, np.diag(noise**2))
-        self.filter_gain = p @ self.c.T @ np.linalg.inv(self.c @ p @ self.c.T + np.diag(noise**2))
-        self.c_att = sys_.C[model.output_layout.slice("attitude")]
+                 paddle_angle_deg: float = 0.0) -> None:
+        super().__init__(env, weights)
+        design = nominal_model(self.env.model, paddle_angle_deg).discrete(0.0)
+        self.a, self.b = design.A, design.B
+        self.gain = self.law.design(self.a, self.b, self._c, self._c_att)
+        self.qn = PROCESS_NOISE**2 * self.b @ self.b.T + 1e-14 * np.eye(self.a.shape[0])
+        self.reset()
+
+    @single_threaded_blas
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
+        obs = self._observation(obs)
+        x = self._filter(self.a, self.b, self._c, self.qn, self._noise_var, obs[self._meas_obs],
+                         info)
+        action = (self._apply(self.gain, x, self.a, obs, info)
+                  if np.all(np.isfinite(obs[self._att])) else self._last)
+        return action
+
+
+class ScheduledLQG(_LQGController):
+    """Gain-scheduled LQG on the measured paddle angle (``info["paddle_angle"]``).
+
+    Fixed LQG designs (nominal mass, nothing docked) at paddle angles every
+    ``step_deg`` over a full turn; each step flies the design nearest the
+    measured angle. All designs share the truth model's coordinates, so the
+    Kalman state carries over from one to the next.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+    weights : LQRWeights
+    step_deg : float
+        Spacing of the design angles, deg.
+    """
+
+    name = "scheduled LQG"
+
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None,
+                 step_deg: float = 15.0) -> None:
+        super().__init__(env, weights)
+        if not 0 < step_deg <= 180:
+            raise ValueError(f"step_deg must be in (0, 180], got {step_deg}")
+        self.angles = np.deg2rad(np.arange(0.0, 360.0, step_deg))
+        self.designs = []
+        for angle in self.angles:
+            design = nominal_model(self.env.model, float(np.rad2deg(angle))).discrete(0.0)
+            self.law.tracker = None                     # each design from scratch
+            gain = self.law.design(design.A, design.B, self._c, self._c_att)
+            qn = PROCESS_NOISE**2 * design.B @ design.B.T + 1e-14 * np.eye(design.A.shape[0])
+            self.designs.append((design.A, design.B, gain, qn))
+        self.reset()
+
+    def _design(self, info: dict[str, Any] | None) -> tuple[np.ndarray, ...]:
+        if info is None or "paddle_angle" not in info:
+            raise ValueError("ScheduledLQG needs the env's info dict with 'paddle_angle'")
+        angle = float(info["paddle_angle"]) % (2 * np.pi)
+        gap = np.abs((self.angles - angle + np.pi) % (2 * np.pi) - np.pi)
+        return self.designs[int(np.argmin(gap))]
+
+    @single_threaded_blas
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
+        a, b, gain, qn = self._design(info)
+        obs = self._observation(obs)
+        x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
+                         info)
+        action = (self._apply(gain, x, a, obs, info)
+                  if np.all(np.isfinite(obs[self._att])) else self._last)
+        return action
+
+
+class _Notch:
+    """Second-order notch (biquad, transposed direct form II) on several channels."""
+
+    def __init__(self, frequency_hz: float, quality: float, dt: float, channels: int) -> None:
+        self.b, self.a = iirnotch(frequency_hz, quality, fs=1.0 / dt)
+        self.z = np.zeros((2, channels))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        b, a, z = self.b, self.a, self.z
+        y = b[0] * x + z[0]
+        z[0] = b[1] * x - a[1] * y + z[1]
+        z[1] = b[2] * x - a[2] * y
+        return y
+
+    def reset(self) -> None:
+        self.z[:] = 0.0
+
+
+class RobustLQG(_LQGController):
+    """A fixed design that no paddle angle can destabilize: rigid-body LQG behind notches.
+
+    The flexible modes' coupling changes sign with the paddle angle, so no
+    fixed design can count on it. This one leaves them alone: the LQG is
+    designed on the rigid body only (nominal inertia; attitude and rate
+    measurements), the measurements pass a notch at the first paddle and
+    antenna modes before the filter, and the bandwidth stays a decade below
+    them, as a classical design would (docs/design/control.md). It gives up
+    active vibration damping in exchange.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+    weights : LQRWeights
+    notch_hz : float
+        Notch centre, Hz (default 0.083, between the 0.077 and 0.09 Hz modes).
+    notch_quality : float
+        Notch quality factor (centre / -3 dB width; default 2: 0.06-0.11 Hz).
+    """
+
+    name = "robust LQG"
+
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None,
+                 notch_hz: float = 0.083, notch_quality: float = 2.0) -> None:
+        super().__init__(env, weights)
+        inv_j = np.linalg.inv(nominal_model(self.env.model).inertia(0.0))
+        dt = self.dt
+        self.a = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+        self.b = np.vstack([0.5 * dt * dt * inv_j, dt * inv_j])
+        layout = self.measured_layout
+        rows = np.concatenate([layout.indices("attitude"), layout.indices("rate")])
+        self._rows = rows
+        self._c = np.zeros((rows.size, 6))
+        self._c[:3, :3] = np.eye(3)
+        self._c[3:, 3:] = np.eye(3)
+        self._c_att = self._c[:3]
+        self._noise_var = self._noise_var[rows]
+        qy = output_weight(layout, self.weights)[np.ix_(rows, rows)]
+        self.law = LQGLaw(qy, self.weights, dt)
+        self.gain = self.law.design(self.a, self.b, self._c, self._c_att)
+        self.qn = PROCESS_NOISE**2 * self.b @ self.b.T + 1e-14 * np.eye(6)
+        self.notch = _Notch(notch_hz, notch_quality, dt, rows.size)
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
-        self.x_pred = np.zeros(self.a.shape[0])
+        self.notch.reset()
 
     @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
-        obs = self._check_obs(obs)
-        if obs is None:
-            self.x_pred = self.a @ self.x_pred + self.b @ (self._last * self.max_torque)
-            return self._last
-        y = obs[self._meas_obs]
-        x = self.x_pred + self.filter_gain @ (y - self.c @ self.x_pred)
-        x_ref = equilibrium_state(self.a, self.c_att, self._reference(info))
-        action = self._to_action(-self.gain @ (x - x_ref))
-        self.x_pred = self.a @ x + self.b @ (action * self.max_torque)
+        obs = self._observation(obs)
+        y = obs[self._meas_obs][self._rows]
+        if np.all(np.isfinite(y)):
+            y = self.notch(y)
+        x = self._filter(self.a, self.b, self._c, self.qn, self._noise_var, y, info)
+        action = (self._apply(self.gain, x, self.a, obs, info)
+                  if np.all(np.isfinite(obs[self._att])) else self._last)
+        return action
+
+
+class OracleLQG(_LQGController):
+    """LQG on the true model of every step, with a Kalman filter on the measured
+    outputs: the fair reference for an adaptive controller (same law, same
+    measurements, the model known instead of identified).
+
+    It reads ``info["time"]`` for the current true model.
+    """
+
+    name = "oracle LQG"
+
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None) -> None:
+        super().__init__(env, weights)
+        self.reset()
+
+    @single_threaded_blas
+    def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
+        if info is None or "time" not in info:
+            raise ValueError("OracleLQG needs the env's info dict with 'time'")
+        sys_ = self.env.model.discrete(float(info["time"]))
+        a, b = sys_.A, sys_.B
+        qn = PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(a.shape[0])
+        obs = self._observation(obs)
+        x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
+                         info)
+        gain = self.law.design(a, b, self._c, self._c_att)
+        action = (self._apply(gain, x, a, obs, info)
+                  if np.all(np.isfinite(obs[self._att])) else self._last)
         return action
 
 
 class OracleLQR(_EnvController):
     """LQR re-designed every step on the true time-varying model, full true state.
 
-    An upper bound: it reads ``info["state"]`` and ``info["time"]``.
-    Re-designs are warm-started (:class:`~controllers.riccati.RiccatiTracker`).
+    An upper bound no measured loop reaches: it reads ``info["state"]`` and
+    ``info["time"]``. Re-designs are warm-started
+    (:class:`~controllers.riccati.RiccatiTracker`).
     """
 
-    name = "oracle LQR"
+    name = "full-state oracle"
 
     def __init__(self, env: gym.Env, weights: LQRWeights | None = None) -> None:
         super().__init__(env)
         self.weights = weights or LQRWeights()
+        self.kf: KalmanPredictor | None = None
         model = self.env.model
         self._qy = output_weight(model.output_layout, self.weights)
         self._r = self.weights.torque * np.eye(3)

@@ -17,9 +17,11 @@ import numpy as np
 from tqdm import tqdm
 
 from controllers.base import Controller
-from spacecraft_conventions import DEG_PER_RAD, single_threaded_blas
+from identifiers import relative_gain_error, rigid_body_gain
+from spacecraft_conventions import DEG_PER_RAD, NOMINAL_SCALE, single_threaded_blas
 
-__all__ = ["Trajectory", "compare", "episode_metrics", "run_episode"]
+__all__ = ["AGGREGATED", "SCORED_FROM_S", "Trajectory", "compare", "controller_shares",
+           "episode_metrics", "run_episode"]
 
 
 @dataclass
@@ -48,6 +50,10 @@ class Trajectory:
         (controllers with an ``identifier``), NaN before warm-up.
     true_frequencies : (K, f) ndarray or None
     frequency_time : (K,) ndarray or None
+    gain_error : (K,) ndarray or None
+        Relative error of the identified rigid-body gain against the true
+        ``J(t)^-1`` (:func:`identifiers.relative_gain_error`) at
+        ``frequency_time``, NaN before warm-up.
     controller_stats : dict
     """
 
@@ -63,6 +69,7 @@ class Trajectory:
     identified_frequencies: np.ndarray | None = None
     true_frequencies: np.ndarray | None = None
     frequency_time: np.ndarray | None = None
+    gain_error: np.ndarray | None = None
     controller_stats: dict = field(default_factory=dict)
 
 
@@ -105,7 +112,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     observations, actions, torques, states, refs, rewards = [obs], [], [], [info["state"]], \
         [info["reference"]], []
     ident = getattr(controller, "identifier", None)
-    freq_t, freq_id, freq_true = [], [], []
+    freq_t, freq_id, freq_true, gain_err = [], [], [], []
+    layout = getattr(controller, "measured_layout", None)
+    rate_rows = (layout.indices("rate") if layout is not None and "rate" in layout.names
+                 else None)
     terminated = truncated = False
     k = 0
     with single_threaded_blas:
@@ -124,6 +134,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 freq_id.append(np.full(n_freq, np.nan) if model is None
                                else _first(model.modal()[0], n_freq))
                 freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
+                gain_err.append(np.nan if model is None or rate_rows is None else
+                                relative_gain_error(rigid_body_gain(model, rate_rows),
+                                                    np.linalg.inv(base.model.inertia(
+                                                        info["time"]))))
             k += 1
     dt = base.model.dt
     return Trajectory(
@@ -135,66 +149,178 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         identified_frequencies=np.array(freq_id) if freq_id else None,
         true_frequencies=np.array(freq_true) if freq_true else None,
         frequency_time=np.array(freq_t) if freq_t else None,
+        gain_error=np.array(gain_err) if gain_err else None,
         controller_stats=dict(getattr(controller, "stats", {})),
     )
 
 
+#: Start of the scored window after warm-up, s (``attitude_rms_after_100s_deg``).
+SCORED_FROM_S = 100.0
+#: Length of the windows whose peaks form the envelope of the stability verdict, s.
+ENVELOPE_WINDOW_S = 10.0
+#: Envelope growth over 100 s above which a loop is judged unstable.
+GROWTH_LIMIT = 2.0
+#: Envelope level (in nominal sensor scales: 1 deg, 1 cm) below which growth is not judged:
+#: sensor noise and a decaying transient wander there.
+ENVELOPE_FLOOR = 0.05
+#: Share of the last 10 % of steps with a saturated actuator that marks a limit cycle.
+SATURATION_LIMIT = 0.5
+#: Window before an event in which the loop must have settled for a settling time, s.
+SETTLED_BEFORE_S = 10.0
+
+
+def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tuple[float, float]:
+    """Growth per 100 s of the windowed peaks of ``level`` from ``start_s``, and the last peak.
+
+    The peaks of consecutive :data:`ENVELOPE_WINDOW_S` windows are fitted by
+    a straight line in log scale; the growth is ``exp(100 * slope)``.
+    """
+    dt = time[1] - time[0] if time.size > 1 else 1.0
+    width = max(1, round(ENVELOPE_WINDOW_S / dt))
+    late = level[time >= start_s]
+    count = late.size // width
+    if count < 3:
+        return float("nan"), float(np.max(level[-width:])) if level.size else float("nan")
+    peaks = late[late.size - count * width:].reshape(count, width).max(axis=1)
+    centres = np.arange(count) * width * dt
+    slope = np.polyfit(centres, np.log(np.maximum(peaks, 1e-12)), 1)[0]
+    return float(np.exp(100.0 * slope)), float(peaks[-1])
+
+
 def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
-                    stable_bound_deg: float = 1.0, after_s: float = 50.0) -> dict[str, Any]:
+                    stable_bound_deg: float = 1.0) -> dict[str, Any]:
     """Scores of one episode.
+
+    Parameters
+    ----------
+    traj : Trajectory
+    model : spacecraft_env.FlexibleSpacecraftModel
+        The env's truth model (output layout, sample time).
+    settle_tol_deg : float
+        Attitude-error band of the settling times, deg.
+    stable_bound_deg : float
+        Attitude error the last 10 % of a stable episode stays below, deg.
 
     Returns
     -------
     dict
         ``attitude_rms_deg`` and ``attitude_peak_deg`` (true attitude error,
-        all axes, after the first step), ``attitude_rms_after_deg`` (the same
-        RMS from ``after_s`` on, e.g. once an identifier has warmed up),
-        ``settling_s`` (per scenario event: time after the event until the
-        error stays below ``settle_tol_deg``;
-        None if it never does), ``vibration_rms_mm`` (true tip deflections),
-        ``torque_rms_Nm`` and ``effort_N2m2s`` (integral of |u|^2),
-        ``return``, ``stable`` (not terminated, finite, and the error over the
-        last 10 % of the episode below ``stable_bound_deg``).
+        all axes, after the first step); ``attitude_rms_after_100s_deg`` and
+        ``vibration_rms_after_100s_mm`` (from :data:`SCORED_FROM_S` on, once
+        an identifier has warmed up); ``settling_s`` (per scenario event: time
+        after the event until the error stays below ``settle_tol_deg``; None
+        if it never does, or if the loop had not settled in the
+        :data:`SETTLED_BEFORE_S` before the event, which
+        ``settled_before_event`` tells); ``vibration_rms_mm`` (true tip
+        deflections); ``torque_rms_Nm`` and ``effort_N2m2s`` (integral of
+        |u|^2); ``return``; ``envelope_growth_per_100s`` (growth of the
+        windowed peaks of the attitude error and the deflections, in their
+        nominal scales, from t = 100 s, or from the middle of a shorter
+        episode); ``saturated_share`` (share of the last 10 % of steps with an
+        actuator at its limit); ``verdict`` and ``stable``.
+
+    Notes
+    -----
+    The verdict is the first that applies of ``"diverged"`` (non-finite
+    state), ``"terminated"`` (attitude bound left), ``"growing"`` (envelope
+    growth above :data:`GROWTH_LIMIT` per 100 s with the last peak above
+    :data:`ENVELOPE_FLOOR`: an unstable loop, however slowly it grows),
+    ``"saturated"`` (a limit cycle: an actuator at its limit for more than
+    :data:`SATURATION_LIMIT` of the last 10 %), ``"offset"`` (the last 10 %
+    of the error above ``stable_bound_deg``), else ``"stable"``. A final
+    error alone cannot tell an unstable loop that has not yet grown large
+    from a stable one.
     """
     layout = model.output_layout
     err = (traj.states[1:] @ model.C[layout.slice("attitude")].T - traj.reference[1:]) \
         * DEG_PER_RAD
     err_norm = np.abs(err).max(axis=1)
-    defl = traj.states[1:] @ model.C[layout.slice("deflection")].T * 1e3
+    defl_m = traj.states[1:] @ model.C[layout.slice("deflection")].T
+    defl = defl_m * 1e3
     dt = model.dt
-    settling = []
+    time = traj.time
+    settling, settled_before = [], []
+    before_steps = round(SETTLED_BEFORE_S / dt)
     for event in traj.events or ():
-        after = traj.time >= event
+        after = time >= event
         if not after.any():
             settling.append(None)
+            settled_before.append(None)
             continue
+        first = int(np.argmax(after))
+        window = err_norm[max(0, first - before_steps):first]
+        calm = bool(window.size and window.max() <= settle_tol_deg)
+        settled_before.append(calm)
         outside = np.flatnonzero(after & (err_norm > settle_tol_deg))
-        if outside.size == 0:
-            settling.append(0.0)
-        elif outside[-1] == len(err_norm) - 1:
+        if not calm or (outside.size and outside[-1] == len(err_norm) - 1):
             settling.append(None)
+        elif outside.size == 0:
+            settling.append(0.0)
         else:
-            settling.append(float(traj.time[outside[-1] + 1] - event))
-    tail = err_norm[-max(1, len(err_norm) // 10):]
+            settling.append(float(time[outside[-1] + 1] - event))
+    level = np.maximum(err_norm / (NOMINAL_SCALE["attitude"] * DEG_PER_RAD),
+                       np.abs(defl_m).max(axis=1) / NOMINAL_SCALE["deflection"])
     finite = bool(np.all(np.isfinite(traj.states)))
-    late = traj.time >= after_s
+    scored_from = SCORED_FROM_S if time.size and time[-1] > 1.5 * SCORED_FROM_S \
+        else (0.5 * time[-1] if time.size else 0.0)
+    growth, last_peak = (_envelope_growth(time, level, scored_from) if finite
+                         else (float("nan"), float("nan")))
+    tail_n = max(1, len(err_norm) // 10)
+    saturated = (float(np.mean(np.any(np.abs(traj.actions[-tail_n:]) >= 0.999, axis=1)))
+                 if traj.actions.size else 0.0)
+    if not finite:
+        verdict = "diverged"
+    elif traj.terminated:
+        verdict = "terminated"
+    elif growth > GROWTH_LIMIT and last_peak > ENVELOPE_FLOOR:
+        verdict = "growing"
+    elif saturated > SATURATION_LIMIT:
+        verdict = "saturated"
+    elif err_norm[-tail_n:].max() >= stable_bound_deg:
+        verdict = "offset"
+    else:
+        verdict = "stable"
+    late = time >= SCORED_FROM_S
     return {
         "attitude_rms_deg": float(np.sqrt(np.mean(err**2))),
-        "attitude_rms_after_deg": (float(np.sqrt(np.mean(err[late] ** 2))) if late.any()
-                                   else float("nan")),
+        "attitude_rms_after_100s_deg": (float(np.sqrt(np.mean(err[late] ** 2))) if late.any()
+                                        else float("nan")),
         "attitude_peak_deg": float(err_norm.max()),
         "settling_s": settling,
+        "settled_before_event": settled_before,
         "vibration_rms_mm": float(np.sqrt(np.mean(defl**2))),
+        "vibration_rms_after_100s_mm": (float(np.sqrt(np.mean(defl[late] ** 2))) if late.any()
+                                        else float("nan")),
         "torque_rms_Nm": float(np.sqrt(np.mean(traj.torque**2))),
         "effort_N2m2s": float(np.sum(traj.torque**2) * dt),
         "return": float(traj.rewards.sum()),
-        "stable": bool(finite and not traj.terminated and tail.max() < stable_bound_deg),
+        "envelope_growth_per_100s": growth,
+        "saturated_share": saturated,
+        "verdict": verdict,
+        "stable": verdict == "stable",
     }
+
+
+def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
+    """Excitation RMS torque (N m) and the shares of steps with a rejected gain and
+    flown by a fallback, from a controller's ``stats`` (0 for controllers
+    without them)."""
+    steps = max(1, int(stats.get("steps", 0)))
+    return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
+            "rejected_share": stats.get("rejected", 0) / steps,
+            "fallback_share": stats.get("fallback_steps", 0) / steps}
+
+
+#: Scalar metrics aggregated by :func:`compare` (median and spread over seeds).
+AGGREGATED = ("attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_deg",
+              "vibration_rms_mm", "vibration_rms_after_100s_mm", "torque_rms_Nm",
+              "effort_N2m2s", "return", "envelope_growth_per_100s", "excitation_rms_Nm",
+              "rejected_share", "fallback_share")
 
 
 def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
             seeds: Sequence[int], options: dict[str, Any] | None = None,
-            progress: bool = True) -> tuple[dict[str, dict], dict[str, Trajectory]]:
+            progress: bool = True) -> tuple[dict[str, dict], dict[str, list[Trajectory]]]:
     """Run every controller on the same seeds.
 
     Parameters
@@ -210,36 +336,41 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
     Returns
     -------
     table : dict
-        Name -> {"per_seed": [metrics...], "mean": {...}, "std": {...},
-        "stable_runs": int, "runs": int}.
-    first : dict
-        Name -> trajectory of the first seed (for plots).
+        Name -> {"per_seed": [metrics...], "median", "q25", "q75", "mean",
+        "std": {metric: value} over :data:`AGGREGATED`, "stable_runs": int,
+        "verdicts": {verdict: count}, "runs": int}.
+    trajectories : dict
+        Name -> the trajectory of every seed (for plots of the spread).
     """
-    table, first = {}, {}
+    table: dict[str, dict] = {}
+    trajectories: dict[str, list[Trajectory]] = {}
     bar = tqdm(total=len(controllers) * len(seeds), desc="closed loop", disable=not progress)
     for name, factory in controllers.items():
         env = make_env()
         ctrl = factory(env)
         per_seed = []
-        for i, seed in enumerate(seeds):
+        for seed in seeds:
             traj = run_episode(env, ctrl, seed=seed, options=options)
             m = episode_metrics(traj, env.unwrapped.model)
             m["seed"] = int(seed)
             m["controller_stats"] = traj.controller_stats
+            m.update(controller_shares(traj.controller_stats))
             per_seed.append(m)
-            if i == 0:
-                first[name] = traj
+            trajectories.setdefault(name, []).append(traj)
             bar.update()
         env.close()
-        keys = ["attitude_rms_deg", "attitude_rms_after_deg", "attitude_peak_deg",
-                "vibration_rms_mm", "torque_rms_Nm", "effort_N2m2s", "return"]
-        arr = {k: np.array([m[k] for m in per_seed]) for k in keys}
+        arr = {k: np.array([m[k] for m in per_seed], dtype=float) for k in AGGREGATED}
         table[name] = {
             "per_seed": per_seed,
-            "mean": {k: float(np.mean(v)) for k, v in arr.items()},
-            "std": {k: float(np.std(v)) for k, v in arr.items()},
+            "median": {k: float(np.nanmedian(v)) for k, v in arr.items()},
+            "q25": {k: float(np.nanpercentile(v, 25)) for k, v in arr.items()},
+            "q75": {k: float(np.nanpercentile(v, 75)) for k, v in arr.items()},
+            "mean": {k: float(np.nanmean(v)) for k, v in arr.items()},
+            "std": {k: float(np.nanstd(v)) for k, v in arr.items()},
             "stable_runs": int(sum(m["stable"] for m in per_seed)),
+            "verdicts": {v: sum(m["verdict"] == v for m in per_seed)
+                         for v in sorted({m["verdict"] for m in per_seed})},
             "runs": len(per_seed),
         }
     bar.close()
-    return table, first
+    return table, trajectories

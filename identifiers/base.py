@@ -372,6 +372,17 @@ class OnlineIdentifier(ABC):
         x = self._current_state()
         return None if x is None else x.copy()
 
+    def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
+        """State estimate at the current sample given its measurement, ``x_{k|k}``.
+
+        :attr:`state` is the prediction ``x_{k|k-1}`` made before ``y_k`` was
+        seen; a controller that acts on ``y_k`` before passing it to
+        :meth:`update` uses this instead. Identifiers with a Kalman filter
+        correct the prediction with ``y_k`` (non-finite entries ignored);
+        the default returns the prediction. The identifier is not changed.
+        """
+        return self.state
+
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(n={self.n}, p={self.p}, forgetting={self.forgetting}, "
                 f"samples={self.n_samples}, skipped={self.n_skipped})")

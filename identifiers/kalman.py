@@ -107,31 +107,57 @@ class KalmanPredictor:
         (n,) ndarray
             ``x_{k+1|k}``.
         """
-        x, p = self.x, self.P
-        if y is not None:
+        self.correct(c, r, y, a=a)
+        return self.predict(a, b, q, u)
+
+    def filtered(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> np.ndarray:
+        """``x_{k|k}``: the prediction corrected by ``y_k``, without changing the filter."""
+        return self._correction(c, r, y)[0]
+
+    def correct(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None,
+                a: np.ndarray | None = None) -> np.ndarray:
+        """Measurement update with ``y_k``: the filter now holds ``x_{k|k}`` (returned).
+
+        ``a`` (the step's transition matrix) only serves to record the
+        predictor gain ``K_k = A L_k`` in :attr:`gain`.
+        """
+        x, p, gain, innovation, s = self._correction(c, r, y)
+        if gain is not None:
             seen = np.isfinite(y)
-            if seen.any():
-                cs = c[seen]
-                pct = p @ cs.T
-                s = cs @ pct + np.diag(r[seen])
-                e = y[seen] - cs @ x
-                try:
-                    gain = np.linalg.solve(s, pct.T).T            # filter gain L
-                except np.linalg.LinAlgError:
-                    gain = np.zeros_like(pct)
-                x = x + gain @ e
-                p = p - gain @ pct.T
-                full = np.zeros((self.n, c.shape[0]))
-                full[:, seen] = a @ gain
-                self.gain = full
-                self.innovation = np.full(c.shape[0], np.nan)
-                self.innovation[seen] = e
-                self.innovation_covariance = s if seen.all() else None
-        x = a @ x + b @ u
-        p = a @ p @ a.T + q
-        self.x = x
-        self.P = 0.5 * (p + p.T)
+            full = np.zeros((self.n, c.shape[0]))
+            full[:, seen] = gain if a is None else a @ gain
+            self.gain = full
+            self.innovation = innovation
+            self.innovation_covariance = s if seen.all() else None
+        self.x, self.P = x, p
         return x
+
+    def predict(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Time update with the input applied: the filter now holds ``x_{k+1|k}``."""
+        p = a @ self.P @ a.T + q
+        self.x = a @ self.x + b @ u
+        self.P = 0.5 * (p + p.T)
+        return self.x
+
+    def _correction(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> tuple:
+        """``(x_{k|k}, P_{k|k}, L, innovation, S)``; the last three None without data."""
+        x, p = self.x, self.P
+        if y is None:
+            return x, p, None, None, None
+        seen = np.isfinite(y)
+        if not seen.any():
+            return x, p, None, None, None
+        cs = c[seen]
+        pct = p @ cs.T
+        s = cs @ pct + np.diag(r[seen])
+        e = y[seen] - cs @ x
+        try:
+            gain = np.linalg.solve(s, pct.T).T            # filter gain L
+        except np.linalg.LinAlgError:
+            gain = np.zeros_like(pct)
+        innovation = np.full(c.shape[0], np.nan)
+        innovation[seen] = e
+        return x + gain @ e, p - gain @ pct.T, gain, innovation, s
 
     def inflate(self, covariance: ArrayLike) -> None:
         """Add ``covariance`` to ``P`` (state uncertainty after a detected change)."""

@@ -132,6 +132,10 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         memory): they change at once at a docking, and three well-excited
         gains per axis need little data. See
         :class:`~identifiers.rls.RecursiveLeastSquares` (vector forgetting).
+    rigid_floor : float
+        Information floor of the rigid gains (unit-RMS regressors): it bounds
+        their covariance when the data stop exciting them (in regulation)
+        without pulling them toward 0.
     warmup : int
         Samples collected before the modes are found and a model is given
         (default 500: 50 s at dt = 0.1 s).
@@ -153,7 +157,11 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         change (old information discounted that much).
     process_torque : float
         Standard deviation (N m) of the unmodelled torque the Kalman filter
-        assumes per axis.
+        assumes per axis: a stand-in for everything the model gets wrong, so
+        large (default 10) that the filter follows the sensors wherever the
+        model and they disagree. Measured on docking at 40 dB, 0.05 -> 10
+        raised the one-step rate VAF from 98.2 to 99.8 % (persistence: 99.9)
+        and the 10 s deflection VAF from 81 to 91 %.
     refresh : int
         Samples between exports of the minimal model (the Kalman filter
         runs every sample).
@@ -167,6 +175,14 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         None keeps the warm-up's modes.
     history : int
         Most recent samples kept for the searches (default 3000: 300 s).
+    gate : float or None
+        Excitation-gated forgetting of the gains (see
+        :class:`~identifiers.rls.RecursiveLeastSquares`): a sample forgets
+        only in proportion to how informative it is, relative to ``gate``
+        times the typical sample that set the estimate (default 0.25). In a
+        closed loop that holds the spacecraft still the estimates then keep
+        what they learnt instead of drifting with the sensor noise. None:
+        plain forgetting.
     outlier_threshold : float, optional
         Reject samples whose normalized innovation exceeds this on any
         channel (default 100).
@@ -187,11 +203,12 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
                  dt: float = 0.1, forgetting: float = 0.998, rigid_forgetting: float = 0.995,
-                 warmup: int = 500,
+                 rigid_floor: float = 1e-4, warmup: int = 500,
                  prior: Sequence[Resonator] | None = None, highpass: float = 0.97,
                  detect_changes: bool = True, change_threshold: float = 6.0,
-                 discount: float = 10.0, process_torque: float = 0.05, refresh: int = 10,
+                 discount: float = 10.0, process_torque: float = 10.0, refresh: int = 10,
                  rediscover: int | None = 500, history: int = 3000,
+                 gate: float | None = 0.25,
                  outlier_threshold: float | None = 100.0,
                  input_scale: ArrayLike | None = None, output_scale: ArrayLike | None = None,
                  max_abs: float = 1e6) -> None:
@@ -219,8 +236,14 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         if not 0 < rigid_forgetting <= 1:
             raise ValueError(f"rigid_forgetting must be in (0, 1], got {rigid_forgetting}")
         self.rigid_forgetting = float(rigid_forgetting)
+        if not (np.isfinite(rigid_floor) and rigid_floor >= 0):
+            raise ValueError(f"rigid_floor must be >= 0, got {rigid_floor}")
+        self.rigid_floor = float(rigid_floor)
         self.rediscover = None if rediscover is None else _positive_int("rediscover", rediscover)
         self.history = _positive_int("history", history)
+        if gate is not None and not (np.isfinite(gate) and gate > 0):
+            raise ValueError(f"gate must be a positive fraction or None, got {gate}")
+        self.gate = None if gate is None else float(gate)
         self.outlier_threshold = (None if outlier_threshold is None
                                   else _positive_float("outlier_threshold", outlier_threshold))
         scales = (np.full(3, NOMINAL_TORQUE) if input_scale is None else input_scale,
@@ -347,13 +370,20 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         # collinearity during transients
         floor = np.full(size, 1e-4)
         floor[self._bank.slices["flexible"]] = FLEXIBLE_FLOOR
+        for block in ("attitude", "rate"):
+            floor[self._bank.slices[block]] = self.rigid_floor
         # the rigid gains forget faster than the rest: a docking changes them at once,
         # and three well-excited gains per axis need little memory
         lam = np.full(size, self.forgetting)
         for block in ("attitude", "rate"):
             lam[self._bank.slices[block]] = self.rigid_forgetting
+        # the rigid gains are never 0: their floor bounds P but does not pull them
+        hold = np.zeros(size, dtype=bool)
+        for block in ("attitude", "rate"):
+            hold[self._bank.slices[block]] = True
         self._fits = [(rows, cols, RecursiveLeastSquares(rows.size, cols.size, lam[cols],
-                                                         1e4, regularization=floor[cols]))
+                                                         1e4, regularization=floor[cols],
+                                                         hold=hold[cols], gate=self.gate))
                       for rows, cols in self._regression_groups()]
         self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
         if self._detector is None:
@@ -563,6 +593,33 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _current_state(self) -> np.ndarray | None:
         return None if self._mats is None else self._kf.x
+
+    def input_uncertainty(self) -> np.ndarray | None:
+        """Covariance (3, 3) of the rigid gains' torque directions, from the rate
+        regression's RLS (larger = less known), for shaping an excitation;
+        None before warm-up."""
+        if not self._fits:
+            return None
+        bank = self._bank
+        rate_cols = np.arange(bank.size)[bank.slices["rate"]]
+        for rows, cols, rls in self._fits:
+            if rows[0] == self.layout.slice("rate").start:
+                where = np.flatnonzero(np.isin(cols, rate_cols))
+                scale = self._scale[rate_cols]
+                return rls.P[np.ix_(where, where)] / np.outer(scale, scale)
+        return None
+
+    def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
+        """``x_{k|k}``: the Kalman filter's prediction corrected by ``y_k`` (physical units)."""
+        if not self.ready or self._mats is None:
+            return None
+        y = np.asarray(y, dtype=float).reshape(-1)
+        if y.shape != (self.n_outputs,):
+            raise ValueError(f"y must have {self.n_outputs} entries, got shape {y.shape}")
+        with np.errstate(invalid="ignore", over="ignore"):
+            y_n = y / self._sy
+        y_n = np.where(np.abs(y_n) <= self.max_abs, y_n, np.nan)
+        return self._kf.filtered(self._mats[2], self._r, y_n)
 
     @property
     def events(self) -> list[ChangeEvent]:

@@ -88,6 +88,22 @@ class RecursiveLeastSquares:
         (``diag(delta)``). Default ``1 / initial_covariance`` (pull ``P``
         back to ``P_0``); 0 gives plain exponentially weighted least squares,
         whose ``P`` grows without bound when nothing is excited.
+    gate : float, optional
+        Forget only as much as the sample informs (excitation-gated
+        forgetting): each update's forgetting ``1 - lambda`` (and the floor's
+        pseudo-row) is scaled by ``min(1, phi^T P phi / (gate d (1 - lambda)))``,
+        the new sample's information relative to that of the data which set
+        ``P`` (``d (1 - lambda)`` at steady state). Where the regressors fall
+        quiet (a regulator holding the spacecraft still) nothing is forgotten,
+        so the estimate neither drifts with the noise nor loses what it knew;
+        as informative data come back, the nominal memory returns. None
+        (default): plain forgetting, exactly weighted least squares.
+    hold : (d,) array_like of bool, optional
+        Coordinates whose floor bounds ``P`` without pulling the estimate:
+        the floor is Tikhonov regularization toward 0, right for couplings
+        that may be absent and wrong for a gain known to be non-zero (a
+        rigid body's inverse inertia would decay toward 0 whenever the
+        data stop exciting it). Default: none held.
 
     Attributes
     ----------
@@ -98,7 +114,8 @@ class RecursiveLeastSquares:
     """
 
     def __init__(self, n_outputs: int, n_regressors: int, forgetting: float | ArrayLike = 1.0,
-                 initial_covariance: float = 1.0, regularization: float | None = None) -> None:
+                 initial_covariance: float = 1.0, regularization: float | None = None,
+                 hold: ArrayLike | None = None, gate: float | None = None) -> None:
         if n_outputs < 1 or n_regressors < 1:
             raise ValueError("n_outputs and n_regressors must be >= 1")
         lam = np.asarray(forgetting, dtype=float)
@@ -128,7 +145,17 @@ class RecursiveLeastSquares:
             raise ValueError(f"regularization must be >= 0 (a scalar or ({n_regressors},)), "
                              f"got {regularization}")
         self.regularization = delta.copy()
+        hold_mask = np.zeros(n_regressors, dtype=bool) if hold is None else np.asarray(hold)
+        if hold_mask.shape != (n_regressors,) or hold_mask.dtype != bool:
+            raise ValueError(f"hold must be a boolean array of shape ({n_regressors},)")
+        self.hold = hold_mask.copy()
         self._pseudo_weights = np.sqrt(n_regressors * (1.0 - self._lam) * delta)
+        if gate is not None and not (np.isfinite(gate) and gate > 0):
+            raise ValueError(f"gate must be a positive fraction or None, got {gate}")
+        self.gate = None if gate is None else float(gate)
+        # phi^T P phi of a regressor as informative as the data that set P, at steady state
+        self._gate_level = (None if gate is None
+                            else float(gate) * n_regressors * float((1.0 - self._lam).max()))
         self.theta = np.zeros((n_outputs, n_regressors), order="F")
         self.reset()
 
@@ -163,16 +190,26 @@ class RecursiveLeastSquares:
             The a-priori error, or None if the update was refused (a
             non-finite or overflowing gain or error; nothing changed).
         """
-        if self._rescale is not None:
-            self._q *= self._rescale                             # per-parameter forgetting
+        share = 1.0
+        if self._gate_level is not None:
+            p_phi0 = dsymv(self._scale, self._q, phi, lower=0)
+            share = min(1.0, float(phi @ p_phi0) / self._gate_level)
+        if share < 1.0:
+            lam_vec = 1.0 - (1.0 - self._lam) * share
+            lam = float(lam_vec.max())
+            rescale = (None if self.forgetting is not None
+                       else np.outer(np.sqrt(lam / lam_vec), np.sqrt(lam / lam_vec)))
+        else:
+            lam, rescale = self._lam_scalar, self._rescale
+        if rescale is not None:
+            self._q *= rescale                                   # per-parameter forgetting
         scale = self._scale
-        lam = self._lam_scalar
         p_phi = dsymv(scale, self._q, phi, lower=0)          # P phi, upper triangle only
         denom = lam + phi @ p_phi
         err = y - self.theta @ phi
         if not self._safe(p_phi, denom, err):
-            if self._rescale is not None:
-                self._q /= self._rescale
+            if rescale is not None:
+                self._q /= rescale
             self.n_rejected += 1
             return None
         gain = p_phi / denom
@@ -182,7 +219,7 @@ class RecursiveLeastSquares:
         if lam < 1.0:
             self._scale /= lam
             if self._pseudo_weights[self._cycle] > 0.0:
-                self._pseudo_update()
+                self._pseudo_update(np.sqrt(share))
             else:
                 self._cycle = (self._cycle + 1) % self.theta.shape[1]
             if self._scale > 1e8:
@@ -201,18 +238,18 @@ class RecursiveLeastSquares:
         return peak_p * peak_p / denom < _OVERFLOW_GUARD and peak_e * peak_p / denom \
             < _OVERFLOW_GUARD
 
-    def _pseudo_update(self) -> None:
+    def _pseudo_update(self, share: float = 1.0) -> None:
         """Rank-1 pseudo-observation ``0 = Theta (w e_i)`` (regularized forgetting)."""
         i = self._cycle
         self._cycle = (i + 1) % self.theta.shape[1]
-        w = self._pseudo_weights[i]
+        w = self._pseudo_weights[i] * share
         q = self._q
         column = np.concatenate((q[:i, i], q[i, i:]))        # column i of the symmetric Q
         p_phi = column * (self._scale * w)                   # P (w e_i)
         denom = 1.0 + w * p_phi[i]
-        gain = p_phi / denom
-        err = -w * self.theta[:, i]
-        self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
+        if not self.hold[i]:                  # pull toward 0; a held coordinate keeps its value
+            err = -w * self.theta[:, i]
+            self.theta = dger(1.0, err, p_phi / denom, a=self.theta, overwrite_a=True)
         self._q = dsyr(-1.0 / (self._scale * denom), p_phi, a=q, lower=0, overwrite_a=True)
 
     def _renormalize(self) -> None:

@@ -1,11 +1,13 @@
 """Time-varying flexible spacecraft (ETS-VIII) truth model and Gymnasium environments.
 
-Importing the package registers three environments (250 s episodes,
+Importing the package registers four environments (250 s episodes,
 ``max_episode_steps=2500`` at dt = 0.1 s):
 
 * ``FlexibleSpacecraft-v0``: constant (LTI) plant,
 * ``FlexibleSpacecraftDocking-v0``: two modules dock at t = 100 s and 180 s,
-* ``FlexibleSpacecraftSolarRotation-v0``: paddles turn at 0.2 deg/s.
+* ``FlexibleSpacecraftSolarRotation-v0``: paddles turn at 0.2 deg/s from 0 deg,
+* ``FlexibleSpacecraftPaddleRotation-v0``: paddles turn from 90 to 180 deg,
+  where a design made at 0 deg goes unstable.
 
 ``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v0")`` works
 without a prior import.
@@ -31,6 +33,7 @@ from spacecraft_env.scenarios import (
     Configuration,
     ConstantScenario,
     DockingScenario,
+    PaddleRotationScenario,
     Scenario,
     SolarRotationScenario,
     make_scenario,
@@ -50,6 +53,7 @@ __all__ = [
     "DockingScenario",
     "FlexibleSpacecraftEnv",
     "FlexibleSpacecraftModel",
+    "PaddleRotationScenario",
     "RewardWeights",
     "Scenario",
     "SolarRotationScenario",

@@ -45,6 +45,7 @@ from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.scenarios import (
     CombinedScenario,
     Configuration,
+    ConstantScenario,
     DockingScenario,
     Scenario,
     SolarRotationScenario,
@@ -471,6 +472,11 @@ class FlexibleSpacecraftModel:
         new._key = _scenario_key(new.scenario)
         new._cache = OrderedDict()
         return new
+
+    def nominal(self, paddle_angle_deg: float = 0.0) -> FlexibleSpacecraftModel:
+        """The design model of a fixed controller: this spacecraft with nothing docked
+        and the paddles at ``paddle_angle_deg`` (0: the nominal configuration), constant."""
+        return self.with_scenario(ConstantScenario(paddle_angle_deg=float(paddle_angle_deg)))
 
     def clear_cache(self) -> None:
         """Forget every cached discrete model."""

@@ -6,6 +6,7 @@ Attitude regulation or slew of the ETS-VIII rigid-flexible model under
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -114,8 +115,10 @@ class FlexibleSpacecraftEnv(gym.Env):
         (rad/s, (3,)) and ``"reference_attitude"`` (rad, (3,)).
     Info
         ``"time"`` (s), ``"state"`` (true state, float64, (n,)), ``"torque"``
-        (applied control torque, N m, after clipping and scaling),
-        ``"reference"`` (rad).
+        (applied control torque, N m, after clipping, scaling, the actuator
+        delay and rate limit),
+        ``"reference"`` (rad), ``"paddle_angle"`` (rad: the solar-paddle drive
+        encoder, which a real spacecraft reads).
 
     Parameters
     ----------
@@ -146,6 +149,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         Constant external torque, N m.
     disturbance_std : float
         Standard deviation of a white external torque, N m.
+    actuator_delay_steps : int
+        Transport delay of the actuators, samples (default 0): the torque
+        commanded at step k acts from step k + ``actuator_delay_steps``.
+    torque_rate_limit : float or None
+        Slew-rate limit of each actuator, N m/s (default None: unlimited):
+        the applied torque moves toward the (delayed) command by at most
+        ``torque_rate_limit * dt`` per step, as a reaction wheel's
+        acceleration limit does.
     reward_weights : RewardWeights, optional
     max_attitude_deg : float
         Termination bound on any attitude angle, deg.
@@ -160,7 +171,9 @@ class FlexibleSpacecraftEnv(gym.Env):
                  max_torque: float = 10.0, dt: float = 0.1, task: str = "regulation",
                  initial_attitude_deg: float = 2.0, slew_range_deg: float = 10.0,
                  disturbance_torque: float | Sequence[float] = 0.0,
-                 disturbance_std: float = 0.0, reward_weights: RewardWeights | None = None,
+                 disturbance_std: float = 0.0, actuator_delay_steps: int = 0,
+                 torque_rate_limit: float | None = None,
+                 reward_weights: RewardWeights | None = None,
                  max_attitude_deg: float = 20.0, render_mode: str | None = None) -> None:
         super().__init__()
         if params is None:
@@ -207,6 +220,17 @@ class FlexibleSpacecraftEnv(gym.Env):
         self.max_attitude = float(max_attitude_deg) * RAD_PER_DEG
         self.disturbance_torque = _vector3("disturbance_torque", disturbance_torque)
         self.disturbance_std = float(disturbance_std)
+        if (not isinstance(actuator_delay_steps, int | np.integer)
+                or isinstance(actuator_delay_steps, bool) or actuator_delay_steps < 0):
+            raise ValueError(f"actuator_delay_steps must be an integer >= 0, "
+                             f"got {actuator_delay_steps!r}")
+        self.actuator_delay_steps = int(actuator_delay_steps)
+        if torque_rate_limit is not None:
+            torque_rate_limit = float(torque_rate_limit)
+            if not (np.isfinite(torque_rate_limit) and torque_rate_limit > 0):
+                raise ValueError(f"torque_rate_limit must be > 0 N m/s or None, "
+                                 f"got {torque_rate_limit}")
+        self.torque_rate_limit = torque_rate_limit
         self.reward_weights = reward_weights or RewardWeights()
         if not isinstance(self.reward_weights, RewardWeights):
             raise TypeError("reward_weights must be a RewardWeights instance")
@@ -218,6 +242,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x = np.zeros(self.model.n)
         self._ref = np.zeros(3)
         self._k = 0
+        self._commands: deque = deque()
         self._torque = np.zeros(3)
         self._renderer = None
 
@@ -285,8 +310,10 @@ class FlexibleSpacecraftEnv(gym.Env):
         return obs.astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        return {"time": self._k * self.model.dt, "state": self._x.copy(),
-                "torque": self._torque.copy(), "reference": self._ref.copy()}
+        t = self._k * self.model.dt
+        return {"time": t, "state": self._x.copy(), "torque": self._torque.copy(),
+                "reference": self._ref.copy(),
+                "paddle_angle": float(self.model.configuration(t).paddle_angle)}
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -323,6 +350,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._ref = ref
         self._k = 0
         self._torque = np.zeros(3)
+        self._commands = deque([np.zeros(3)] * self.actuator_delay_steps)
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
@@ -340,6 +368,12 @@ class FlexibleSpacecraftEnv(gym.Env):
             raise ValueError(f"action must be finite (no NaN or inf), got {a.tolist()}")
         np.clip(a, -1.0, 1.0, out=a)
         torque = a * self.max_torque
+        if self.actuator_delay_steps:
+            self._commands.append(torque)
+            torque = self._commands.popleft()
+        if self.torque_rate_limit is not None:
+            move = self.torque_rate_limit * self.model.dt
+            torque = self._torque + np.clip(torque - self._torque, -move, move)
         self._torque = torque
         total = torque + self.disturbance_torque
         if self.disturbance_std > 0:

@@ -19,6 +19,7 @@ ENV_IDS: Mapping[str, str] = MappingProxyType({
     "FlexibleSpacecraft-v0": "constant",
     "FlexibleSpacecraftDocking-v0": "docking",
     "FlexibleSpacecraftSolarRotation-v0": "solar_rotation",
+    "FlexibleSpacecraftPaddleRotation-v0": "paddle_rotation",
 })
 
 #: Episode length of every registered id: 250 s at dt = 0.1 s.

@@ -16,6 +16,14 @@ Scenarios
     system mass centre unchanged.
 ``solar_rotation``
     Paper Case 2: both paddles turn about pitch at 0.2 deg/s.
+``paddle_rotation``
+    The paddles turn from 90 deg to 180 deg in one 250 s episode (0.36
+    deg/s). A geostationary satellite's paddles track the sun through 360 deg
+    a day, so a controller designed with the paddles at 0 deg meets every
+    angle; past about 96 deg the paddle mode's coupling to the body changes
+    sign relative to that design (it goes with cos and sin of the angle) and a
+    fixed design that damps the mode actively destabilizes it. The episode is
+    that part of the day, compressed.
 ``docking_solar_rotation``
     Both at once.
 
@@ -26,6 +34,7 @@ variant (docking times and masses, rotation rate) from a seeded
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -40,6 +49,7 @@ __all__ = [
     "Configuration",
     "ConstantScenario",
     "DockingScenario",
+    "PaddleRotationScenario",
     "Scenario",
     "SolarRotationScenario",
     "make_scenario",
@@ -202,9 +212,32 @@ class SolarRotationScenario(Scenario):
 
     def randomized(self, rng: np.random.Generator) -> SolarRotationScenario:
         """Draw the rotation rate uniformly from ``rate_range``."""
-        return SolarRotationScenario(rate_deg_s=float(rng.uniform(*self.rate_range)),
-                                     initial_angle_deg=self.initial_angle_deg,
-                                     rate_range=self.rate_range)
+        return dataclasses.replace(self, rate_deg_s=float(rng.uniform(*self.rate_range)))
+
+
+@dataclass(frozen=True)
+class PaddleRotationScenario(SolarRotationScenario):
+    """The paddles turn through the angles where a nominal design fails.
+
+    Same physics as :class:`SolarRotationScenario`; the defaults start the
+    paddles at 90 deg and turn them at 0.36 deg/s, so one 250 s episode
+    covers 90-180 deg (the nominal design, made at 0 deg, is unstable from
+    about 96 deg on). Give ``initial_angle_deg`` for any other start.
+
+    Parameters
+    ----------
+    rate_deg_s : float
+        Rotation rate, deg/s.
+    initial_angle_deg : float
+        Paddle angle at t = 0, deg.
+    rate_range : (float, float)
+        Rate range (deg/s) for :meth:`randomized`.
+    """
+
+    rate_deg_s: float = 0.36
+    initial_angle_deg: float = 90.0
+    rate_range: tuple = (0.2, 0.5)
+    name = "paddle_rotation"
 
 
 @dataclass(frozen=True)
@@ -232,6 +265,7 @@ SCENARIOS: dict[str, type[Scenario]] = {
     "constant": ConstantScenario,
     "docking": DockingScenario,
     "solar_rotation": SolarRotationScenario,
+    "paddle_rotation": PaddleRotationScenario,
     "docking_solar_rotation": CombinedScenario,
 }
 

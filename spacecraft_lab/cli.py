@@ -8,8 +8,8 @@ Commands
     The paper's identification experiment for every method
     (:func:`spacecraft_lab.identification.run_identification`).
 ``control``
-    Fixed LQR, PD, adaptive LQR and oracle LQR compared in closed loop
-    (:func:`spacecraft_lab.control.run_control`).
+    Fixed, robust and scheduled LQG, PD, adaptive LQG and the oracles
+    compared in closed loop (:func:`spacecraft_lab.control.run_control`).
 ``train``
     stable-baselines3 agents with or without identified-model features
     (:func:`spacecraft_lab.training.run_training`); ``rl-table`` tabulates runs.
@@ -38,7 +38,7 @@ from pathlib import Path
 from controllers import LQRWeights
 from spacecraft_conventions import __version__
 from spacecraft_env import SCENARIOS
-from spacecraft_lab.control import SCENARIO_NAMES, run_control, scenario_override
+from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.reporting import rl_table
@@ -180,21 +180,39 @@ def build_parser() -> argparse.ArgumentParser:
 
     ctl = sub.add_parser("control", help="closed-loop comparison of the controllers",
                          formatter_class=fmt)
-    ctl.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="docking",
+    ctl.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="paddle_rotation",
                      help="registered scenario")
     ctl.add_argument("--seeds", type=_integer(1), default=10,
                      help="number of episode seeds, 0..N-1")
     ctl.add_argument("--out", type=_output_directory, default="results/control",
                      help="output directory")
+    ctl.add_argument("--controllers", nargs="+", choices=sorted(CONTROLLER_KEYS), default=None,
+                     help="controllers to run (default: all)")
+    ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
+                     help="slew to a random reference within +-10 deg, or regulate from "
+                          "+-2 deg")
+    ctl.add_argument("--steps", type=_integer(100), default=None,
+                     help="episode length, steps of 0.1 s (default: the registered 2500)")
     ctl.add_argument("--module-mass", type=_number(0.0, low_open=True, unit=" kg"),
                      default=None, help="mass of each docking module, kg (paper: 600)")
     ctl.add_argument("--rotation-rate", type=_number(-10.0, 10.0, unit=" deg/s"), default=None,
-                     help="paddle rotation rate, deg/s (paper: 0.2)")
+                     help="paddle rotation rate, deg/s (solar_rotation: 0.2, "
+                          "paddle_rotation: 0.36)")
+    ctl.add_argument("--paddle-angle", type=_number(-360.0, 360.0, unit=" deg"), default=None,
+                     help="paddle angle at t = 0, deg (constant and rotation scenarios)")
+    ctl.add_argument("--snr-db", type=_snr, default=40.0,
+                     help="measurement SNR per channel in dB, or 'none'")
     ctl.add_argument("--torque-weight", type=_number(0.0, low_open=True), default=None,
                      help="LQR torque weight per (N m)^2; smaller = more aggressive "
-                          "(default: LQRWeights' 0.3)")
+                          "(default: LQRWeights')")
     ctl.add_argument("--max-torque", type=_number(0.0, 1e4, low_open=True, unit=" N m"),
                      default=None, help="N m per unit action (default: the env's 10)")
+    ctl.add_argument("--actuator-delay", type=_integer(0), default=0,
+                     help="actuator transport delay, steps of 0.1 s")
+    ctl.add_argument("--torque-rate-limit", type=_number(0.0, low_open=True, unit=" N m/s"),
+                     default=None, help="actuator slew-rate limit, N m/s (default: none)")
+    ctl.add_argument("--disturbance-torque", type=_number(-100.0, 100.0, unit=" N m"),
+                     default=0.0, help="constant external torque on every axis, N m")
 
     train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)", formatter_class=fmt)
     train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
@@ -267,11 +285,15 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _control(args: argparse.Namespace) -> int:
-    env_kwargs = scenario_override(args.module_mass, args.rotation_rate)
-    if args.max_torque is not None:
-        env_kwargs["max_torque"] = args.max_torque
+    env_kwargs = env_kwargs_for(args.scenario, task=args.task, module_mass=args.module_mass,
+                                rotation_rate=args.rotation_rate, paddle_angle=args.paddle_angle,
+                                snr_db=args.snr_db, max_torque=args.max_torque,
+                                actuator_delay_steps=args.actuator_delay,
+                                torque_rate_limit=args.torque_rate_limit,
+                                disturbance_torque=args.disturbance_torque)
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
-    run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs, weights=weights)
+    run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs, weights=weights,
+                controllers=args.controllers, steps=args.steps)
     print((Path(args.out) / "table.md").read_text())
     print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
     return 0
@@ -283,8 +305,8 @@ def _train(args: argparse.Namespace) -> int:
                      tensorboard=None if args.tensorboard is None else str(args.tensorboard))
     print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps",
                                        "final_attitude_rms_deg", "final_return",
-                                       "adaptive_lqr")}, indent=2))
-    print("steps to 2x adaptive LQR RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
+                                       "adaptive_lqg")}, indent=2))
+    print("steps to 2x adaptive LQG RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
     print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
     return 0
 

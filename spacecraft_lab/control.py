@@ -1,91 +1,152 @@
-"""The main job: ``spacecraft control --scenario docking --seeds 10 --out DIR``.
+"""The main job: ``spacecraft control --scenario paddle_rotation --seeds 10 --out DIR``.
 
-Runs fixed LQR (t = 0 design), PD, adaptive LQR and oracle LQR on the same
-seeds of a registered environment (slew task: a random reference within
-+-10 deg per axis from rest, 250 s), prints the comparison table and writes
-``metrics.json`` (per seed and aggregated), ``results.csv`` (one row per
-controller and seed) and ``comparison.png`` (attitude error, torque, tip
-deflection, identified vs true modal frequencies for seed 0).
+Runs the controllers of :func:`CONTROLLERS` (fixed, robust and gain-scheduled
+LQG, PD, adaptive LQG, the output-feedback oracle LQG and the full-state
+oracle) on the same seeds of a registered environment, prints the comparison
+table and writes ``metrics.json`` (per seed and aggregated: median,
+quartiles, mean, spread, verdicts), ``results.csv`` (one row per controller
+and seed) and ``comparison.png`` (median and interquartile band over seeds of
+the attitude error, vibration and torque; the identified rigid-body gain's
+error and modal frequencies).
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 from controllers import (
-    LQR,
     PD,
-    AdaptiveLQR,
+    AdaptiveLQG,
+    FixedLQG,
     LQRWeights,
+    OracleLQG,
     OracleLQR,
+    RobustLQG,
+    ScheduledLQG,
     compare,
+    controller_shares,
     episode_metrics,
     run_episode,
 )
 from spacecraft_conventions import single_threaded_blas
-from spacecraft_env import ENV_IDS, DockingModule, DockingScenario, SolarRotationScenario, env_id
+from spacecraft_env import (
+    ENV_IDS,
+    SCENARIOS,
+    ConstantScenario,
+    DockingModule,
+    DockingScenario,
+    SolarRotationScenario,
+    env_id,
+)
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
 
-__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "SCENARIO_NAMES", "control_task", "run_control",
-           "scenario_override"]
+__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "ORACLE", "SCENARIO_NAMES", "control_task",
+           "env_kwargs_for", "run_control"]
 
 #: Scenarios with a registered environment id.
 SCENARIO_NAMES = tuple(ENV_IDS.values())
+#: The reference every ratio is taken against: the output-feedback oracle.
+ORACLE = "oracle LQG"
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
     """Name -> factory ``env -> Controller`` for the comparison."""
     return {
-        "LQR (fixed)": lambda env: LQR(env, weights),
+        "fixed LQG": lambda env: FixedLQG(env, weights),
+        "robust LQG": lambda env: RobustLQG(env, weights),
+        "scheduled LQG": lambda env: ScheduledLQG(env, weights),
         "PD": lambda env: PD(env),
-        "adaptive LQR": lambda env: AdaptiveLQR(env, weights=weights),
-        "oracle LQR": lambda env: OracleLQR(env, weights),
+        "adaptive LQG": lambda env: AdaptiveLQG(env, weights=weights),
+        ORACLE: lambda env: OracleLQG(env, weights),
+        "full-state oracle": lambda env: OracleLQR(env, weights),
     }
 
 
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
-CONTROLLER_KEYS = {"lqr": "LQR (fixed)", "pd": "PD", "adaptive-lqr": "adaptive LQR",
-                   "oracle-lqr": "oracle LQR"}
+CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
+                   "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
+                   "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle"}
 
 
-def scenario_override(module_mass: float | None = None,
-                      rotation_rate: float | None = None) -> dict[str, Any]:
-    """``gym.make`` keywords for a variant of the paper's scenarios.
+def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | None = None,
+                   rotation_rate: float | None = None, paddle_angle: float | None = None,
+                   snr_db: float | None = 40.0, max_torque: float | None = None,
+                   actuator_delay_steps: int = 0, torque_rate_limit: float | None = None,
+                   disturbance_torque: float = 0.0) -> dict[str, Any]:
+    """``gym.make`` keywords for a registered scenario and its variants.
 
     Parameters
     ----------
+    scenario : str
+        A name of :data:`SCENARIO_NAMES`.
+    task : {"slew", "regulation"}
     module_mass : float, optional
-        Mass of each of the two docking modules, kg (paper: 600); they dock
-        at 100 s and 180 s on the yaw axis as in the paper.
+        Mass of each of the two docking modules, kg (paper: 600; docking
+        only); they dock at 100 s and 180 s on the yaw axis as in the paper.
     rotation_rate : float, optional
-        Solar-paddle rotation rate, deg/s (paper: 0.2).
+        Paddle rotation rate, deg/s (rotation scenarios only).
+    paddle_angle : float, optional
+        Paddle angle at t = 0, deg (constant and rotation scenarios).
+    snr_db, max_torque, actuator_delay_steps, torque_rate_limit, disturbance_torque
+        Passed to :class:`spacecraft_env.FlexibleSpacecraftEnv`.
 
-    Returns
-    -------
-    dict
-        ``{"scenario": Scenario}`` or empty when neither is given.
+    Raises
+    ------
+    ValueError
+        For a variant the scenario does not have.
     """
-    if module_mass is not None and rotation_rate is not None:
-        raise ValueError("give module_mass (docking) or rotation_rate (solar rotation), not both")
+    if scenario not in SCENARIO_NAMES:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
+    kwargs: dict[str, Any] = {"task": task, "snr_db": snr_db,
+                              "actuator_delay_steps": int(actuator_delay_steps),
+                              "torque_rate_limit": torque_rate_limit,
+                              "disturbance_torque": disturbance_torque}
+    if max_torque is not None:
+        kwargs["max_torque"] = float(max_torque)
+    base = SCENARIOS[scenario]()
+    rotating = isinstance(base, SolarRotationScenario)
     if module_mass is not None:
-        return {"scenario": DockingScenario(modules=(
+        if not isinstance(base, DockingScenario):
+            raise ValueError(f"module_mass applies to the docking scenario, not {scenario!r}")
+        base = DockingScenario(modules=(
             DockingModule(mass=float(module_mass), time=100.0, position=(0.0, 0.0, 3.0)),
-            DockingModule(mass=float(module_mass), time=180.0, position=(0.0, 0.0, -3.0))))}
+            DockingModule(mass=float(module_mass), time=180.0, position=(0.0, 0.0, -3.0))))
     if rotation_rate is not None:
-        return {"scenario": SolarRotationScenario(rate_deg_s=float(rotation_rate))}
-    return {}
+        if not rotating:
+            raise ValueError(f"rotation_rate applies to the rotation scenarios, not {scenario!r}")
+        base = dataclasses.replace(base, rate_deg_s=float(rotation_rate))
+    if paddle_angle is not None:
+        if rotating:
+            base = dataclasses.replace(base, initial_angle_deg=float(paddle_angle))
+        elif isinstance(base, ConstantScenario):
+            base = ConstantScenario(paddle_angle_deg=float(paddle_angle))
+        else:
+            raise ValueError(f"paddle_angle applies to the constant and rotation scenarios, "
+                             f"not {scenario!r}")
+    if base != SCENARIOS[scenario]():
+        kwargs["scenario"] = base
+    return kwargs
+
+
+def _metrics(traj: Any, model: Any) -> dict[str, Any]:
+    m = episode_metrics(traj, model)
+    m.update(controller_shares(traj.controller_stats))
+    return m
 
 
 @single_threaded_blas
-def control_task(*, controller: str, seed: int, scenario: str = "docking", task: str = "slew",
-                 module_mass: float | None = None, rotation_rate: float | None = None,
+def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation",
+                 task: str = "slew", module_mass: float | None = None,
+                 rotation_rate: float | None = None, paddle_angle: float | None = None,
                  max_torque: float | None = None, snr_db: float | None = 40.0,
                  torque_weight: float | None = None, max_steps: int | None = None) -> dict:
     """One closed-loop episode: one controller on one seed (a sweep task).
@@ -95,38 +156,32 @@ def control_task(*, controller: str, seed: int, scenario: str = "docking", task:
 
     Parameters
     ----------
-    controller : {"lqr", "pd", "adaptive-lqr", "oracle-lqr"}
-        See :data:`CONTROLLER_KEYS`.
+    controller : str
+        A key of :data:`CONTROLLER_KEYS`.
     seed : int
-        Episode seed (reference, noise, dither).
-    scenario : {"constant", "docking", "solar_rotation"}
-    task : {"slew", "regulation"}
-    module_mass, rotation_rate : float, optional
-        Scenario variants (:func:`scenario_override`).
-    max_torque : float, optional
-        N m per unit action (environment default 10).
-    snr_db : float or None
-        Measurement SNR (environment default 40 dB).
+        Episode seed (reference, noise, excitation).
+    scenario : str
+        A name of :data:`SCENARIO_NAMES`.
+    task, module_mass, rotation_rate, paddle_angle, max_torque, snr_db
+        See :func:`env_kwargs_for`.
     torque_weight : float, optional
-        LQR torque weight per (N m)^2 (:class:`LQRWeights`, default 0.3).
+        LQR torque weight per (N m)^2 (:class:`LQRWeights`' default otherwise).
     max_steps : int, optional
         Episode length in steps (default: the registered 2500 = 250 s).
 
     Returns
     -------
     dict
-        ``{"metrics": the episode metrics of :func:`episode_metrics`,
-        "timings": {"episode_s": wall time of the episode}}``.
+        ``{"metrics": the episode metrics of :func:`episode_metrics` and
+        :func:`controllers.harness.controller_shares`, "timings":
+        {"episode_s": wall time of the episode}}``.
     """
-    if scenario not in SCENARIO_NAMES:
-        raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if controller not in CONTROLLER_KEYS:
         raise ValueError(f"controller must be one of {sorted(CONTROLLER_KEYS)}, "
                          f"got {controller!r}")
-    kwargs: dict[str, Any] = {"task": task, "snr_db": snr_db,
-                              **scenario_override(module_mass, rotation_rate)}
-    if max_torque is not None:
-        kwargs["max_torque"] = float(max_torque)
+    kwargs = env_kwargs_for(scenario, task=task, module_mass=module_mass,
+                            rotation_rate=rotation_rate, paddle_angle=paddle_angle,
+                            snr_db=snr_db, max_torque=max_torque)
     weights = LQRWeights() if torque_weight is None else LQRWeights(torque=float(torque_weight))
     env = gym.make(env_id(scenario), **kwargs)
     try:
@@ -135,60 +190,83 @@ def control_task(*, controller: str, seed: int, scenario: str = "docking", task:
         traj = run_episode(env, ctrl, seed=int(seed),
                            max_steps=None if max_steps is None else int(max_steps))
         elapsed = time.perf_counter() - start
-        metrics = episode_metrics(traj, env.unwrapped.model)
+        metrics = _metrics(traj, env.unwrapped.model)
     finally:
         env.close()
     return {"metrics": metrics, "timings": {"episode_s": elapsed}}
 
 
-def run_control(scenario: str = "docking", seeds: int = 10, out: str | Path = "results/control",
-                *, env_kwargs: dict[str, Any] | None = None,
-                weights: LQRWeights | None = None, progress: bool = True) -> dict:
+def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
+                out: str | Path = "results/control", *, env_kwargs: dict[str, Any] | None = None,
+                weights: LQRWeights | None = None, controllers: Sequence[str] | None = None,
+                steps: int | None = None, progress: bool = True) -> dict:
     """Compare the controllers and write the artefacts.
 
     Parameters
     ----------
-    scenario : {"constant", "docking", "solar_rotation"}
+    scenario : str
+        A name of :data:`SCENARIO_NAMES`.
     seeds : int
         Episode seeds 0 .. seeds-1 (same for every controller).
     out : path
     env_kwargs : dict, optional
-        Extra keywords for ``gym.make`` (default ``task="slew"``), e.g. a
-        heavier docking module or a faster paddle rotation.
+        ``gym.make`` keywords (:func:`env_kwargs_for`; default: its defaults,
+        the slew task).
     weights : LQRWeights, optional
-        LQR weights shared by the LQR designs.
+        LQR weights shared by the LQG designs.
+    controllers : sequence of str, optional
+        Keys of :data:`CONTROLLER_KEYS` (default: all).
+    steps : int, optional
+        Episode length, steps of 0.1 s (default: the registered 2500).
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
-    kwargs = {"task": "slew", **(env_kwargs or {})}
+    kwargs = env_kwargs if env_kwargs is not None else env_kwargs_for(scenario)
+    if steps is not None:
+        kwargs = {**kwargs, "max_episode_steps": int(steps)}
     weights = weights or LQRWeights()
+    factories = CONTROLLERS(weights)
+    if controllers is not None:
+        unknown = sorted(set(controllers) - set(CONTROLLER_KEYS))
+        if unknown:
+            raise ValueError(f"unknown controllers {unknown}; expected {sorted(CONTROLLER_KEYS)}")
+        factories = {CONTROLLER_KEYS[k]: factories[CONTROLLER_KEYS[k]] for k in controllers}
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
     def make_env() -> gym.Env:
         return gym.make(env_id(scenario), **kwargs)
 
-    table, first = compare(CONTROLLERS(weights), make_env, list(range(seeds)),
-                           progress=progress)
+    table, runs = compare(factories, make_env, list(range(seeds)), progress=progress)
     env = make_env()
     model = env.unwrapped.model
-    text = control_table(table, oracle="oracle LQR")
-    metrics = {"scenario": scenario, "seeds": seeds, "env_kwargs": {k: repr(v) for k, v in
-                                                                    kwargs.items()},
+    text = control_table(table, oracle=ORACLE if ORACLE in table else None)
+    metrics = {"scenario": scenario, "seeds": seeds,
+               "env_kwargs": {k: repr(v) for k, v in kwargs.items()},
                "weights": weights.__dict__, "controllers": table}
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
     (out / "table.md").write_text(text)
+    cols = ["attitude_rms_after_100s_deg", "vibration_rms_after_100s_mm", "attitude_rms_deg",
+            "attitude_peak_deg", "vibration_rms_mm", "torque_rms_Nm", "effort_N2m2s", "return",
+            "envelope_growth_per_100s", "excitation_rms_Nm", "rejected_share",
+            "fallback_share", "verdict"]
     with open(out / "results.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
-        cols = ["attitude_rms_deg", "attitude_rms_after_deg", "attitude_peak_deg",
-                "vibration_rms_mm", "torque_rms_Nm", "effort_N2m2s", "return", "stable"]
         writer.writerow(["controller", "seed", *cols, "settling_s"])
         for name, row in table.items():
             for m in row["per_seed"]:
                 writer.writerow([name, m["seed"], *[m[c] for c in cols],
                                  ";".join("" if s is None else f"{s:.1f}"
                                           for s in m["settling_s"])])
-    plot_control_comparison(first, model, out / "comparison.png",
-                    title=f"{scenario}, slew, seed 0 (dashed: docking events)")
+    angle = ""
+    scen = model.scenario
+    if isinstance(scen, SolarRotationScenario):
+        t_end = (steps or env.spec.max_episode_steps) * model.dt
+        angle = (f", paddles {scen.initial_angle_deg:g} -> "
+                 f"{scen.initial_angle_deg + scen.rate_deg_s * t_end:g} deg")
+    plot_control_comparison(runs, model, out / "comparison.png",
+                            title=f"{scenario}{angle}, {kwargs.get('task', 'slew')}, "
+                                  f"{seeds} seeds: median and interquartile band\n"
+                                  f"(dashed: events, dotted: scored from 100 s)")
     env.close()
     return metrics

@@ -7,6 +7,7 @@ they work in any process and never open a window.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -174,44 +175,80 @@ def plot_prediction_horizons(path: str | Path, metrics: Mapping[str, Any],
     save(fig, path)
 
 
-def plot_control_comparison(first: Mapping[str, Trajectory], model: FlexibleSpacecraftModel,
-                            path: str | Path, title: str = "") -> None:
-    """Attitude error, torque, tip deflection and identified frequencies of one seed."""
-    has_freq = any(t.identified_frequencies is not None for t in first.values())
-    rows = 4 if has_freq else 3
+def _band(ax: Axes, t: np.ndarray, runs: Sequence[np.ndarray], label: str, color: str,
+          log: bool = False) -> None:
+    """Median line and interquartile band over seeds (runs cut to the shortest)."""
+    n = min(r.size for r in runs)
+    stack = np.array([r[:n] for r in runs])
+    with warnings.catch_warnings():          # all-NaN columns: before an identifier's warm-up
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, med, hi = np.nanpercentile(stack, [25, 50, 75], axis=0)
+    plot = ax.semilogy if log else ax.plot
+    plot(t[:n], med, lw=1, color=color, label=label)
+    ax.fill_between(t[:n], lo, hi, color=color, alpha=0.2, lw=0)
+
+
+def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
+                            model: FlexibleSpacecraftModel, path: str | Path,
+                            title: str = "", scored_from_s: float = 100.0) -> None:
+    """Closed-loop comparison over seeds: median and interquartile band.
+
+    Panels: attitude error (log), tip deflection, torque, and for controllers
+    with an identifier the identified rigid-body gain's error against the true
+    ``J(t)^-1`` and the identified against the true modal frequencies (seed 0,
+    zoomed on the flexible band). Dashed lines: scenario events; dotted: the
+    start of the scored window.
+    """
+    adaptive = {n: r for n, r in runs.items() if r[0].gain_error is not None}
+    rows = 5 if adaptive else 3
     layout = model.output_layout
     c_att = model.C[layout.slice("attitude")]
     c_defl = model.C[layout.slice("deflection")]
-    fig = Figure(figsize=(10, 2.6 * rows))
+    fig = Figure(figsize=(11, 2.5 * rows))
     axes = fig.subplots(rows, 1, sharex=True)
-    for name, traj in first.items():
-        err = np.abs((traj.states[1:] @ c_att.T - traj.reference[1:]) * DEG_PER_RAD).max(axis=1)
-        axes[0].semilogy(traj.time, np.maximum(err, 1e-5), label=name, lw=1)
-        axes[1].plot(traj.time, np.linalg.norm(traj.torque, axis=1), lw=0.8, label=name)
-        defl = np.abs(traj.states[1:] @ c_defl.T).max(axis=1) * 1e3
-        axes[2].plot(traj.time, defl, lw=0.8, label=name)
-        if has_freq and traj.identified_frequencies is not None:
-            axes[3].plot(traj.frequency_time, traj.identified_frequencies, ".", ms=2,
-                         color="tab:blue")
-            axes[3].plot(traj.frequency_time, traj.true_frequencies, "k-", lw=1)
+    colors = dict(zip(runs, [f"C{i}" for i in range(len(runs))], strict=True))
+    for name, trajs in runs.items():
+        t = trajs[0].time
+        err = [np.abs((tr.states[1:] @ c_att.T - tr.reference[1:]) * DEG_PER_RAD).max(axis=1)
+               for tr in trajs]
+        _band(axes[0], t, [np.maximum(e, 1e-5) for e in err], name, colors[name], log=True)
+        _band(axes[1], t, [np.abs(tr.states[1:] @ c_defl.T).max(axis=1) * 1e3 for tr in trajs],
+              name, colors[name], log=True)
+        _band(axes[2], t, [np.linalg.norm(tr.torque, axis=1) for tr in trajs], name,
+              colors[name], log=True)
+    for name, trajs in adaptive.items():
+        tf = trajs[0].frequency_time
+        _band(axes[3], tf, [100 * tr.gain_error for tr in trajs], name, colors[name])
+        first = trajs[0]
+        axes[4].plot(tf, first.identified_frequencies, ".", ms=2, color=colors[name])
+        axes[4].plot(tf, first.true_frequencies, "k-", lw=1)
     axes[0].set_ylabel("max |attitude error| (deg)")
-    axes[1].set_ylabel("|torque| (N m)")
-    axes[2].set_ylabel("max |tip deflection| (mm)")
-    if has_freq:
-        axes[3].set_ylabel("frequency (Hz)")
-        axes[3].set_ylim(0, 1.0)
-        axes[3].set_title("identified (dots) vs true (lines) modal frequencies", fontsize=9)
+    axes[1].set_ylabel("max |tip deflection| (mm)")
+    axes[2].set_ylabel("|torque| (N m)")
+    if adaptive:
+        axes[3].set_ylabel("rigid gain error (%)")
+        axes[3].set_ylim(0, 50)
+        axes[3].set_title("identified rigid-body gain against the true J(t)^-1", fontsize=9)
+        axes[4].set_ylabel("frequency (Hz)")
+        true = np.concatenate([tr[0].true_frequencies.ravel() for tr in adaptive.values()])
+        true = true[np.isfinite(true)]
+        if true.size:
+            axes[4].set_ylim(0.7 * true.min(), 1.3 * true.max())
+        axes[4].set_title("identified (dots) vs true (lines) modal frequencies, seed 0",
+                          fontsize=9)
     axes[-1].set_xlabel("time (s)")
-    mark_events(axes, next(iter(first.values())).events)
+    first_run = next(iter(runs.values()))[0]
+    mark_events(axes, first_run.events)
     for ax in axes:
+        ax.axvline(scored_from_s, color="gray", ls=":", lw=0.8)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, ncol=4)
-    fig.suptitle(title)
+    fig.suptitle(title, fontsize=10)
     save(fig, path)
 
 
 def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
-    """Evaluation attitude RMS and return against env steps, adaptive LQR dashed."""
+    """Evaluation attitude RMS and return against env steps, adaptive LQG dashed."""
     fig = Figure(figsize=(11, 4))
     axes = fig.subplots(1, 2)
     for run in metrics["runs"]:
@@ -221,11 +258,11 @@ def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
         axes[0].plot(steps, [c["attitude_rms_deg"] for c in run["curve"]], "o-",
                      label=f"seed {run['seed']}")
         axes[1].plot(steps, [c["return"] for c in run["curve"]], "o-")
-    axes[0].axhline(metrics["adaptive_lqr"]["attitude_rms_deg"], color="k", ls="--",
-                    label="adaptive LQR")
+    axes[0].axhline(metrics["adaptive_lqg"]["attitude_rms_deg"], color="k", ls="--",
+                    label="adaptive LQG")
     axes[0].axhline(metrics["target_attitude_rms_deg"], color="gray", ls=":",
-                    label="2x adaptive LQR")
-    axes[1].axhline(metrics["adaptive_lqr"]["return"], color="k", ls="--")
+                    label="2x adaptive LQG")
+    axes[1].axhline(metrics["adaptive_lqg"]["return"], color="k", ls="--")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("attitude RMS (deg), eval seeds")
     axes[1].set_ylabel("return, eval seeds")

@@ -102,25 +102,31 @@ def identification_table(metrics: dict[str, Any]) -> str:
 
 
 def control_table(table: dict[str, dict], oracle: str | None = None) -> str:
-    """Markdown table of :func:`controllers.compare` results (mean ± std over seeds)."""
-    head = ("| controller | stable | attitude RMS (deg) | RMS t >= 50 s (deg) | peak (deg) "
-            "| vibration RMS (mm) | torque RMS (N m) | return |"
-            + (" RMS / oracle | RMS t >= 50 s / oracle |" if oracle else ""))
-    lines = [head, "|" + "---|" * (8 + (2 if oracle else 0))]
-    ref = table[oracle]["mean"]["attitude_rms_deg"] if oracle in table else None
-    ref_late = table[oracle]["mean"]["attitude_rms_after_deg"] if oracle in table else None
+    """Markdown table of :func:`controllers.compare` results.
+
+    Median [25th, 75th percentile] over seeds of the attitude RMS and the
+    vibration from t = 100 s, the median torque and excitation RMS, the share
+    of gains rejected, the verdicts, and the ratio of the medians to
+    ``oracle``'s.
+    """
+    def cell(row: dict, key: str, digits: int) -> str:
+        return (f"{row['median'][key]:.{digits}g} "
+                f"[{row['q25'][key]:.{digits}g}, {row['q75'][key]:.{digits}g}]")
+
+    head = ("| controller | verdicts | attitude RMS t >= 100 s (deg) | vibration t >= 100 s (mm) "
+            "| torque RMS (N m) | excitation RMS (N m) | gains rejected | "
+            + ("RMS / oracle |" if oracle else ""))
+    lines = [head, "|" + "---|" * (7 + (1 if oracle else 0))]
+    key = "attitude_rms_after_100s_deg"
+    ref = table[oracle]["median"][key] if oracle in table else None
     for name, row in table.items():
-        mu, sd = row["mean"], row["std"]
-        cells = [f"{row['stable_runs']}/{row['runs']}",
-                 f"{mu['attitude_rms_deg']:.4f} ± {sd['attitude_rms_deg']:.4f}",
-                 f"{mu['attitude_rms_after_deg']:.4f} ± {sd['attitude_rms_after_deg']:.4f}",
-                 f"{mu['attitude_peak_deg']:.3f} ± {sd['attitude_peak_deg']:.3f}",
-                 f"{mu['vibration_rms_mm']:.3f} ± {sd['vibration_rms_mm']:.3f}",
-                 f"{mu['torque_rms_Nm']:.3f} ± {sd['torque_rms_Nm']:.3f}",
-                 f"{mu['return']:.4g}"]
+        verdicts = ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items())
+        cells = [verdicts, cell(row, key, 3), cell(row, "vibration_rms_after_100s_mm", 3),
+                 f"{row['median']['torque_rms_Nm']:.3g}",
+                 f"{row['median']['excitation_rms_Nm']:.3g}",
+                 f"{100 * row['median']['rejected_share']:.0f} %"]
         if ref:
-            cells.append(f"{mu['attitude_rms_deg'] / ref:.2f}")
-            cells.append(f"{mu['attitude_rms_after_deg'] / ref_late:.2f}")
+            cells.append(f"{row['median'][key] / ref:.2f}")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -130,14 +136,14 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     rows, baseline = [], None
     for directory in directories:
         m = json.loads((Path(directory) / "metrics.json").read_text())
-        baseline = m["adaptive_lqr"]
+        baseline = m["adaptive_lqg"]
         reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
         rows.append(f"| {m['algo'].upper()} | {m['features']} | {m['timesteps']:,} "
                     f"| {m['final_attitude_rms_deg']:.3f} | {m['final_return']:.4g} "
                     f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
     head = ["| agent | features | env steps | final attitude RMS (deg) | final return "
-            "| env steps to <= 2x adaptive LQR RMS |", "|---|---|---|---|---|---|"]
+            "| env steps to <= 2x adaptive LQG RMS |", "|---|---|---|---|---|---|"]
     if baseline is not None:
-        rows.append(f"| adaptive LQR | - | - | {baseline['attitude_rms_deg']:.3f} "
+        rows.append(f"| adaptive LQG | - | - | {baseline['attitude_rms_deg']:.3f} "
                     f"| {baseline['return']:.4g} | - |")
     return "\n".join(head + rows) + "\n"

@@ -8,7 +8,7 @@ normalized by ``VecNormalize``, optionally with
 ``eval_every`` steps the current policy is evaluated through the same
 harness as the controllers (:func:`controllers.run_episode`). It writes the saved models,
 ``learning_curves.png``, ``metrics.json`` (final attitude RMS, return, and
-the env steps needed to come within 2x of the adaptive LQR's attitude RMS on
+the env steps needed to come within 2x of the adaptive LQG's attitude RMS on
 the same evaluation seeds) and, with ``--tensorboard``, TensorBoard logs.
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from controllers import (
-    AdaptiveLQR,
+    AdaptiveLQG,
     Controller,
     IdentifiedModelFeatures,
     episode_metrics,
@@ -100,7 +100,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     env_kwargs = {"task": "slew"}
 
     baseline_env = gym.make(env_id(scenario), **env_kwargs)
-    baseline = _evaluate(AdaptiveLQR(baseline_env.unwrapped), scenario, "none", env_kwargs)
+    baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
@@ -127,7 +127,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "timesteps": timesteps,
-        "seeds": seeds, "eval_seeds": list(EVAL_SEEDS), "adaptive_lqr": baseline,
+        "seeds": seeds, "eval_seeds": list(EVAL_SEEDS), "adaptive_lqg": baseline,
         "target_attitude_rms_deg": target, "runs": runs,
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
         "final_return": float(np.mean([r["final"]["return"] for r in runs])),

@@ -16,7 +16,7 @@ import pytest
 from filelock import FileLock
 from threadpoolctl import threadpool_limits
 
-from controllers import AdaptiveLQR, IdentifiedModelFeatures, dlqr
+from controllers import AdaptiveLQG, IdentifiedModelFeatures, dlqr
 from identifiers import (
     ClassicalRPBSID,
     ImprovedRPBSID,
@@ -203,9 +203,9 @@ def test_features_wrapper_feeds_every_sample_and_the_identifier_counts_nans():
     assert ident.n_skipped == 3            # the dropouts are counted, not lost
 
 
-def test_adaptive_lqr_feeds_nan_samples_to_the_identifier():
+def test_adaptive_lqg_feeds_nan_samples_to_the_identifier():
     env = FlexibleSpacecraftEnv("docking")
-    ctrl = AdaptiveLQR(env)
+    ctrl = AdaptiveLQG(env)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     for k in range(50):

@@ -7,19 +7,23 @@ import numpy as np
 import pytest
 
 from controllers import (
-    LQR,
     PD,
-    AdaptiveLQR,
+    AdaptiveLQG,
+    BinaryExcitation,
+    FixedLQG,
     LQRWeights,
+    OracleLQG,
     OracleLQR,
     PolicyController,
     RiccatiTracker,
+    RobustLQG,
+    ScheduledLQG,
     check_weights,
     dlqr,
     episode_metrics,
     run_episode,
 )
-from spacecraft_env import FlexibleSpacecraftEnv
+from spacecraft_env import ConstantScenario, FlexibleSpacecraftEnv
 
 
 def test_scalar_riccati_closed_form():
@@ -81,7 +85,7 @@ def test_invalid_lqr_weights_dataclass():
         LQRWeights(attitude=-1.0)
 
 
-@pytest.mark.parametrize("make", [PD, LQR, OracleLQR])
+@pytest.mark.parametrize("make", [PD, FixedLQG, RobustLQG, ScheduledLQG, OracleLQG, OracleLQR])
 def test_baselines_regulate_the_constant_plant(make):
     env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=1500)
     traj = run_episode(env, make(env), seed=0)
@@ -92,16 +96,19 @@ def test_baselines_regulate_the_constant_plant(make):
     assert final < 0.05 * initial
 
 
-def test_oracle_equals_fixed_lqr_on_lti_plant_with_true_state():
-    """On the constant plant the oracle's re-design reproduces the t = 0 gain."""
+def test_oracle_equals_fixed_lqg_on_the_nominal_plant():
+    """On the constant nominal plant the oracle's re-design reproduces the fixed gain."""
     env = FlexibleSpacecraftEnv("constant")
-    oracle = OracleLQR(env)
-    fixed = LQR(env)
+    oracle = OracleLQG(env)
+    fixed = FixedLQG(env)
     obs, info = env.reset(seed=0)
     oracle.reset()
-    oracle.act(obs, info)
-    np.testing.assert_allclose(oracle._tracker.design(fixed.a, fixed.b), fixed.gain,
-                               rtol=1e-6, atol=1e-9)
+    fixed.reset()
+    np.testing.assert_allclose(oracle.act(obs, info), fixed.act(obs, info), rtol=1e-6,
+                               atol=1e-7)
+    sys_ = env.model.discrete(0.0)
+    np.testing.assert_allclose(oracle.law.design(sys_.A, sys_.B, fixed._c, fixed._c_att),
+                               fixed.gain, rtol=1e-6, atol=1e-9)
 
 
 def test_slew_reaches_reference_without_steady_state_error():
@@ -112,49 +119,87 @@ def test_slew_reaches_reference_without_steady_state_error():
     assert err.max() < 0.01
 
 
-def test_settling_time_metric_on_synthetic_trajectory():
+def _synthetic(error_deg, deflection_m=None, events=(), dt=0.1):
     from controllers.harness import Trajectory
     from spacecraft_env import FlexibleSpacecraftModel
 
     model = FlexibleSpacecraftModel()
-    n_steps = 100
+    n_steps = len(error_deg)
     states = np.zeros((n_steps + 1, model.n))
-    states[1:51, 0] = np.deg2rad(1.0)        # error of 1 deg until t = 5.0 s
-    traj = Trajectory(time=np.arange(1, n_steps + 1) * 0.1, observations=np.zeros((101, 10)),
-                      actions=np.zeros((100, 3)), torque=np.zeros((100, 3)), states=states,
-                      reference=np.zeros((101, 3)), rewards=np.zeros(100), terminated=False,
-                      events=(2.0,))
+    states[1:, 0] = np.deg2rad(error_deg)
+    if deflection_m is not None:   # the first deflection sensor reads the first modal coordinate
+        row = model.C[model.output_layout.slice("deflection")][0]
+        states[1:] += np.outer(deflection_m, row) / (row @ row)
+    traj = Trajectory(time=np.arange(1, n_steps + 1) * dt,
+                      observations=np.zeros((n_steps + 1, 10)), actions=np.zeros((n_steps, 3)),
+                      torque=np.zeros((n_steps, 3)), states=states,
+                      reference=np.zeros((n_steps + 1, 3)), rewards=np.zeros(n_steps),
+                      terminated=False, events=tuple(events))
+    return traj, model
+
+
+def test_settling_time_counts_only_a_loop_that_had_settled():
+    err = np.zeros(300)
+    err[100:150] = 1.0                                  # 1 deg from t = 10.1 s to 15.0 s
+    traj, model = _synthetic(err, events=(10.0,))
     m = episode_metrics(traj, model)
-    assert m["settling_s"] == [pytest.approx(3.1)]
+    assert m["settling_s"] == [pytest.approx(5.1)]
+    assert m["settled_before_event"] == [True]
     assert m["attitude_peak_deg"] == pytest.approx(1.0)
+    err[40:100] = 0.2                                   # not settled before the event
+    traj, model = _synthetic(err, events=(10.0,))
+    m = episode_metrics(traj, model)
+    assert m["settling_s"] == [None] and m["settled_before_event"] == [False]
 
 
-def test_adaptive_lqr_runs_and_counts_its_safeguards():
+def test_stability_verdict_sees_a_slowly_growing_envelope():
+    """Rho = 1.00135 per step (the fixed LQG at 180 deg): small at the end, but growing."""
+    t = np.arange(1, 2501) * 0.1
+    growing = 1e-3 * np.exp(0.0135 * t) * np.sin(2 * np.pi * 0.08 * t)   # metres
+    traj, model = _synthetic(np.zeros(2500), deflection_m=growing)
+    m = episode_metrics(traj, model)
+    assert np.abs(growing[-250:]).max() < 0.05       # a final-error check would call it stable
+    assert m["envelope_growth_per_100s"] == pytest.approx(np.exp(1.35), rel=0.1)
+    assert m["verdict"] == "growing" and not m["stable"]
+    decaying = 1e-2 * np.exp(-0.02 * t) * np.sin(2 * np.pi * 0.08 * t)
+    m = episode_metrics(*_synthetic(np.zeros(2500), deflection_m=decaying))
+    assert m["verdict"] == "stable" and m["envelope_growth_per_100s"] < 1
+
+
+def test_stability_verdict_flags_a_saturated_limit_cycle():
+    traj, model = _synthetic(0.05 * np.sin(np.arange(2500) * 0.3))
+    traj.actions[:] = np.sign(np.sin(np.arange(2500) * 0.3))[:, None]
+    m = episode_metrics(traj, model)
+    assert m["verdict"] == "saturated" and not m["stable"]
+
+
+def test_adaptive_lqg_runs_and_counts_its_safeguards():
     env = gym.make("FlexibleSpacecraftDocking-v0")
-    ctrl = AdaptiveLQR(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped)
     traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
     assert stats["steps"] == 650
-    assert stats["fallback_steps"] >= ctrl.identifier.warmup - 1   # PD until warmed up
-    assert stats["redesigns"] + stats["rejected_unstable"] + stats["failed_redesigns"] > 0
+    assert stats["fallback_steps"] >= ctrl.identifier.warmup - 1   # robust LQG until warmed up
+    assert stats["redesigns"] + stats["rejected"] + stats["failed_designs"] > 0
     assert np.all(np.isfinite(traj.actions))
+    assert stats["excitation_rms_Nm"] > 0
 
 
 def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
     env = FlexibleSpacecraftEnv("docking")
-    ctrl = AdaptiveLQR(env)
+    ctrl = AdaptiveLQG(env)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     for _ in range(5):
         action = ctrl.act(obs, info)
         obs, _, _, _, info = env.step(action)
     samples, skipped = ctrl.identifier.n_samples, ctrl.identifier.n_skipped
-    pd_action = ctrl.fallback._last.copy()
+    held = ctrl.fallback._last.copy()
     bad = obs.copy()
     bad[1] = np.nan
     action = ctrl.act(bad, info)
     assert np.all(np.isfinite(action))
-    np.testing.assert_array_equal(ctrl.fallback._last, pd_action)   # PD holds its action
+    np.testing.assert_array_equal(ctrl.fallback._last, held)   # the fallback holds its action
     assert ctrl.identifier.n_samples == samples + 1      # the sample is not lost ...
     assert ctrl.identifier.n_skipped == skipped + 1      # ... it is skipped and counted
     assert ctrl.stats["nonfinite_observations"] == 1
@@ -180,3 +225,32 @@ def test_sb3_style_predict_and_policy_wrapper():
     np.testing.assert_allclose(wrapped.act(obs), pd.act(obs))
     with pytest.raises(TypeError):
         PolicyController(object())
+
+
+@pytest.mark.parametrize("make", [FixedLQG, RobustLQG, OracleLQG, AdaptiveLQG])
+def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(make):
+    """0.01 N m on every axis: PD keeps d / kp (about 0.01 deg); integral action removes it."""
+    def steady_error(ctrl_factory):
+        env = gym.make("FlexibleSpacecraft-v0", snr_db=None, disturbance_torque=0.01,
+                       max_episode_steps=4000)
+        traj = run_episode(env, ctrl_factory(env.unwrapped), seed=0)
+        return np.abs(np.rad2deg(traj.states[-500:, :3] - traj.reference[-500:]).mean(axis=0))
+
+    def quiet(env):    # the adaptive loop without its excitation, so the mean is the offset
+        if make is AdaptiveLQG:
+            return AdaptiveLQG(env, excitation=BinaryExcitation(0.0, 0.0))
+        return make(env)
+
+    assert steady_error(PD).max() > 5e-3
+    assert steady_error(quiet).max() < 2e-4
+
+
+def test_fixed_lqg_is_judged_unstable_past_96_deg_and_the_oracle_stable():
+    env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=2500,
+                   scenario=ConstantScenario(paddle_angle_deg=180.0))
+    fixed = episode_metrics(run_episode(env, FixedLQG(env.unwrapped), seed=0),
+                            env.unwrapped.model)
+    oracle = episode_metrics(run_episode(env, OracleLQG(env.unwrapped), seed=0),
+                             env.unwrapped.model)
+    assert fixed["verdict"] == "growing" and fixed["envelope_growth_per_100s"] > 2
+    assert oracle["verdict"] == "stable"

@@ -240,3 +240,27 @@ def test_bad_reset_options():
 def test_public_api_exports():
     for name in spacecraft_env.__all__:
         assert hasattr(spacecraft_env, name)
+
+
+def test_actuator_delay_and_rate_limit_shape_the_applied_torque():
+    env = FlexibleSpacecraftEnv("constant", snr_db=None, actuator_delay_steps=2,
+                                torque_rate_limit=5.0)                   # 0.5 N m per step
+    env.reset(seed=0)
+    applied = [env.step(np.ones(3, dtype=np.float32))[4]["torque"][0] for _ in range(5)]
+    np.testing.assert_allclose(applied, [0.0, 0.0, 0.5, 1.0, 1.5])
+    env.reset(seed=0)                                                     # the queue empties
+    assert env.step(np.ones(3, dtype=np.float32))[4]["torque"][0] == 0.0
+    with pytest.raises(ValueError, match="actuator_delay_steps"):
+        FlexibleSpacecraftEnv(actuator_delay_steps=-1)
+    with pytest.raises(ValueError, match="torque_rate_limit"):
+        FlexibleSpacecraftEnv(torque_rate_limit=0.0)
+
+
+def test_paddle_rotation_id_turns_the_paddles_from_90_to_180_deg():
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v0")
+    _, info = env.reset(seed=0)
+    assert np.rad2deg(info["paddle_angle"]) == pytest.approx(90.0)
+    model = env.unwrapped.model
+    assert np.rad2deg(model.configuration(250.0).paddle_angle) == pytest.approx(180.0)
+    drawn = model.scenario.randomized(np.random.default_rng(0))
+    assert type(drawn) is type(model.scenario) and drawn.initial_angle_deg == 90.0

@@ -42,7 +42,7 @@ TINY_IDENTIFY = {
 TINY_CONTROL = {
     "name": "tiny-control", "task": "control", "seeds": [3, 4],
     "params": {"scenario": "docking", "max_steps": 300},
-    "grid": {"controller": ["pd", "adaptive-lqr"]},
+    "grid": {"controller": ["pd", "adaptive-lqg"]},
 }
 
 
