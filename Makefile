@@ -27,7 +27,7 @@ $(PEERS_STAMP): pyproject.toml constraints.txt
 
 demo: $(STAMP)
 	$(BIN)/spacecraft demo --scenario docking --out results/demo
-	OPENBLAS_NUM_THREADS=1 $(BIN)/spacecraft control --scenario paddle_rotation --seeds 10 --out results/control
+	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 10 --out results/control
 
 test: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_are
 
 from controllers import AdaptiveLQG
+from controllers.lqg import augment_integral
 from spacecraft_conventions import single_threaded_blas
 
 
@@ -29,7 +30,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1500)
     args = parser.parse_args()
-    env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v0")
+    env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v0")
     ctrl = AdaptiveLQG(env.unwrapped)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
@@ -39,19 +40,21 @@ def main() -> None:
             start = time.perf_counter()
             action = ctrl.act(obs, info)
             step_times.append(time.perf_counter() - start)
-            if ctrl.gain is not None and ctrl.identifier.model is not None:
+            if ctrl.identifier.model is not None:
                 models.append(ctrl.identifier.model)
             obs, _, terminated, truncated, info = env.step(action)
             if terminated or truncated:
                 obs, info = env.reset()
         adaptive = np.array(step_times[ctrl.identifier.warmup:])
         dare = []
-        qy = ctrl._qy
+        law = ctrl.law
+        att = ctrl.measured_layout.indices("attitude")
         for model in models[:500]:
-            q = model.C.T @ qy @ model.C + 1e-6 * np.eye(model.n)
+            q = law.weight_matrix(model.C)
+            a, b = augment_integral(model.A, model.B, model.C[att], law.dt)
             start = time.perf_counter()
             try:
-                solve_discrete_are(model.A, model.B, q, ctrl._r)
+                solve_discrete_are(a, b, q, law.r)
             except (np.linalg.LinAlgError, ValueError):
                 pass
             dare.append(time.perf_counter() - start)
