@@ -6,7 +6,7 @@ in one process and one run, three paths users never wrap themselves:
 
 * ``update()`` of the default identifier,
 * a step of the identified-model features wrapper (env step + identifier),
-* a step of the adaptive LQR (identifier + re-design + act) plus the env step,
+* a step of the adaptive LQG (identifier + re-design + act) plus the env step,
 
 each with BLAS limited to 1 thread and to 2 threads by the caller, and with
 the library's guard switched off (``single_threaded_blas.enabled = False``)
@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from controllers import AdaptiveLQR, IdentifiedModelFeatures
+from controllers import AdaptiveLQG, IdentifiedModelFeatures
 from identifiers import default_identifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel
@@ -50,7 +50,7 @@ def identifier_path(steps: int) -> Callable[[], float]:
 
 def features_path(steps: int) -> Callable[[], float]:
     def run() -> float:
-        env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraftDocking-v0"))
+        env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1"))
         env.reset(seed=0)
         action = np.full(3, 0.05, dtype=np.float32)
         start = time.perf_counter()
@@ -63,8 +63,8 @@ def features_path(steps: int) -> Callable[[], float]:
 
 def adaptive_path(steps: int) -> Callable[[], float]:
     def run() -> float:
-        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v0")
-        ctrl = AdaptiveLQR(env.unwrapped)
+        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1")
+        ctrl = AdaptiveLQG(env.unwrapped)
         obs, info = env.reset(seed=0)
         ctrl.reset(0)
         start = time.perf_counter()
@@ -90,7 +90,7 @@ def main() -> None:
     args = parser.parse_args()
     paths = {"identifier update": identifier_path(args.steps),
              "features wrapper step": features_path(args.steps),
-             "adaptive LQR + env step": adaptive_path(args.steps)}
+             "adaptive LQG + env step": adaptive_path(args.steps)}
     per = 1000.0 / args.steps
     print(f"{'path':<26}{'1 thread':>11}{'2 threads':>11}{'ratio':>8}"
           f"{'2 thr, guard off':>18}{'ratio':>8}   (s per 1000 steps)")

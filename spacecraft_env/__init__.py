@@ -3,13 +3,13 @@
 Importing the package registers four environments (250 s episodes,
 ``max_episode_steps=2500`` at dt = 0.1 s):
 
-* ``FlexibleSpacecraft-v0``: constant (LTI) plant,
-* ``FlexibleSpacecraftDocking-v0``: two modules dock at t = 100 s and 180 s,
-* ``FlexibleSpacecraftSolarRotation-v0``: paddles turn at 0.2 deg/s from 0 deg,
-* ``FlexibleSpacecraftPaddleRotation-v0``: paddles turn from 90 to 180 deg,
+* ``FlexibleSpacecraft-v1``: constant (LTI) plant,
+* ``FlexibleSpacecraftDocking-v1``: two modules dock at t = 100 s and 180 s,
+* ``FlexibleSpacecraftSolarRotation-v1``: paddles turn at 0.2 deg/s from 0 deg,
+* ``FlexibleSpacecraftPaddleRotation-v1``: paddles turn from 90 to 180 deg,
   where a design made at 0 deg goes unstable.
 
-``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v0")`` works
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v1")`` works
 without a prior import.
 """
 

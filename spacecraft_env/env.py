@@ -18,6 +18,7 @@ from gymnasium import spaces
 from spacecraft_conventions import (
     AXES,
     LABEL_PREFIX,
+    NOMINAL_SCALE,
     OBSERVATION_GROUPS,
     OUTPUT_GROUPS,
     RAD_PER_DEG,
@@ -25,6 +26,7 @@ from spacecraft_conventions import (
 )
 from spacecraft_env.dynamics import FlexibleSpacecraftModel
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
+from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
 from spacecraft_env.scenarios import Scenario, make_scenario
 
@@ -106,7 +108,13 @@ class FlexibleSpacecraftEnv(gym.Env):
         ``terminated`` when any true attitude angle exceeds
         ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
         error passes 2 %); ``truncated`` only by the registered time limit
-        (2500 steps = 250 s).
+        (2500 steps = 250 s). Leaving the bound costs, on the terminating
+        step, every step left to the time limit at the stage cost of an
+        attitude error at the bound on all three axes (the ``-v1`` ids; with
+        ``-v0`` ending the episode stopped the cost, so crashing paid: full
+        torque until termination scored -2.0e5 against -2.5e5 for zero
+        torque on the slew task). No policy that stays within the bound can
+        do worse than that penalty.
     Starting state
         ``task="regulation"``: reference 0 and initial attitude uniform in
         +-``initial_attitude_deg`` per axis; ``task="slew"``: initial attitude
@@ -388,10 +396,27 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x = ad @ x + bd @ total
         self._k += 1
         terminated = bool(np.abs(self._x[:3]).max() > self.max_attitude)
+        if terminated:
+            cost += self.termination_penalty()
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
         return obs, -float(cost), terminated, False, self._info()
+
+    def termination_penalty(self) -> float:
+        """Cost charged when the attitude bound is left at the current step.
+
+        Every step left to the time limit (``spec.max_episode_steps``, or the
+        registered 2500 without a spec) at the stage cost of an attitude
+        error of ``max_attitude_deg`` on all three axes: more than any policy
+        that stays within the bound can lose by staying.
+        """
+        spec = getattr(self, "spec", None)
+        limit = spec.max_episode_steps if spec is not None and spec.max_episode_steps \
+            else MAX_EPISODE_STEPS
+        at_bound = 3 * self.reward_weights.attitude * (
+            self.max_attitude / NOMINAL_SCALE["attitude"]) ** 2
+        return float(max(limit - self._k + 1, 1) * at_bound)
 
     # -------------------------------------------------------------- rendering
     def render(self) -> np.ndarray | None:

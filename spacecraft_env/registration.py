@@ -1,7 +1,7 @@
 """The registered environment ids, defined once, and their registration.
 
 Importing :mod:`spacecraft_env` registers them, so
-``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v0")`` works
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v1")`` works
 without a prior import.
 """
 
@@ -16,10 +16,10 @@ __all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "env_id", "register_envs"]
 
 #: Registered environment id -> scenario name.
 ENV_IDS: Mapping[str, str] = MappingProxyType({
-    "FlexibleSpacecraft-v0": "constant",
-    "FlexibleSpacecraftDocking-v0": "docking",
-    "FlexibleSpacecraftSolarRotation-v0": "solar_rotation",
-    "FlexibleSpacecraftPaddleRotation-v0": "paddle_rotation",
+    "FlexibleSpacecraft-v1": "constant",
+    "FlexibleSpacecraftDocking-v1": "docking",
+    "FlexibleSpacecraftSolarRotation-v1": "solar_rotation",
+    "FlexibleSpacecraftPaddleRotation-v1": "paddle_rotation",
 })
 
 #: Episode length of every registered id: 250 s at dt = 0.1 s.

@@ -18,7 +18,7 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "rl_zoo3"
 
 @pytest.mark.parametrize(("algo", "steps"), [("ppo", 2000), ("sac", 300)])
 def test_rl_zoo3_trains_with_the_shipped_hyperparameters(tmp_path, algo, steps):
-    env_id = "FlexibleSpacecraftDocking-v0"
+    env_id = "FlexibleSpacecraftDocking-v1"
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", algo, "--env", env_id,
            "--gym-packages", "spacecraft_env", "-conf", str(CONFIGS / f"{algo}.yml"),
            "-n", str(steps), "-f", str(tmp_path), "--eval-freq", "-1", "--seed", "0"]

@@ -87,7 +87,7 @@ def test_invalid_lqr_weights_dataclass():
 
 @pytest.mark.parametrize("make", [PD, FixedLQG, RobustLQG, ScheduledLQG, OracleLQG, OracleLQR])
 def test_baselines_regulate_the_constant_plant(make):
-    env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=1500)
+    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=1500)
     traj = run_episode(env, make(env), seed=0)
     m = episode_metrics(traj, env.unwrapped.model)
     assert m["stable"]
@@ -112,7 +112,7 @@ def test_oracle_equals_fixed_lqg_on_the_nominal_plant():
 
 
 def test_slew_reaches_reference_without_steady_state_error():
-    env = gym.make("FlexibleSpacecraft-v0", task="slew", snr_db=None)
+    env = gym.make("FlexibleSpacecraft-v1", task="slew", snr_db=None)
     traj = run_episode(env, OracleLQR(env.unwrapped), seed=3)
     err = np.rad2deg(np.abs(traj.states[-1, :3] - traj.reference[-1]))
     assert np.abs(np.rad2deg(traj.reference[-1])).max() > 1.0   # a real slew
@@ -174,7 +174,7 @@ def test_stability_verdict_flags_a_saturated_limit_cycle():
 
 
 def test_adaptive_lqg_runs_and_counts_its_safeguards():
-    env = gym.make("FlexibleSpacecraftDocking-v0")
+    env = gym.make("FlexibleSpacecraftDocking-v1")
     ctrl = AdaptiveLQG(env.unwrapped)
     traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
@@ -231,7 +231,7 @@ def test_sb3_style_predict_and_policy_wrapper():
 def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(make):
     """0.01 N m on every axis: PD keeps d / kp (about 0.01 deg); integral action removes it."""
     def steady_error(ctrl_factory):
-        env = gym.make("FlexibleSpacecraft-v0", snr_db=None, disturbance_torque=0.01,
+        env = gym.make("FlexibleSpacecraft-v1", snr_db=None, disturbance_torque=0.01,
                        max_episode_steps=4000)
         traj = run_episode(env, ctrl_factory(env.unwrapped), seed=0)
         return np.abs(np.rad2deg(traj.states[-500:, :3] - traj.reference[-500:]).mean(axis=0))
@@ -246,7 +246,7 @@ def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(ma
 
 
 def test_fixed_lqg_is_judged_unstable_past_96_deg_and_the_oracle_stable():
-    env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=2500,
+    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=2500,
                    scenario=ConstantScenario(paddle_angle_deg=180.0))
     fixed = episode_metrics(run_episode(env, FixedLQG(env.unwrapped), seed=0),
                             env.unwrapped.model)

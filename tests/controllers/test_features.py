@@ -16,7 +16,7 @@ from spacecraft_conventions import STANDARD_OUTPUTS
 
 
 def _wrapped(**kwargs):
-    env = gym.make("FlexibleSpacecraftDocking-v0")
+    env = gym.make("FlexibleSpacecraftDocking-v1")
     ident = MomentRefitRPBSID(22, 15, 0.999, warmup=100, regularization=0.001,
                               input_scale=np.ones(3), output_scale=STANDARD_OUTPUTS.scales())
     return IdentifiedModelFeatures(env, identifier=ident, **kwargs)
@@ -58,7 +58,7 @@ def test_features_pickle_and_vector_envs():
     clone = pickle.loads(pickle.dumps(env))
     a = np.array([0.2, -0.1, 0.05], dtype=np.float32)
     np.testing.assert_array_equal(env.step(a)[0], clone.step(a)[0])
-    vec = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v0", num_envs=2,
+    vec = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v1", num_envs=2,
                        vectorization_mode="sync", wrappers=[IdentifiedModelFeatures])
     obs, _ = vec.reset(seed=[0, 1])
     assert obs.shape == (2, 10 + 22 + 8 + 10 + 1)
@@ -69,6 +69,6 @@ def test_features_pickle_and_vector_envs():
 
 
 def test_features_reject_env_without_sensors():
-    env = gym.make("FlexibleSpacecraft-v0", outputs=("reference",))
+    env = gym.make("FlexibleSpacecraft-v1", outputs=("reference",))
     with pytest.raises(ValueError, match="sensor group"):
         IdentifiedModelFeatures(env)

@@ -13,6 +13,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import spacecraft_env
+from controllers import OracleLQG, run_episode
 from spacecraft_env import ENV_IDS, FlexibleSpacecraftEnv
 
 IDS = sorted(ENV_IDS)
@@ -54,7 +55,7 @@ def test_sb3_check_env_without_warnings(env_id):
 
 
 def test_render_rgb_array_passes_check_env():
-    env = gym.make("FlexibleSpacecraftDocking-v0", render_mode="rgb_array").unwrapped
+    env = gym.make("FlexibleSpacecraftDocking-v1", render_mode="rgb_array").unwrapped
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env)
@@ -66,7 +67,7 @@ def test_render_rgb_array_passes_check_env():
 
 def test_make_without_prior_import_in_fresh_interpreter():
     code = ("import gymnasium as gym\n"
-            "env = gym.make('spacecraft_env:FlexibleSpacecraftDocking-v0')\n"
+            "env = gym.make('spacecraft_env:FlexibleSpacecraftDocking-v1')\n"
             "obs, info = env.reset(seed=0)\n"
             "print(env.spec.max_episode_steps, obs.shape, info['time'])\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -76,7 +77,7 @@ def test_make_without_prior_import_in_fresh_interpreter():
 
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_make_vec(mode):
-    envs = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v0", num_envs=2,
+    envs = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v1", num_envs=2,
                         vectorization_mode=mode)
     obs, _ = envs.reset(seed=[1, 2])
     assert obs.shape == (2, 10) and not np.allclose(obs[0], obs[1])
@@ -168,7 +169,7 @@ def test_terminates_when_attitude_leaves_small_angle_range():
 
 
 def test_time_limit_truncates():
-    env = gym.make("FlexibleSpacecraft-v0", max_episode_steps=5)
+    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=5)
     env.reset(seed=0)
     for _ in range(5):
         *_, terminated, truncated, _ = env.step(np.zeros(3, dtype=np.float32))
@@ -257,10 +258,35 @@ def test_actuator_delay_and_rate_limit_shape_the_applied_torque():
 
 
 def test_paddle_rotation_id_turns_the_paddles_from_90_to_180_deg():
-    env = gym.make("FlexibleSpacecraftPaddleRotation-v0")
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
     _, info = env.reset(seed=0)
     assert np.rad2deg(info["paddle_angle"]) == pytest.approx(90.0)
     model = env.unwrapped.model
     assert np.rad2deg(model.configuration(250.0).paddle_angle) == pytest.approx(180.0)
     drawn = model.scenario.randomized(np.random.default_rng(0))
     assert type(drawn) is type(model.scenario) and drawn.initial_angle_deg == 90.0
+
+
+@pytest.mark.parametrize("env_name", IDS)
+@pytest.mark.parametrize("task", ["regulation", "slew"])
+def test_crashing_does_not_pay(env_name, task):
+    """Full torque until the bound is left < zero torque < LQG, on every id and task."""
+    def score(policy):
+        env = gym.make(env_name, task=task)
+        if policy == "lqg":
+            traj = run_episode(env, OracleLQG(env.unwrapped), seed=0)
+            return float(traj.rewards.sum()), traj.terminated
+        env.reset(seed=0)
+        action = np.ones(3, dtype=np.float32) if policy == "crash" else np.zeros(3, np.float32)
+        total, done, terminated = 0.0, False, False
+        while not done:
+            _, reward, terminated, truncated, _ = env.step(action)
+            total += reward
+            done = terminated or truncated
+        return total, terminated
+
+    crash, crashed = score("crash")
+    zero, _ = score("zero")
+    lqg, lqg_crashed = score("lqg")
+    assert crashed and not lqg_crashed
+    assert crash < zero < lqg
