@@ -223,6 +223,8 @@ class AdaptiveLQG(_LQGController):
             self.excitation.shape(shape())
         torque = torque + self.excitation()
         action = self._to_action(torque)
+        if isinstance(self.fallback, _LQGController):
+            self.fallback.applied_action = action
         self._remember(x, y, action.astype(float) * self.max_torque)
         self.stats["excitation_rms_Nm"] = self.excitation.rms
         self._k += 1

@@ -73,11 +73,19 @@ class _EnvController(Controller):
         self._meas_obs, self._meas_rows = match_groups(layout, env.model.output_layout)
         self._last = np.zeros(3, dtype=np.float32)
         self.n_nonfinite = 0
+        # an observed reference (the "reference" group) serves predict(obs) without info
+        self._ref_obs = layout.indices("reference") if "reference" in layout.names else None
+        self._obs = None
 
-    @staticmethod
-    def _reference(info: dict[str, Any] | None) -> np.ndarray:
+    def _reference(self, info: dict[str, Any] | None) -> np.ndarray:
+        """The reference attitude (rad): ``info["reference"]``, else the observed
+        ``"reference"`` group of the last observation, else zero."""
         if info is not None and "reference" in info:
             return np.asarray(info["reference"], dtype=float)
+        if self._ref_obs is not None and self._obs is not None:
+            ref = self._obs[self._ref_obs]
+            if np.all(np.isfinite(ref)):
+                return ref
         return np.zeros(3)
 
     def _to_action(self, torque: np.ndarray) -> np.ndarray:
@@ -97,6 +105,7 @@ class _EnvController(Controller):
         if obs.shape != self.env.observation_space.shape:
             raise ValueError(f"observation must have shape {self.env.observation_space.shape}, "
                              f"got {obs.shape}")
+        self._obs = obs
         return obs
 
     def _check_obs(self, obs: ArrayLike) -> np.ndarray | None:
@@ -161,6 +170,9 @@ class _LQGController(_EnvController):
         self.law.reset()
         self.kf = None
         self._pending: tuple[np.ndarray, ...] | None = None
+        #: The action actually sent last, when a wrapping controller changed ours (an
+        #: excitation added); the filter's time update uses it when ``info`` is absent.
+        self.applied_action: np.ndarray | None = None
 
     def _filter(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, qn: np.ndarray,
                 noise_var: np.ndarray, y: np.ndarray | None,
@@ -177,9 +189,11 @@ class _LQGController(_EnvController):
             self.kf = KalmanPredictor(a.shape[0], initial_covariance=1e-3)
         elif self._pending is not None:
             pa, pb, pq = self._pending
-            applied = (np.asarray(info["torque"], dtype=float)
-                       if info is not None and "torque" in info
-                       else self._last.astype(float) * self.max_torque)
+            if info is not None and "torque" in info:
+                applied = np.asarray(info["torque"], dtype=float)
+            else:   # without info: what a wrapping controller says it sent, else our own
+                sent = self.applied_action if self.applied_action is not None else self._last
+                applied = sent.astype(float) * self.max_torque
             self.kf.predict(pa, pb, pq, applied)
         self._pending = (a, b, qn)
         return self.kf.correct(c, noise_var, y, a=a)

@@ -254,3 +254,26 @@ def test_fixed_lqg_is_judged_unstable_past_96_deg_and_the_oracle_stable():
                              env.unwrapped.model)
     assert fixed["verdict"] == "growing" and fixed["envelope_growth_per_100s"] > 2
     assert oracle["verdict"] == "stable"
+
+
+@pytest.mark.parametrize("make", [PD, FixedLQG, RobustLQG, AdaptiveLQG])
+def test_predict_reads_an_observed_reference_as_act_reads_info(make):
+    """SB3's evaluate_policy calls predict(obs): with the reference observed it must
+    act as act(obs, info) does; without it, it cannot know the slew target."""
+    env = FlexibleSpacecraftEnv("docking", task="slew",
+                                outputs=("attitude", "rate", "deflection", "reference"))
+    with_info, from_obs = make(env), make(env)
+    obs, info = env.reset(seed=4)
+    with_info.reset(0)
+    from_obs.reset(0)
+    for _ in range(300):
+        action = with_info.act(obs, info)
+        predicted, _ = from_obs.predict(obs, deterministic=True)
+        # the observed reference is float32: equal to rounding, not bit for bit
+        np.testing.assert_allclose(predicted, action, rtol=0, atol=1e-4)
+        obs, _, _, _, info = env.step(action)
+    blind_env = FlexibleSpacecraftEnv("docking", task="slew")
+    blind = make(blind_env)
+    obs, info = blind_env.reset(seed=4)
+    blind.reset(0)
+    assert np.abs(blind.predict(obs)[0] - make(blind_env).act(obs, info)).max() > 0.1
