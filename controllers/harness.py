@@ -169,6 +169,16 @@ SATURATION_LIMIT = 0.5
 SETTLED_BEFORE_S = 10.0
 
 
+def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
+    """Excitation RMS torque (N m) and the shares of steps with a rejected gain and
+    flown by a fallback, from a controller's ``stats`` (0 for controllers
+    without them)."""
+    steps = max(1, int(stats.get("steps", 0)))
+    return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
+            "rejected_share": stats.get("rejected", 0) / steps,
+            "fallback_share": stats.get("fallback_steps", 0) / steps}
+
+
 def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tuple[float, float]:
     """Growth per 100 s of the windowed peaks of ``level`` from ``start_s``, and the last peak.
 
@@ -180,7 +190,8 @@ def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tup
     late = level[time >= start_s]
     count = late.size // width
     if count < 3:
-        return float("nan"), float(np.max(level[-width:])) if level.size else float("nan")
+        last = float(np.max(level[-width:])) if level.size else float("nan")
+        return float("nan"), last
     peaks = late[late.size - count * width:].reshape(count, width).max(axis=1)
     centres = np.arange(count) * width * dt
     slope = np.polyfit(centres, np.log(np.maximum(peaks, 1e-12)), 1)[0]
@@ -217,7 +228,9 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         windowed peaks of the attitude error and the deflections, in their
         nominal scales, from t = 100 s, or from the middle of a shorter
         episode); ``saturated_share`` (share of the last 10 % of steps with an
-        actuator at its limit); ``verdict`` and ``stable``.
+        actuator at its limit); ``verdict`` and ``stable``; and the
+        controller's ``excitation_rms_Nm``, ``rejected_share`` and
+        ``fallback_share`` (:func:`controller_shares`).
 
     Notes
     -----
@@ -298,17 +311,8 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         "saturated_share": saturated,
         "verdict": verdict,
         "stable": verdict == "stable",
+        **controller_shares(traj.controller_stats),
     }
-
-
-def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
-    """Excitation RMS torque (N m) and the shares of steps with a rejected gain and
-    flown by a fallback, from a controller's ``stats`` (0 for controllers
-    without them)."""
-    steps = max(1, int(stats.get("steps", 0)))
-    return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
-            "rejected_share": stats.get("rejected", 0) / steps,
-            "fallback_share": stats.get("fallback_steps", 0) / steps}
 
 
 #: Scalar metrics aggregated by :func:`compare` (median and spread over seeds).
@@ -354,7 +358,6 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
             m = episode_metrics(traj, env.unwrapped.model)
             m["seed"] = int(seed)
             m["controller_stats"] = traj.controller_stats
-            m.update(controller_shares(traj.controller_stats))
             per_seed.append(m)
             trajectories.setdefault(name, []).append(traj)
             bar.update()

@@ -32,7 +32,6 @@ from controllers import (
     RobustLQG,
     ScheduledLQG,
     compare,
-    controller_shares,
     episode_metrics,
     run_episode,
 )
@@ -137,12 +136,6 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
     return kwargs
 
 
-def _metrics(traj: Any, model: Any) -> dict[str, Any]:
-    m = episode_metrics(traj, model)
-    m.update(controller_shares(traj.controller_stats))
-    return m
-
-
 @single_threaded_blas
 def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation",
                  task: str = "slew", module_mass: float | None = None,
@@ -172,9 +165,8 @@ def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation
     Returns
     -------
     dict
-        ``{"metrics": the episode metrics of :func:`episode_metrics` and
-        :func:`controllers.harness.controller_shares`, "timings":
-        {"episode_s": wall time of the episode}}``.
+        ``{"metrics": the episode metrics of :func:`episode_metrics`,
+        "timings": {"episode_s": wall time of the episode}}``.
     """
     if controller not in CONTROLLER_KEYS:
         raise ValueError(f"controller must be one of {sorted(CONTROLLER_KEYS)}, "
@@ -190,7 +182,7 @@ def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation
         traj = run_episode(env, ctrl, seed=int(seed),
                            max_steps=None if max_steps is None else int(max_steps))
         elapsed = time.perf_counter() - start
-        metrics = _metrics(traj, env.unwrapped.model)
+        metrics = episode_metrics(traj, env.unwrapped.model)
     finally:
         env.close()
     return {"metrics": metrics, "timings": {"episode_s": elapsed}}
