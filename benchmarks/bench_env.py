@@ -3,8 +3,10 @@
 Measures, in one run on this machine:
 
 * single env (``gym.make``, with the standard wrappers) for each scenario,
-  first episode (cold matrix cache) and a repeated episode (warm cache),
-* ``gym.make_vec(..., num_envs=8, vectorization_mode="sync")``, env steps/s,
+  first episode (a new env: cold matrix caches), a repeated episode (warm
+  caches) and ``randomize=True`` episodes (a new scenario draw every reset),
+* ``gym.make_vec(..., num_envs=8)`` with ``vectorization_mode="sync"`` and
+  ``"async"`` (subprocesses), env steps/s from new envs,
 * Gymnasium's ``Pendulum-v1`` the same way, as the yardstick.
 
 Every rate is printed beside Pendulum-v1's, measured in the same run.
@@ -20,33 +22,40 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from tqdm.auto import tqdm
 
 from spacecraft_env import ENV_IDS
 
 IDS = {scenario: env_id for env_id, scenario in ENV_IDS.items()}
 
 
-def single_rate(env_id: str, steps: int, episodes: int = 1) -> list[float]:
-    """Steps/s of consecutive ``steps``-long runs of one env (zero action)."""
-    env = gym.make(env_id)
-    action = np.zeros(env.action_space.shape, dtype=np.float32)
-    env.reset(seed=0)
-    rates = []
-    for _ in range(episodes):
-        env.reset()
-        start = time.perf_counter()
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset()
-        rates.append(steps / (time.perf_counter() - start))
-    env.close()
-    return rates
+def single_rate(env_id: str, steps: int, repeats: int = 3, **kwargs) -> tuple[float, float]:
+    """Steps/s of a new env's first ``steps`` and of a second run after a reset.
+
+    Medians over ``repeats`` new envs (zero action); a run that ends its
+    episode resets and goes on. With ``randomize=True`` every reset draws a
+    new scenario, so the second run is a new draw too.
+    """
+    first, second = [], []
+    for _ in range(repeats):
+        env = gym.make(env_id, **kwargs)
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        env.reset(seed=0)
+        for rates in (first, second):
+            env.reset()
+            start = time.perf_counter()
+            for _ in range(steps):
+                _, _, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    env.reset()
+            rates.append(steps / (time.perf_counter() - start))
+        env.close()
+    return float(np.median(first)), float(np.median(second))
 
 
-def vec_rate(env_id: str, steps: int, num_envs: int = 8) -> float:
-    """Env steps/s of a synchronous vector env (``num_envs`` steps per call)."""
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync")
+def vec_rate(env_id: str, steps: int, num_envs: int = 8, mode: str = "sync") -> float:
+    """Env steps/s of a new vector env (``num_envs`` steps per call)."""
+    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
     envs.reset(seed=0)
     action = np.zeros((num_envs, *envs.single_action_space.shape), dtype=np.float32)
     calls = max(1, steps // num_envs)
@@ -64,27 +73,35 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="write the figures to this file")
     args = parser.parse_args()
 
-    pend_single = max(single_rate("Pendulum-v1", args.steps, episodes=3))
-    pend_vec = vec_rate("Pendulum-v1", args.steps * 4)
+    pend_single = max(single_rate("Pendulum-v1", args.steps))
+    pend = {"sync": vec_rate("Pendulum-v1", args.steps * 4),
+            "async": vec_rate("Pendulum-v1", args.steps * 4, mode="async")}
     rows = []
-    for name, env_id in IDS.items():
-        cold, warm = single_rate(env_id, args.steps, episodes=2)
-        vec = vec_rate(env_id, args.steps * 4)
-        rows.append({"scenario": name, "single_cold": cold, "single_warm": warm,
-                     "vec8_sync": vec, "ratio_cold": cold / pend_single,
-                     "ratio_warm": warm / pend_single, "ratio_vec": vec / pend_vec})
+    for name, env_id in tqdm(IDS.items(), desc="scenarios", leave=False):
+        cold, warm = single_rate(env_id, args.steps)
+        randomized = min(single_rate(env_id, args.steps, randomize=True))
+        sync = vec_rate(env_id, args.steps * 4)
+        asyn = vec_rate(env_id, args.steps * 4, mode="async")
+        rows.append({"scenario": name, "single_first": cold, "single_repeat": warm,
+                     "single_randomized": randomized, "vec8_sync": sync, "vec8_async": asyn,
+                     "ratio_first": cold / pend_single, "ratio_repeat": warm / pend_single,
+                     "ratio_randomized": randomized / pend_single,
+                     "ratio_sync": sync / pend["sync"], "ratio_async": asyn / pend["async"]})
 
-    print(f"Pendulum-v1: single {pend_single:10,.0f} steps/s   make_vec(8, sync) "
-          f"{pend_vec:10,.0f} env-steps/s")
-    print(f"{'scenario':<16}{'single, 1st ep':>16}{'single, repeat':>16}{'vec8 sync':>12}"
-          f"{'1st/Pend':>10}{'rep/Pend':>10}{'vec/Pend':>10}")
+    print(f"Pendulum-v1: single {pend_single:,.0f} steps/s; make_vec(8) sync "
+          f"{pend['sync']:,.0f}, async {pend['async']:,.0f} env-steps/s")
+    print("env steps/s, and in brackets the ratio to Pendulum-v1 measured the same way")
+    heads = ("single, 1st ep", "single, repeat", "randomized", "vec8 sync", "vec8 async")
+    keys = ("first", "repeat", "randomized", "sync", "async")
+    cols = ("single_first", "single_repeat", "single_randomized", "vec8_sync", "vec8_async")
+    print(f"{'scenario':<16}" + "".join(f"{h:>17}" for h in heads))
     for r in rows:
-        print(f"{r['scenario']:<16}{r['single_cold']:>16,.0f}{r['single_warm']:>16,.0f}"
-              f"{r['vec8_sync']:>12,.0f}{r['ratio_cold']:>10.0%}{r['ratio_warm']:>10.0%}"
-              f"{r['ratio_vec']:>10.0%}")
+        cells = "".join(f"{r[c]:>10,.0f} ({r['ratio_' + k]:>3.0%})"
+                        for c, k in zip(cols, keys, strict=True))
+        print(f"{r['scenario']:<16}{cells}")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"pendulum_single": pend_single, "pendulum_vec8": pend_vec, "rows": rows},
+            json.dump({"pendulum_single": pend_single, "pendulum_vec8": pend, "rows": rows},
                       fh, indent=2)
 
 

@@ -16,10 +16,13 @@ matrices ``A_c = [[0, I], [-M^-1 K, -M^-1 E]]``, ``B_c = [0; M^-1 L]``;
 outputs ``y = C x`` select attitude angles psi (rad), body rates
 omega = psi' (rad/s) and appendage deflections ``w_i = Phi_i eta_i`` (m).
 
-The sampled model is the exact zero-order-hold discretization, from the
-matrix exponential of ``[[A_c, B_c], [0, 0]] dt``, cached on the scenario's
-configuration (so docking costs one exponential per segment and a repeated
-rotation episode reuses its matrices).
+The sampled model is the zero-order-hold discretization, from the matrix
+exponential of ``[[A_c, B_c], [0, 0]] dt`` (:mod:`spacecraft_env.discretization`):
+exact and cached per configuration for piecewise-constant scenarios (docking
+costs one exponential per segment), and for a turning paddle a Chebyshev
+interpolant in the paddle angle of exact exponentials that agrees with them to
+rounding, shared by every episode of the model (so the first and a randomized
+rotation episode cost about what a repeated one does).
 """
 
 from __future__ import annotations
@@ -31,15 +34,14 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import expm
 
 from spacecraft_conventions import (
     AXES,
     LABEL_PREFIX,
     OUTPUT_GROUPS,
     OutputLayout,
-    single_threaded_blas,
 )
+from spacecraft_env.discretization import AnglePanels, zoh_exponential
 from spacecraft_env.modes import cantilever_moments, coupling_matrix, sensor_mode_shapes
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.scenarios import (
@@ -91,39 +93,48 @@ def rotation_pitch(theta: float) -> np.ndarray:
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-def _inv3_spd(s: np.ndarray, t: float) -> np.ndarray:
-    """Inverse of a symmetric 3x3 matrix, checked positive definite.
+#: Steps of a rotating scenario whose ZOH matrices are interpolated together.
+_BLOCK_STEPS = 64
+
+
+def _not_positive_definite(cfg: Configuration, t: float) -> ValueError:
+    where = (f"at t = {t} s" if math.isfinite(t)
+             else f"at paddle angle {math.degrees(cfg.paddle_angle):.6g} deg")
+    return ValueError(f"mass matrix M is not positive definite {where}: "
+                      "J - sum F_i F_i^T must be positive definite")
+
+
+def _inv3_spd(s: np.ndarray) -> np.ndarray | None:
+    """Inverse of a symmetric 3x3 matrix, or ``None`` if it is not positive definite.
 
     Sylvester's criterion (positive leading minors) and the adjugate, in
     scalar arithmetic: several times faster than LAPACK calls at this size.
-
-    Raises
-    ------
-    ValueError
-        If ``s`` is not positive definite (the mass matrix at time ``t`` is not).
     """
     (a, b, c), (_, e, f), (_, _, i) = s.tolist()
     c11, c12, c13 = e * i - f * f, c * f - b * i, b * f - c * e
     det = a * c11 + b * c12 + c * c13
     if not (a > 0 and a * e - b * b > 0 and det > 0):
-        raise ValueError(f"mass matrix M(t) is not positive definite at t = {t} s: "
-                         "J - sum F_i F_i^T must be positive definite")
+        return None
     c22, c23, c33 = a * i - c * c, b * c - a * f, a * e - b * b
     return np.array([[c11, c12, c13], [c12, c22, c23], [c13, c23, c33]]) / det
 
 
 def _scenario_key(scenario: Scenario):
-    """A cheap hashable key function ``t -> key`` for the matrix cache."""
+    """Cheap hashable keys for the matrix cache: ``(t -> key, (t, cfg) -> key)``.
+
+    The second form gives the same key from a configuration already at hand.
+    """
     if isinstance(scenario, DockingScenario):
         times = scenario.event_times()
-        return lambda t: bisect_right(times, t)
+        return (lambda t: bisect_right(times, t)), (lambda t, cfg: bisect_right(times, t))
     if isinstance(scenario, SolarRotationScenario):
-        return lambda t: scenario.configuration(t).paddle_angle
+        return (lambda t: scenario.configuration(t).paddle_angle), (lambda t, cfg: cfg.paddle_angle)
     if isinstance(scenario, CombinedScenario):
         times = scenario.event_times()
         rot = scenario.rotation
-        return lambda t: (bisect_right(times, t), rot.configuration(t).paddle_angle)
-    return scenario.configuration
+        return ((lambda t: (bisect_right(times, t), rot.configuration(t).paddle_angle)),
+                (lambda t, cfg: (bisect_right(times, t), cfg.paddle_angle)))
+    return scenario.configuration, (lambda t, cfg: cfg)
 
 
 class FlexibleSpacecraftModel:
@@ -143,8 +154,12 @@ class FlexibleSpacecraftModel:
     dt : float
         Sample time of the discrete model, s (paper: 0.1).
     cache_size : int, optional
-        Most discrete models kept in the LRU cache; default holds a full
-        2500-step rotation episode within about 64 MB.
+        Most per-step discrete models kept in the scenario's LRU cache (at
+        least 128, two interpolation blocks); default holds a full 2500-step
+        rotation episode within about 64 MB.
+        The configuration-level caches behind it (exact exponentials per
+        docked configuration, angle interpolants) are bounded separately and
+        shared by :meth:`with_scenario` copies, so they survive episodes.
 
     Attributes
     ----------
@@ -183,13 +198,15 @@ class FlexibleSpacecraftModel:
         self.scenario = make_scenario(scenario)
         self.outputs = tuple(o for o in OUTPUT_GROUPS if o in outputs)
         self.dt = dt
-        self._key = _scenario_key(self.scenario)
+        self._key, self._key_of = _scenario_key(self.scenario)
         self._build_constant_parts()
         if cache_size is None:
             per_entry = 8 * self.n * (self.n + 3)
             cache_size = int(np.clip(64e6 // per_entry, 16, 4096))
+        cache_size = max(int(cache_size), 2 * _BLOCK_STEPS)
         self._cache_size = int(cache_size)
         self._cache: OrderedDict = OrderedDict()
+        self._shared = _SharedDiscretization(self)
 
     # ------------------------------------------------------------------ setup
     def _build_constant_parts(self) -> None:
@@ -354,8 +371,7 @@ class FlexibleSpacecraftModel:
         try:
             np.linalg.cholesky(m)
         except np.linalg.LinAlgError:
-            raise ValueError(f"mass matrix M(t) is not positive definite at t = {t} s: "
-                             "J - sum F_i F_i^T must be positive definite") from None
+            raise _not_positive_definite(cfg, t) from None
         return m
 
     @property
@@ -376,10 +392,19 @@ class FlexibleSpacecraftModel:
         ``S = J - F F^T``, ``G = S^-1 F``:
         ``M^-1 = [[S^-1, -G], [-G^T, I + F^T G]]``. M is positive definite
         iff S is, which :func:`_inv3_spd` checks (Sylvester's criterion).
+        ``t`` (s; NaN for a configuration off the scenario's path) only
+        names the instant in the error.
+
+        Raises
+        ------
+        ValueError
+            If M is not positive definite.
         """
         nd = self.n_dof
         f = self._coupling(cfg)
-        s_inv = _inv3_spd(self._inertia(cfg) - f @ f.T, t)
+        s_inv = _inv3_spd(self._inertia(cfg) - f @ f.T)
+        if s_inv is None:
+            raise _not_positive_definite(cfg, t)
         g = s_inv @ f
         # only the modal columns of K and E are non-zero: M^-1[:, 3:] = [-G; I + F^T G]
         minv_modal = np.vstack((-g, self._eye_modal + f.T @ g))
@@ -439,6 +464,13 @@ class FlexibleSpacecraftModel:
                            for j in keep])
         return wn / (2 * np.pi), -vals[keep].real / wn, weight / weight.max()
 
+    def _van_loan(self, cfg: Configuration, t: float) -> np.ndarray:
+        """``[[A_c, B_c], [0, 0]] dt`` of configuration ``cfg`` ((n + 3, n + 3))."""
+        aug = np.zeros((self.n + 3, self.n + 3))
+        self._fill_continuous(aug, cfg, t)
+        aug *= self.dt
+        return aug
+
     def _discrete_ab(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Cached zero-order-hold ``(A_d, B_d)`` at time ``t`` (read-only arrays)."""
         key = self._key(t)
@@ -447,17 +479,40 @@ class FlexibleSpacecraftModel:
         if hit is not None:
             return hit
         n = self.n
-        aug = np.zeros((n + 3, n + 3))
-        self._fill_continuous(aug, self.configuration(t), t)
-        aug *= self.dt
-        with single_threaded_blas:   # bit-identical whatever the caller's BLAS threads
-            phi = expm(aug)
-        phi.flags.writeable = False
-        entry = (phi[:n, :n], phi[:n, n:])
-        cache[key] = entry
-        if len(cache) > self._cache_size:
+        if self.scenario.piecewise_constant:
+            phi = self._shared.exact(self.configuration(t), t)
+            entry = cache[key] = (phi[:n, :n], phi[:n, n:])
+        else:
+            entry = self._interpolate_block(t, key)
+        while len(cache) > self._cache_size:
             cache.popitem(last=False)
         return entry
+
+    def _interpolate_block(self, t: float, key) -> tuple[np.ndarray, np.ndarray]:
+        """Interpolate (and cache) the ZOH of the whole block of steps holding ``t``.
+
+        A time on the step grid (``t == k dt``) belongs to the fixed block of
+        :data:`_BLOCK_STEPS` steps holding ``k``, evaluated in one product,
+        so the per-step cost is a fraction of one evaluation; any other time
+        is a block of its own. Block membership is a function of ``t`` alone,
+        so the bits never depend on the query history.
+        """
+        n, dt = self.n, self.dt
+        k = round(t / dt)
+        if k >= 0 and k * dt == t:
+            start = k - k % _BLOCK_STEPS
+            ts = [(start + j) * dt for j in range(_BLOCK_STEPS)]
+        else:
+            ts = [t]
+        cfgs = [self.configuration(tj) for tj in ts]
+        phis = self._shared.panels.evaluate([c.modules for c in cfgs],
+                                            [c.paddle_angle for c in cfgs])
+        phis.flags.writeable = False
+        cache = self._cache
+        key_of = self._key_of
+        for tj, cfg, phi in zip(ts, cfgs, phis, strict=True):
+            cache[key_of(tj, cfg)] = (phi[:, :n], phi[:, n:])
+        return cache[key]
 
     def discrete(self, t: float) -> StateSpaceMatrices:
         """True zero-order-hold ``(A_d, B_d, C, D)`` for the step starting at ``t``."""
@@ -469,7 +524,7 @@ class FlexibleSpacecraftModel:
         new = object.__new__(FlexibleSpacecraftModel)
         new.__dict__.update(self.__dict__)
         new.scenario = make_scenario(scenario)
-        new._key = _scenario_key(new.scenario)
+        new._key, new._key_of = _scenario_key(new.scenario)
         new._cache = OrderedDict()
         return new
 
@@ -479,8 +534,9 @@ class FlexibleSpacecraftModel:
         return self.with_scenario(ConstantScenario(paddle_angle_deg=float(paddle_angle_deg)))
 
     def clear_cache(self) -> None:
-        """Forget every cached discrete model."""
+        """Forget every cached discrete model (this scenario's and the shared ones)."""
         self._cache.clear()
+        self._shared.clear()
 
     # ------------------------------------------------------------ simulation
     def step(self, x: np.ndarray, u: np.ndarray, t: float) -> np.ndarray:
@@ -534,9 +590,50 @@ class FlexibleSpacecraftModel:
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_cache"] = OrderedDict()  # rebuilt on demand; keeps pickles small
-        del state["_key"]
+        del state["_key"], state["_key_of"], state["_shared"]
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self._key = _scenario_key(self.scenario)
+        self._key, self._key_of = _scenario_key(self.scenario)
+        self._shared = _SharedDiscretization(self)
+
+
+class _SharedDiscretization:
+    """The configuration-level ZOH caches of one model and its scenario copies.
+
+    ``exact(cfg)`` holds the exponential of each piecewise-constant
+    configuration (bounded LRU); ``panels`` the angle interpolants of the
+    rotating scenarios (:class:`~spacecraft_env.discretization.AnglePanels`).
+    Both depend on the physics and ``dt`` only, never on the scenario's
+    timing, so :meth:`FlexibleSpacecraftModel.with_scenario` shares them.
+    """
+
+    def __init__(self, model: FlexibleSpacecraftModel, max_configs: int = 64) -> None:
+        self._model = model
+        self._configs: OrderedDict = OrderedDict()
+        self._max_configs = int(max_configs)
+        self.panels = AnglePanels(self._build_panel, model.n)
+
+    def _build_panel(self, modules: tuple, thetas: np.ndarray) -> np.ndarray:
+        m = self._model
+        return np.stack([m._van_loan(Configuration(paddle_angle=float(th), modules=modules),
+                                     math.nan) for th in thetas])
+
+    def exact(self, cfg: Configuration, t: float) -> np.ndarray:
+        """Read-only ``[A_d, B_d]`` rows of the exponential of configuration ``cfg``."""
+        hit = self._configs.get(cfg)
+        if hit is not None:
+            self._configs.move_to_end(cfg)
+            return hit
+        n = self._model.n
+        phi = zoh_exponential(self._model._van_loan(cfg, t))[:n]
+        phi.flags.writeable = False
+        self._configs[cfg] = phi
+        if len(self._configs) > self._max_configs:
+            self._configs.popitem(last=False)
+        return phi
+
+    def clear(self) -> None:
+        self._configs.clear()
+        self.panels.clear()
