@@ -9,6 +9,7 @@ harness runs LQR designs and RL agents alike.
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from typing import Any
 
@@ -39,17 +40,74 @@ class Controller(ABC):
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
         """SB3-compatible entry point: ``(action, state)``.
 
-        A batch of observations (2-D) is handled row by row; ``episode_start``
-        resets the controller where it is true.
+        Everything comes from the observation (a controller that needs the
+        env's privileged ``info`` raises without it). A single observation
+        (1-D) is acted on by this controller. A batch ``(n_envs, obs_dim)``
+        is acted on by one copy of the controller per env, as SB3's recurrent
+        policies keep one hidden state per env: the copies (deep copies of
+        this controller when the batch first arrives, each with its own
+        identifier and filter) are returned as ``state`` and kept here too,
+        so callers that pass ``state`` back and callers that do not both
+        work. ``episode_start[i]`` resets env i's copy.
+
+        Episodes started here are seeded (their dither and any other
+        randomness): the j-th episode of a single stream gets seed j, env
+        i's j-th episode of a batch of n gets ``j n + i``; so an evaluation
+        through ``predict`` (e.g. SB3's ``evaluate_policy``) is reproducible.
         """
         obs = np.asarray(observation)
-        if obs.ndim == 2:
+        if obs.ndim == 1:
             if episode_start is not None and np.any(episode_start):
-                self.reset()
-            return np.stack([self.act(o) for o in obs]), state
-        if episode_start is not None and np.any(episode_start):
-            self.reset()
-        return self.act(obs), state
+                self.reset(seed=self._next_seed())
+            return self.act(obs), state
+        if obs.ndim != 2:
+            raise ValueError(f"observation must be (obs_dim,) or (n_envs, obs_dim), "
+                             f"got shape {obs.shape}")
+        n = obs.shape[0]
+        starts = np.zeros(n, dtype=bool) if episode_start is None else \
+            np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
+        copies = state if isinstance(state, _PerEnv) and len(state) == n else self._per_env(n)
+        for i in np.flatnonzero(starts):
+            copies[i].reset(seed=copies.next_seed(i))
+        actions = np.stack([c.act(o) for c, o in zip(copies, obs, strict=True)])
+        return actions, copies
+
+    def _next_seed(self) -> int:
+        j = self.__dict__.get("_predict_episodes", 0)
+        self.__dict__["_predict_episodes"] = j + 1
+        return j
+
+    def _per_env(self, n: int) -> _PerEnv:
+        """This controller's per-env copies for a batch of ``n`` (made on first use)."""
+        held = self.__dict__.get("_batch")
+        if held is None or len(held) != n:
+            held = _PerEnv([copy.deepcopy(self) for _ in range(n)])
+            self.__dict__["_batch"] = held
+        return held
+
+    def __deepcopy__(self, memo: dict) -> Controller:
+        clone = object.__new__(type(self))
+        memo[id(self)] = clone
+        env = self.__dict__.get("env")
+        if env is not None:                     # the env is what we control, not our state
+            memo.setdefault(id(env), env)
+        for key, value in self.__dict__.items():
+            if key not in ("_batch", "_predict_episodes"):
+                clone.__dict__[key] = copy.deepcopy(value, memo)
+        return clone
+
+
+class _PerEnv(list):
+    """Per-env controller copies: the ``state`` that batched ``predict`` returns."""
+
+    def __init__(self, controllers: list) -> None:
+        super().__init__(controllers)
+        self._episodes = [0] * len(controllers)
+
+    def next_seed(self, i: int) -> int:
+        j = self._episodes[i]
+        self._episodes[i] = j + 1
+        return j * len(self) + i
 
 
 class PolicyController(Controller):

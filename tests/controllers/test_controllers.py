@@ -277,3 +277,38 @@ def test_predict_reads_an_observed_reference_as_act_reads_info(make):
     obs, info = blind_env.reset(seed=4)
     blind.reset(0)
     assert np.abs(blind.predict(obs)[0] - make(blind_env).act(obs, info)).max() > 0.1
+
+
+def test_evaluate_policy_on_two_envs_equals_each_env_alone():
+    """SB3's evaluate_policy through predict: one identifier per env, nothing interleaved."""
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    kwargs = {"scenario": "docking", "task": "slew", "max_episode_steps": 800,
+              "outputs": ("attitude", "rate", "deflection", "reference")}
+    vec = DummyVecEnv([lambda: Monitor(gym.make("FlexibleSpacecraft-v1", **kwargs))
+                       for _ in range(2)])
+    vec.seed(100)
+    ctrl = AdaptiveLQG(vec.envs[0].unwrapped)
+    returns, _ = evaluate_policy(ctrl, vec, n_eval_episodes=2, return_episode_rewards=True)
+    copies = ctrl._batch
+    assert len(copies) == 2 and copies[0].identifier is not copies[1].identifier
+    # each identifier saw its own env's 800 samples, none of the other's
+    assert [c.identifier.n_samples for c in copies] == [800, 800]
+
+    alone = []
+    for i in range(2):
+        env = gym.make("FlexibleSpacecraft-v1", **kwargs)
+        solo = AdaptiveLQG(env.unwrapped)
+        solo.reset(seed=i)                 # env i's first episode through predict: seed i
+        obs, info = env.reset(seed=100 + i)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(solo.act(obs, info))
+            total += reward
+            done = terminated or truncated
+        alone.append(total)
+        assert solo.stats["redesigns"] + solo.stats["rejected"] > 0   # the identified loop ran
+    # the reference is read from the float32 observation instead of info
+    np.testing.assert_allclose(sorted(returns), sorted(alone), rtol=1e-4)
