@@ -12,7 +12,8 @@
 * :func:`run_episode`, :func:`episode_metrics`, :func:`compare`: the
   closed-loop harness.
 * :class:`IdentifiedModelFeatures`: the identifier as a model-learning
-  component for RL agents.
+  component for RL agents; :class:`OracleModelFeatures`: the same features
+  from the true plant (the ceiling, privileged).
 """
 
 from controllers.acceptance import GainAcceptance, effective_gains
@@ -28,7 +29,7 @@ from controllers.baselines import (
     nominal_model,
 )
 from controllers.excitation import BinaryExcitation
-from controllers.features import IdentifiedModelFeatures
+from controllers.features import IdentifiedModelFeatures, OracleModelFeatures
 from controllers.harness import (
     Trajectory,
     compare,
@@ -52,6 +53,7 @@ __all__ = [
     "LQRWeights",
     "OracleLQG",
     "OracleLQR",
+    "OracleModelFeatures",
     "PolicyController",
     "RiccatiTracker",
     "RobustLQG",

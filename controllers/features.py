@@ -13,6 +13,12 @@ feature                   size   scaling
 state estimate            n      identifier state (its internal coordinates,
                                  already normalized by the nominal sensor
                                  ranges) divided by ``state_scale`` (10)
+rigid-body gain           6      upper triangle (xx, xy, xz, yy, yz, zz) of the
+                                 identified ``J^-1``
+                                 (:func:`identifiers.rigid_body_gain`, from
+                                 torque to body rate) times the nominal
+                                 inertia's mean diagonal (so about 1);
+                                 refreshed every ``gain_every`` steps
 modal frequencies         k      identified natural frequencies (Hz) of the k
                                  slowest oscillatory poles, divided by 1 Hz
 damping ratios            k      of the same poles (dimensionless)
@@ -23,6 +29,10 @@ model ready               1      1 once the identifier has a model, else 0
 ========================  =====  ==============================================
 
 Before warm-up every feature but the flag is 0.
+
+:class:`OracleModelFeatures` appends the same rigid-body gain, frequencies
+and damping ratios computed from the true current plant: the ceiling of
+what model features can give an agent (privileged; for comparisons only).
 """
 
 from __future__ import annotations
@@ -34,12 +44,19 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
 
-from identifiers import OnlineIdentifier, default_identifier
+from identifiers import OnlineIdentifier, default_identifier, rigid_body_gain
 from spacecraft_conventions import match_groups, single_threaded_blas
 
-__all__ = ["IdentifiedModelFeatures"]
+__all__ = ["IdentifiedModelFeatures", "OracleModelFeatures"]
 
 _CLIP = 10.0
+#: Entries of a symmetric 3x3 matrix that the features carry (upper triangle).
+_UPPER = np.triu_indices(3)
+
+
+def _gain_scale(env: gym.Env) -> float:
+    """Mean diagonal of the nominal inertia, kg m^2: makes ``J^-1`` about 1."""
+    return float(np.mean(np.diag(env.unwrapped.model.nominal().inertia(0.0))))
 
 
 class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -56,17 +73,22 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         k, number of modal frequencies and damping ratios appended.
     state_scale : float
         Divisor of the state estimate.
+    gain_every : int
+        Steps between refreshes of the rigid-body gain feature (its Schur
+        split costs several updates' worth; 10 steps are 1 s).
     """
 
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None, n_modes: int = 4,
-                 state_scale: float = 10.0) -> None:
+                 state_scale: float = 10.0, gain_every: int = 10) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
-                                                 state_scale=state_scale)
+                                                 state_scale=state_scale, gain_every=gain_every)
         gym.ObservationWrapper.__init__(self, env)
         base = env.unwrapped
         model = base.model
         if n_modes < 1:
             raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+        if gain_every < 1:
+            raise ValueError(f"gain_every must be >= 1, got {gain_every}")
         layout = base.observation_layout
         self._meas_obs, _ = match_groups(layout, model.output_layout)
         if self._meas_obs.size == 0:
@@ -79,9 +101,12 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self.identifier = identifier
         self.n_modes = int(n_modes)
         self.state_scale = float(state_scale)
+        self.gain_every = int(gain_every)
+        self._gain_scale = _gain_scale(env)
+        self._rate_rows = measured.indices("rate") if "rate" in measured.names else None
         self._max_torque = float(base.max_torque)
         n = identifier.n
-        self.n_features = n + 2 * self.n_modes + self._meas_obs.size + 1
+        self.n_features = n + 6 + 2 * self.n_modes + self._meas_obs.size + 1
         low = np.concatenate([env.observation_space.low,
                               np.full(self.n_features, -_CLIP, dtype=np.float32)])
         high = np.concatenate([env.observation_space.high,
@@ -96,6 +121,8 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self.identifier.reset()
         self._action = None
         self._last_y = None
+        self._gain = np.zeros(6)
+        self._steps = 0
         return super().reset(seed=seed, options=options)
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
@@ -111,12 +138,19 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         if model is None or x is None or not np.all(np.isfinite(model.A)):
             return out
         out[:n] = x / self.state_scale
+        if self._rate_rows is not None and self._steps % self.gain_every == 0:
+            try:
+                gain = rigid_body_gain(model, self._rate_rows)
+                self._gain = (0.5 * (gain + gain.T))[_UPPER] * self._gain_scale
+            except (ValueError, np.linalg.LinAlgError):
+                pass                        # keep the last gain
+        out[n:n + 6] = self._gain
         freq, zeta = model.modal()
         count = min(k, freq.size)
-        out[n:n + count] = freq[:count]
-        out[n + k:n + k + count] = zeta[:count]
+        out[n + 6:n + 6 + count] = freq[:count]
+        out[n + 6 + k:n + 6 + k + count] = zeta[:count]
         pred = model.C @ x
-        out[n + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
+        out[n + 6 + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
         out[-1] = 1.0
         return np.nan_to_num(out, nan=0.0, posinf=_CLIP, neginf=-_CLIP)
 
@@ -128,7 +162,69 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
             # y_k goes in as it is: the identifier skips and counts it.
             self.identifier.update(self._action * self._max_torque, self._last_y)
         feats = self._features(y)
+        self._steps += 1
         self._last_y = y
         full = np.concatenate([np.asarray(observation, dtype=float),
                                np.clip(feats, -_CLIP, _CLIP)])
         return full.astype(np.float32)
+
+
+class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Append the true current plant's model features (privileged: the ceiling).
+
+    Appends, from the truth model at the current time, the rigid-body gain
+    ``J(t)^-1`` (6, scaled as in :class:`IdentifiedModelFeatures`), the
+    natural frequencies (Hz) of the k slowest flexible modes and their
+    damping ratios: what a perfect identifier would report. For comparisons
+    only; a deployed agent cannot have it.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment.
+    n_modes : int
+        k, number of modal frequencies and damping ratios appended.
+    """
+
+    def __init__(self, env: gym.Env, n_modes: int = 4) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes)
+        gym.ObservationWrapper.__init__(self, env)
+        if n_modes < 1:
+            raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+        self.n_modes = int(n_modes)
+        self._gain_scale = _gain_scale(env)
+        self.n_features = 6 + 2 * self.n_modes
+        low = np.concatenate([env.observation_space.low,
+                              np.full(self.n_features, -_CLIP, dtype=np.float32)])
+        high = np.concatenate([env.observation_space.high,
+                               np.full(self.n_features, _CLIP, dtype=np.float32)])
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                            dtype=np.float32)
+        self._cache: dict = {}
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        self._cache.clear()            # a randomized reset changes the plant
+        return super().reset(seed=seed, options=options)
+
+    def _truth(self) -> np.ndarray:
+        base = self.env.unwrapped
+        model, t = base.model, base.time
+        key = model._key(t)             # the features change only with the plant
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            k = self.n_modes
+            hit = np.zeros(self.n_features)
+            hit[:6] = np.linalg.inv(model.inertia(t))[_UPPER] * self._gain_scale
+            freq, zeta = model.modal(t)
+            count = min(k, freq.size)
+            hit[6:6 + count] = freq[:count]
+            hit[6 + k:6 + k + count] = zeta[:count]
+            self._cache[key] = hit
+        return hit
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        feats = np.clip(self._truth(), -_CLIP, _CLIP)
+        return np.concatenate([np.asarray(observation, dtype=float), feats]).astype(np.float32)

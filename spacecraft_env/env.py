@@ -126,16 +126,20 @@ class FlexibleSpacecraftEnv(gym.Env):
         (applied control torque, N m, after clipping, scaling, the actuator
         delay and rate limit),
         ``"reference"`` (rad), ``"paddle_angle"`` (rad: the solar-paddle drive
-        encoder, which a real spacecraft reads).
+        encoder, which a real spacecraft reads). ``reset`` adds
+        ``"scenario"``: the episode's scenario values
+        (:meth:`Scenario.parameters`: docking times, masses and positions,
+        rotation rate), so a randomized draw is on record; a policy must not
+        read it (that would be privileged knowledge).
 
     Parameters
     ----------
     scenario : str or Scenario
-        ``"constant"``, ``"docking"``, ``"solar_rotation"`` or
-        ``"docking_solar_rotation"``.
+        ``"constant"``, ``"docking"``, ``"solar_rotation"``,
+        ``"paddle_rotation"`` or ``"docking_solar_rotation"``.
     randomize : bool
-        Draw a random scenario variant (docking times and masses, rotation
-        rate) from ``self.np_random`` at every reset.
+        Draw a random scenario variant (docking times, masses and off-axis
+        offsets; rotation rate) from ``self.np_random`` at every reset.
     n_modes : int
         Modes per appendage, 1..8 (ignored when ``params`` is given).
     params : SpacecraftParameters, optional
@@ -364,7 +368,9 @@ class FlexibleSpacecraftEnv(gym.Env):
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
-        return obs, self._info()
+        info = self._info()
+        info["scenario"] = self.model.scenario.parameters()
+        return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         a = np.asarray(action)

@@ -93,6 +93,11 @@ class Scenario(ABC):
         """A concrete random variant drawn from ``rng`` (default: self)."""
         return self
 
+    def parameters(self) -> dict:
+        """The concrete values of this scenario (JSON-ready; the env reports
+        them in ``reset``'s info, so a randomized draw is on record)."""
+        return {"name": self.name}
+
 
 @dataclass(frozen=True)
 class ConstantScenario(Scenario):
@@ -113,6 +118,9 @@ class ConstantScenario(Scenario):
 
     def configuration(self, t: float) -> Configuration:
         return Configuration(paddle_angle=float(np.deg2rad(self.paddle_angle_deg)))
+
+    def parameters(self) -> dict:
+        return {"name": self.name, "paddle_angle_deg": float(self.paddle_angle_deg)}
 
 
 def _default_modules() -> tuple[DockingModule, ...]:
@@ -136,12 +144,18 @@ class DockingScenario(Scenario):
     first_window, second_window : (float, float)
         Docking-time windows (s) for :meth:`randomized`; the second module
         docks at least 20 s after the first.
+    offset_range : float
+        Largest off-axis offset (m) for :meth:`randomized`: each module's
+        x and y are drawn from +-offset_range around its nominal position
+        (from the system mass centre, the paper's convention), so the draw
+        also changes the products of inertia, i.e. the axes' coupling.
     """
 
     modules: tuple = field(default_factory=_default_modules)
     mass_range: tuple = (400.0, 800.0)
     first_window: tuple = (60.0, 140.0)
     second_window: tuple = (140.0, 220.0)
+    offset_range: float = 1.0
     name = "docking"
 
     def __post_init__(self) -> None:
@@ -153,6 +167,8 @@ class DockingScenario(Scenario):
             lo, hi = getattr(self, name)
             if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
                 raise ValueError(f"{name} must be (low, high) with 0 <= low <= high")
+        if not (np.isfinite(self.offset_range) and self.offset_range >= 0):
+            raise ValueError(f"offset_range must be >= 0 m, got {self.offset_range}")
 
     def configuration(self, t: float) -> Configuration:
         return Configuration(modules=tuple(m for m in self.modules if t >= m.time))
@@ -160,23 +176,23 @@ class DockingScenario(Scenario):
     def event_times(self) -> tuple[float, ...]:
         return tuple(m.time for m in self.modules)
 
+    def parameters(self) -> dict:
+        return {"name": self.name,
+                "times_s": [m.time for m in self.modules],
+                "masses_kg": [m.mass for m in self.modules],
+                "positions_m": [list(m.position) for m in self.modules]}
+
     def randomized(self, rng: np.random.Generator) -> DockingScenario:
-        """Draw docking times and module masses (two modules, +-z)."""
+        """Draw docking times, module masses and off-axis offsets (two modules, +-z)."""
         t1 = rng.uniform(*self.first_window)
         t2 = max(rng.uniform(*self.second_window), t1 + 20.0)
         m1, m2 = rng.uniform(*self.mass_range, size=2)
+        offsets = rng.uniform(-self.offset_range, self.offset_range, size=(2, 2))
         base = self.modules if len(self.modules) >= 2 else _default_modules()
-        return DockingScenario(
-            modules=(
-                DockingModule(mass=m1, dimensions=base[0].dimensions,
-                              position=base[0].position, time=t1),
-                DockingModule(mass=m2, dimensions=base[1].dimensions,
-                              position=base[1].position, time=t2),
-            ),
-            mass_range=self.mass_range,
-            first_window=self.first_window,
-            second_window=self.second_window,
-        )
+        return dataclasses.replace(self, modules=tuple(
+            DockingModule(mass=mass, dimensions=mod.dimensions, time=t,
+                          position=tuple(np.asarray(mod.position) + np.append(off, 0.0)))
+            for mod, mass, t, off in zip(base[:2], (m1, m2), (t1, t2), offsets, strict=True)))
 
 
 @dataclass(frozen=True)
@@ -209,6 +225,10 @@ class SolarRotationScenario(Scenario):
     def configuration(self, t: float) -> Configuration:
         return Configuration(paddle_angle=math.radians(self.initial_angle_deg
                                                        + self.rate_deg_s * t))
+
+    def parameters(self) -> dict:
+        return {"name": self.name, "rate_deg_s": float(self.rate_deg_s),
+                "initial_angle_deg": float(self.initial_angle_deg)}
 
     def randomized(self, rng: np.random.Generator) -> SolarRotationScenario:
         """Draw the rotation rate uniformly from ``rate_range``."""
@@ -255,6 +275,10 @@ class CombinedScenario(Scenario):
 
     def event_times(self) -> tuple[float, ...]:
         return self.docking.event_times()
+
+    def parameters(self) -> dict:
+        return {"name": self.name, "docking": self.docking.parameters(),
+                "rotation": self.rotation.parameters()}
 
     def randomized(self, rng: np.random.Generator) -> CombinedScenario:
         return CombinedScenario(self.docking.randomized(rng), self.rotation.randomized(rng))

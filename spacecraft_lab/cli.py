@@ -223,6 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--seeds", type=_integer(1), default=1, help="training seeds 0..N-1")
     train.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="docking",
                        help="registered scenario")
+    train.add_argument("--randomize", action="store_true",
+                       help="draw a new scenario every episode (docking: masses, times, "
+                            "off-axis offsets; rotation: rate); the task where model "
+                            "knowledge matters")
     train.add_argument("--eval-every", type=_integer(1), default=20_000,
                        help="env steps between evaluations")
     train.add_argument("--out", type=_output_directory, default="results/train",
@@ -302,10 +306,11 @@ def _control(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
                      scenario=args.scenario, eval_every=args.eval_every,
-                     tensorboard=None if args.tensorboard is None else str(args.tensorboard))
-    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps",
-                                       "final_attitude_rms_deg", "final_return",
-                                       "adaptive_lqg")}, indent=2))
+                     tensorboard=None if args.tensorboard is None else str(args.tensorboard),
+                     randomize=args.randomize)
+    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps", "randomize",
+                                       "final_attitude_rms_deg", "final_vibration_rms_mm",
+                                       "final_return", "adaptive_lqg", "fixed_lqg")}, indent=2))
     print("steps to 2x adaptive LQG RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
     print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
     return 0

@@ -1,15 +1,22 @@
 """Training stable-baselines3 agents on the spacecraft environments.
 
-``spacecraft train --algo ppo|sac --features none|identified --timesteps N
---seeds S --out DIR`` calls :func:`run_training`: for each seed it trains an
-agent on a registered environment (slew task), with observations and rewards
+``spacecraft train --algo ppo|sac --features none|identified|oracle
+--timesteps N --seeds S [--randomize] --out DIR`` calls :func:`run_training`:
+for each seed it trains an agent on a registered environment (slew task;
+``--randomize`` draws a new scenario every episode, e.g. docking masses,
+times and offsets), Monitor-wrapped, with observations and rewards
 normalized by ``VecNormalize``, optionally with
-:class:`controllers.IdentifiedModelFeatures` appended; every
-``eval_every`` steps the current policy is evaluated through the same
-harness as the controllers (:func:`controllers.run_episode`). It writes the saved models,
-``learning_curves.png``, ``metrics.json`` (final attitude RMS, return, and
-the env steps needed to come within 2x of the adaptive LQG's attitude RMS on
-the same evaluation seeds) and, with ``--tensorboard``, TensorBoard logs.
+:class:`controllers.IdentifiedModelFeatures` or (the ceiling)
+:class:`controllers.OracleModelFeatures` appended. Every ``eval_every``
+steps the current policy is evaluated through the same harness as the
+controllers (:func:`controllers.run_episode`), and the evaluation (attitude
+RMS, vibration, return, share of stable episodes) goes to SB3's logger
+under ``eval/`` beside Monitor's ``rollout/ep_rew_mean`` and
+``ep_len_mean``, so TensorBoard shows them. It writes the saved models,
+``learning_curves.png``, ``metrics.json`` (final attitude RMS, vibration,
+return, and the env steps needed to come within 2x of the adaptive LQG's
+attitude RMS on the same evaluation seeds, with the fixed LQG beside it)
+and, with ``--tensorboard``, TensorBoard logs.
 """
 
 from __future__ import annotations
@@ -25,7 +32,9 @@ from tqdm import tqdm
 from controllers import (
     AdaptiveLQG,
     Controller,
+    FixedLQG,
     IdentifiedModelFeatures,
+    OracleModelFeatures,
     episode_metrics,
     run_episode,
 )
@@ -38,7 +47,7 @@ __all__ = ["ALGORITHMS", "EVAL_SEEDS", "FEATURES", "NormalizedPolicy", "run_trai
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
 #: Observation features the agent may get on top of the env's.
-FEATURES = ("none", "identified")
+FEATURES = ("none", "identified", "oracle")
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
 
@@ -61,29 +70,35 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]):
     env = gym.make(env_id(scenario), **env_kwargs)
     if features == "identified":
         env = IdentifiedModelFeatures(env)
+    elif features == "oracle":
+        env = OracleModelFeatures(env)
     return env
 
 
 def _evaluate(controller: Controller, scenario: str, features: str,
               env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
-    rms, ret = [], []
+    per_seed = []
     for seed in seeds:
         env = _make_env(scenario, features, env_kwargs)
         traj = run_episode(env, controller, seed=seed)
-        m = episode_metrics(traj, env.unwrapped.model)
-        rms.append(m["attitude_rms_deg"])
-        ret.append(m["return"])
+        per_seed.append(episode_metrics(traj, env.unwrapped.model))
         env.close()
-    return {"attitude_rms_deg": float(np.mean(rms)), "return": float(np.mean(ret))}
+    return {"attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
+            "vibration_rms_mm": float(np.mean([m["vibration_rms_mm"] for m in per_seed])),
+            "return": float(np.mean([m["return"] for m in per_seed])),
+            "stable_share": float(np.mean([m["stable"] for m in per_seed]))}
 
 
 def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100_000,
                  seeds: int = 1, out: str | Path = "results/train", *,
                  scenario: str = "docking", eval_every: int = 20_000,
-                 tensorboard: str | None = None, progress: bool = True) -> dict:
+                 tensorboard: str | None = None, progress: bool = True,
+                 randomize: bool = False) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring."""
+    # optional dependency (the "rl" extra): imported where it is needed
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     algos = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
@@ -97,16 +112,18 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError("timesteps and seeds must be >= 1")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {"task": "slew"}
+    env_kwargs = {"task": "slew", "randomize": bool(randomize)}
 
     baseline_env = gym.make(env_id(scenario), **env_kwargs)
     baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
+    fixed = _evaluate(FixedLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
     for seed in range(seeds):
-        venv = VecNormalize(DummyVecEnv([lambda: _make_env(scenario, features, env_kwargs)]),
-                            norm_obs=True, norm_reward=True, clip_obs=10.0)
+        venv = VecNormalize(
+            DummyVecEnv([lambda: Monitor(_make_env(scenario, features, env_kwargs))]),
+            norm_obs=True, norm_reward=True, clip_obs=10.0)
         venv.seed(seed)
         model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
                             tensorboard_log=tensorboard)
@@ -126,10 +143,12 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                      "steps_to_2x_adaptive": reached})
 
     metrics = {
-        "algo": algo, "features": features, "scenario": scenario, "timesteps": timesteps,
-        "seeds": seeds, "eval_seeds": list(EVAL_SEEDS), "adaptive_lqg": baseline,
+        "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
+        "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
+        "adaptive_lqg": baseline, "fixed_lqg": fixed,
         "target_attitude_rms_deg": target, "runs": runs,
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
+        "final_vibration_rms_mm": float(np.mean([r["final"]["vibration_rms_mm"] for r in runs])),
         "final_return": float(np.mean([r["final"]["return"] for r in runs])),
     }
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
@@ -156,6 +175,8 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
                                   env_kwargs)
                 venv.training = True
                 curve.append({"timesteps": int(self.num_timesteps), **score})
+                for key, value in score.items():
+                    self.logger.record(f"eval/{key}", value)
             return True
 
         def _on_training_end(self) -> None:

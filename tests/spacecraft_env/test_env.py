@@ -290,3 +290,22 @@ def test_crashing_does_not_pay(env_name, task):
     lqg, lqg_crashed = score("lqg")
     assert crashed and not lqg_crashed
     assert crash < zero < lqg
+
+
+def test_randomized_docking_records_its_draw_in_reset_info():
+    env = gym.make("FlexibleSpacecraftDocking-v1", randomize=True)
+    _, first = env.reset(seed=3)
+    _, second = env.reset()
+    draws = [first["scenario"], second["scenario"]]
+    assert draws[0]["name"] == "docking" and draws[0] != draws[1]
+    for draw in draws:
+        assert all(400 <= m <= 800 for m in draw["masses_kg"])
+        assert 60 <= draw["times_s"][0] <= 140 and draw["times_s"][1] >= draw["times_s"][0] + 20
+        offsets = np.array(draw["positions_m"])[:, :2]
+        assert np.all(np.abs(offsets) <= 1.0) and np.abs(offsets).max() > 0.05
+    # the draw is what the plant flies: off-axis modules couple the axes after docking
+    model = env.unwrapped.model
+    after = model.inertia(draws[1]["times_s"][1] + 1.0)
+    assert abs(after[0, 2]) + abs(after[1, 2]) > abs(model.inertia(0.0)[1, 2]) + 1.0
+    _, again = gym.make("FlexibleSpacecraftDocking-v1", randomize=True).reset(seed=3)
+    assert again["scenario"] == draws[0]
