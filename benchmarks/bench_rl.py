@@ -1,0 +1,70 @@
+"""PPO training throughput: our env with and without model features, beside Pendulum-v1.
+
+Measures, in one run on this machine, stable-baselines3 PPO (``MlpPolicy``,
+default hyperparameters, one env, torch on one thread) training env steps
+per second on
+
+* Gymnasium's ``Pendulum-v1`` (the yardstick),
+* ``FlexibleSpacecraftDocking-v1`` (slew task) with no features,
+* the same with :class:`controllers.IdentifiedModelFeatures` (the default
+  identifier runs every step),
+* the same with :class:`controllers.OracleModelFeatures` (truth features).
+
+and prints every rate beside the no-feature rate and Pendulum's.
+
+Usage: ``python benchmarks/bench_rl.py [--steps 8192] [--json out.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import gymnasium as gym
+import torch
+from stable_baselines3 import PPO
+
+import spacecraft_env  # noqa: F401  (registers the environments)
+from controllers import IdentifiedModelFeatures, OracleModelFeatures
+from spacecraft_conventions import single_threaded_blas
+
+CASES = {
+    "Pendulum-v1": lambda: gym.make("Pendulum-v1"),
+    "docking, no features": lambda: gym.make("FlexibleSpacecraftDocking-v1", task="slew"),
+    "docking, identified features": lambda: IdentifiedModelFeatures(
+        gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
+    "docking, oracle features": lambda: OracleModelFeatures(
+        gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
+}
+
+
+def ppo_rate(make, steps: int) -> float:
+    """PPO training env steps/s (after a first rollout that builds everything)."""
+    model = PPO("MlpPolicy", make(), n_steps=2048, seed=0, verbose=0)
+    model.learn(2048)
+    start = time.perf_counter()
+    model.learn(steps, reset_num_timesteps=False)
+    return steps / (time.perf_counter() - start)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=8192)
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    with single_threaded_blas:
+        rates = {name: ppo_rate(make, args.steps) for name, make in CASES.items()}
+    pend, plain = rates["Pendulum-v1"], rates["docking, no features"]
+    print(f"PPO training env steps/s ({args.steps} steps, one env, torch on one thread)")
+    print(f"{'case':<32}{'steps/s':>10}{'/ no features':>15}{'/ Pendulum':>12}")
+    for name, rate in rates.items():
+        print(f"{name:<32}{rate:>10,.0f}{rate / plain:>15.2f}{rate / pend:>12.2f}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(rates, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()
