@@ -27,6 +27,7 @@ rotation episode cost about what a repeated one does).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from bisect import bisect_right
 from collections import OrderedDict
@@ -250,11 +251,15 @@ class FlexibleSpacecraftModel:
             start += a.n_modes
         self._F_fixed = np.zeros((3, kk))
         self._F_rotating = []  # (columns, sqrt(m) S(h), sqrt(m) L S(e), d0, I0, I1)
+        self._root_terms = []  # (columns, sqrt(m), d0, I0, rotates): for a moved mass centre
+        self._undocked_mass = p.hub_mass + sum(a.mass for a in p.appendages)
         for a, sl in zip(p.appendages, self._mode_slices, strict=True):
             cols = slice(sl.start - 3, sl.stop - 3)
             if not p.coupling:
                 continue
             hinge, span, d0 = (np.asarray(v) for v in (a.hinge, a.span_axis, a.bending_axis))
+            self._root_terms.append((cols, np.sqrt(a.mass), d0, cantilever_moments(a.n_modes)[0],
+                                     a.rotates))
             if a.rotates:
                 i0, i1 = cantilever_moments(a.n_modes)
                 root_op = np.sqrt(a.mass) * skew(hinge)
@@ -321,6 +326,15 @@ class FlexibleSpacecraftModel:
         fmean = 0.5 * (f0 + f180)
         self._f_harmonics = (fmean, 0.5 * (f0 - f180), f90 - fmean)
 
+    def _mass_centre(self, cfg: Configuration) -> tuple[float, np.ndarray] | None:
+        """Total mass (kg) and mass centre (m) with the docked modules, or None
+        when the configuration keeps the paper's fixed mass centre."""
+        if not (cfg.mass_centre_shift and cfg.modules):
+            return None
+        masses = np.array([m.mass for m in cfg.modules])
+        total = self._undocked_mass + masses.sum()
+        return total, masses @ np.array([m.position for m in cfg.modules]) / total
+
     def _inertia(self, cfg: Configuration) -> np.ndarray:
         j = self._j_fixed.copy()
         if self._rotating:
@@ -329,14 +343,28 @@ class FlexibleSpacecraftModel:
             j += mean + math.cos(two) * jc + math.sin(two) * js
         for module in cfg.modules:
             j += module.inertia_about_system_centre()
+        centre = self._mass_centre(cfg)
+        if centre is not None:      # parallel axes: J_c = J_o - M (|c|^2 I - c c^T)
+            total, c = centre
+            j -= total * (c @ c * np.eye(3) - np.outer(c, c))
         return j
 
     def _coupling(self, cfg: Configuration) -> np.ndarray:
         if not self._F_rotating:
-            return self._F_fixed.copy()
-        mean, fc, fs = self._f_harmonics
-        th = cfg.paddle_angle
-        return self._F_fixed + mean + math.cos(th) * fc + math.sin(th) * fs
+            f = self._F_fixed.copy()
+        else:
+            mean, fc, fs = self._f_harmonics
+            th = cfg.paddle_angle
+            f = self._F_fixed + mean + math.cos(th) * fc + math.sin(th) * fs
+        centre = self._mass_centre(cfg)
+        if centre is not None and self.params.coupling:
+            # every root moves by -c: F_i -= sqrt(m_i) (c x d_i) I0_i^T
+            c = skew(centre[1])
+            t_s = rotation_pitch(cfg.paddle_angle)
+            for cols, root_mass, d0, i0, rotates in self._root_terms:
+                d = t_s.T @ d0 if rotates else d0
+                f[:, cols] -= np.outer(root_mass * (c @ d), i0)
+        return f
 
     def inertia(self, t: float) -> np.ndarray:
         """Total inertia J(t) about the system mass centre, (3, 3), kg m^2."""
@@ -505,8 +533,8 @@ class FlexibleSpacecraftModel:
         else:
             ts = [t]
         cfgs = [self.configuration(tj) for tj in ts]
-        phis = self._shared.panels.evaluate([c.modules for c in cfgs],
-                                            [c.paddle_angle for c in cfgs])
+        phis = self._shared.panels.evaluate([dataclasses.replace(c, paddle_angle=0.0)
+                                             for c in cfgs], [c.paddle_angle for c in cfgs])
         phis.flags.writeable = False
         cache = self._cache
         key_of = self._key_of
@@ -580,6 +608,56 @@ class FlexibleSpacecraftModel:
             states[k + 1] = x
         return states, states[:-1] @ self.C.T
 
+    def capture_steps(self) -> frozenset[int]:
+        """Steps ``k`` (from t = 0) whose configuration first holds a module that
+        brings its own angular momentum (:meth:`capture` applies there)."""
+        steps = set()
+        for module in self.configuration(math.inf).modules:
+            if module.angular_momentum is None:
+                continue
+            k = math.ceil(module.time / self.dt)
+            while k > 0 and (k - 1) * self.dt >= module.time:
+                k -= 1
+            while k * self.dt < module.time:
+                k += 1
+            steps.add(k)
+        return frozenset(steps)
+
+    def capture(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The state just after the modules docking at the step from ``t`` are captured.
+
+        The capture is a plastic impact: positions carry on and the total
+        angular momentum is conserved,
+        ``M_+ delta'_+ = M_- delta'_- + [sum_i h_i; 0]``, with ``h_i`` the
+        captured module's angular momentum (:class:`DockingModule`); a module
+        without one arrives co-rotating and brings ``J_i omega``. With only
+        co-rotating modules the rates carry on unchanged.
+
+        Parameters
+        ----------
+        x : (n,) ndarray
+            State before the capture.
+        t : float
+            Start of the first step whose configuration holds the new modules, s.
+
+        Returns
+        -------
+        (n,) ndarray
+        """
+        before, after = self.configuration(t - self.dt), self.configuration(t)
+        new = [m for m in after.modules if m not in before.modules]
+        if all(m.angular_momentum is None for m in new):
+            return np.array(x, dtype=float)
+        nd = self.n_dof
+        v = np.asarray(x, dtype=float)[nd:]
+        momentum = self._mass_matrix(before) @ v
+        for m in new:
+            momentum[:3] += (m.inertia_about_system_centre() @ v[:3]
+                             if m.angular_momentum is None else m.angular_momentum)
+        out = np.array(x, dtype=float)
+        out[nd:] = np.linalg.solve(self._checked_mass(after, t), momentum)
+        return out
+
     def energy(self, x: np.ndarray, t: float) -> float:
         """Mechanical energy ``1/2 delta'^T M delta' + 1/2 delta^T K delta``, J."""
         nd = self.n_dof
@@ -615,10 +693,10 @@ class _SharedDiscretization:
         self._max_configs = int(max_configs)
         self.panels = AnglePanels(self._build_panel, model.n)
 
-    def _build_panel(self, modules: tuple, thetas: np.ndarray) -> np.ndarray:
+    def _build_panel(self, cfg: Configuration, thetas: np.ndarray) -> np.ndarray:
         m = self._model
-        return np.stack([m._van_loan(Configuration(paddle_angle=float(th), modules=modules),
-                                     math.nan) for th in thetas])
+        return np.stack([m._van_loan(dataclasses.replace(cfg, paddle_angle=float(th)), math.nan)
+                         for th in thetas])
 
     def exact(self, cfg: Configuration, t: float) -> np.ndarray:
         """Read-only ``[A_d, B_d]`` rows of the exponential of configuration ``cfg``."""

@@ -363,6 +363,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x[nd:nd + 3] = rate0
         self._ref = ref
         self._k = 0
+        self._captures = self.model.capture_steps()
         self._torque = np.zeros(3)
         self._commands = deque([np.zeros(3)] * self.actuator_delay_steps)
         obs = self._observe()
@@ -401,6 +402,8 @@ class FlexibleSpacecraftEnv(gym.Env):
         err = model.C @ x
         err[:3] -= self._ref
         cost = err @ (self._cost_weights * err) + self.reward_weights.torque * (a @ a)
+        if self._k in self._captures:      # a module that brings its own momentum docks
+            x = model.capture(x, self._k * model.dt)
         ad, bd = model._discrete_ab(self._k * model.dt)
         self._x = ad @ x + bd @ total
         self._k += 1

@@ -216,12 +216,20 @@ class DockingModule:
         1.5 m plus the module's half-length 1.5 m).
     time : float
         Docking instant, s.
+    angular_momentum : (3,) array_like or None
+        The module's angular momentum at capture (N m s, body frame, about
+        the system mass centre). ``None`` (default, the paper's assumption):
+        it arrives co-rotating with the spacecraft, and the body rates carry
+        on. A vector (0 for a module at rest, or a tumbling target's
+        momentum): the capture conserves the total angular momentum, and the
+        rates jump (``FlexibleSpacecraftModel.capture``).
     """
 
     mass: float = 600.0
     dimensions: tuple = (2.35, 2.45, 3.0)
     position: tuple = (0.0, 0.0, 3.0)
     time: float = 100.0
+    angular_momentum: tuple | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass", _positive("mass", self.mass))
@@ -234,6 +242,9 @@ class DockingModule:
         if not np.isfinite(t) or t < 0:
             raise ValueError(f"time must be a finite non-negative number, got {t}")
         object.__setattr__(self, "time", t)
+        if self.angular_momentum is not None:
+            object.__setattr__(self, "angular_momentum",
+                               _vector("angular_momentum", self.angular_momentum))
 
     def inertia_about_system_centre(self) -> np.ndarray:
         """Own cuboid inertia plus the parallel-axis term, (3, 3), kg m^2."""

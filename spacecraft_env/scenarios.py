@@ -67,10 +67,15 @@ class Configuration:
         ``T_s(t)``).
     modules : tuple of DockingModule
         Modules docked so far.
+    mass_centre_shift : bool
+        Take the inertia and coupling about the mass centre the docked
+        modules move (True), or keep the paper's assumption that docking
+        leaves it where it was (False).
     """
 
     paddle_angle: float = 0.0
     modules: tuple = ()
+    mass_centre_shift: bool = False
 
 
 class Scenario(ABC):
@@ -149,6 +154,13 @@ class DockingScenario(Scenario):
         x and y are drawn from +-offset_range around its nominal position
         (from the system mass centre, the paper's convention), so the draw
         also changes the products of inertia, i.e. the axes' coupling.
+    mass_centre_shift : bool
+        False (default, the paper): module positions are taken from a
+        system mass centre that docking does not move. True: positions are
+        from the undocked spacecraft's mass centre, and the inertia and
+        the appendages' coupling are taken about the mass centre of
+        spacecraft plus modules (parallel-axis theorem; the root lever arm
+        of every appendage moves with it).
     """
 
     modules: tuple = field(default_factory=_default_modules)
@@ -156,6 +168,7 @@ class DockingScenario(Scenario):
     first_window: tuple = (60.0, 140.0)
     second_window: tuple = (140.0, 220.0)
     offset_range: float = 1.0
+    mass_centre_shift: bool = False
     name = "docking"
 
     def __post_init__(self) -> None:
@@ -171,7 +184,8 @@ class DockingScenario(Scenario):
             raise ValueError(f"offset_range must be >= 0 m, got {self.offset_range}")
 
     def configuration(self, t: float) -> Configuration:
-        return Configuration(modules=tuple(m for m in self.modules if t >= m.time))
+        return Configuration(modules=tuple(m for m in self.modules if t >= m.time),
+                             mass_centre_shift=self.mass_centre_shift)
 
     def event_times(self) -> tuple[float, ...]:
         return tuple(m.time for m in self.modules)
@@ -180,7 +194,10 @@ class DockingScenario(Scenario):
         return {"name": self.name,
                 "times_s": [m.time for m in self.modules],
                 "masses_kg": [m.mass for m in self.modules],
-                "positions_m": [list(m.position) for m in self.modules]}
+                "positions_m": [list(m.position) for m in self.modules],
+                "angular_momenta_Nms": [None if m.angular_momentum is None
+                                        else list(m.angular_momentum) for m in self.modules],
+                "mass_centre_shift": self.mass_centre_shift}
 
     def randomized(self, rng: np.random.Generator) -> DockingScenario:
         """Draw docking times, module masses and off-axis offsets (two modules, +-z)."""
@@ -191,6 +208,7 @@ class DockingScenario(Scenario):
         base = self.modules if len(self.modules) >= 2 else _default_modules()
         return dataclasses.replace(self, modules=tuple(
             DockingModule(mass=mass, dimensions=mod.dimensions, time=t,
+                          angular_momentum=mod.angular_momentum,
                           position=tuple(np.asarray(mod.position) + np.append(off, 0.0)))
             for mod, mass, t, off in zip(base[:2], (m1, m2), (t1, t2), offsets, strict=True)))
 
@@ -270,8 +288,10 @@ class CombinedScenario(Scenario):
     piecewise_constant = False
 
     def configuration(self, t: float) -> Configuration:
+        docked = self.docking.configuration(t)
         return Configuration(paddle_angle=self.rotation.configuration(t).paddle_angle,
-                             modules=self.docking.configuration(t).modules)
+                             modules=docked.modules,
+                             mass_centre_shift=docked.mass_centre_shift)
 
     def event_times(self) -> tuple[float, ...]:
         return self.docking.event_times()

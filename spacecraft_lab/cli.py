@@ -195,6 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="episode length, steps of 0.1 s (default: the registered 2500)")
     ctl.add_argument("--module-mass", type=_number(0.0, low_open=True, unit=" kg"),
                      default=None, help="mass of each docking module, kg (paper: 600)")
+    ctl.add_argument("--mass-centre-shift", action="store_true",
+                     help="docking: the modules move the system mass centre (the paper "
+                          "keeps it fixed)")
+    ctl.add_argument("--capture-momentum", type=_number(-1e4, 1e4, unit=" N m s"), nargs=3,
+                     default=None, metavar=("HX", "HY", "HZ"),
+                     help="docking: angular momentum each module brings at capture, N m s "
+                          "(conserved; default: modules arrive co-rotating)")
     ctl.add_argument("--rotation-rate", type=_number(-10.0, 10.0, unit=" deg/s"), default=None,
                      help="paddle rotation rate, deg/s (solar_rotation: 0.2, "
                           "paddle_rotation: 0.36)")
@@ -290,6 +297,8 @@ def _identify(args: argparse.Namespace) -> int:
 
 def _control(args: argparse.Namespace) -> int:
     env_kwargs = env_kwargs_for(args.scenario, task=args.task, module_mass=args.module_mass,
+                                mass_centre_shift=args.mass_centre_shift,
+                                capture_momentum=args.capture_momentum,
                                 rotation_rate=args.rotation_rate, paddle_angle=args.paddle_angle,
                                 snr_db=args.snr_db, max_torque=args.max_torque,
                                 actuator_delay_steps=args.actuator_delay,

@@ -80,7 +80,8 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                    rotation_rate: float | None = None, paddle_angle: float | None = None,
                    snr_db: float | None = 40.0, max_torque: float | None = None,
                    actuator_delay_steps: int = 0, torque_rate_limit: float | None = None,
-                   disturbance_torque: float = 0.0) -> dict[str, Any]:
+                   disturbance_torque: float = 0.0, mass_centre_shift: bool = False,
+                   capture_momentum: Sequence[float] | None = None) -> dict[str, Any]:
     """``gym.make`` keywords for a registered scenario and its variants.
 
     Parameters
@@ -97,6 +98,13 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
         Paddle angle at t = 0, deg (constant and rotation scenarios).
     snr_db, max_torque, actuator_delay_steps, torque_rate_limit, disturbance_torque
         Passed to :class:`spacecraft_env.FlexibleSpacecraftEnv`.
+    mass_centre_shift : bool
+        Docking only: the modules move the system mass centre
+        (:class:`~spacecraft_env.DockingScenario`).
+    capture_momentum : (3,) sequence of float, optional
+        Docking only: angular momentum (N m s, body frame) each module
+        brings at capture, conserved by the capture (default: the modules
+        arrive co-rotating, the paper's assumption).
 
     Raises
     ------
@@ -119,6 +127,16 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
         base = DockingScenario(modules=(
             DockingModule(mass=float(module_mass), time=100.0, position=(0.0, 0.0, 3.0)),
             DockingModule(mass=float(module_mass), time=180.0, position=(0.0, 0.0, -3.0))))
+    if mass_centre_shift or capture_momentum is not None:
+        if not isinstance(base, DockingScenario):
+            raise ValueError(f"mass_centre_shift and capture_momentum apply to the docking "
+                             f"scenario, not {scenario!r}")
+        modules = base.modules
+        if capture_momentum is not None:
+            modules = tuple(dataclasses.replace(m, angular_momentum=tuple(capture_momentum))
+                            for m in modules)
+        base = dataclasses.replace(base, modules=modules,
+                                   mass_centre_shift=bool(mass_centre_shift))
     if rotation_rate is not None:
         if not rotating:
             raise ValueError(f"rotation_rate applies to the rotation scenarios, not {scenario!r}")

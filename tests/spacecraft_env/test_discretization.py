@@ -52,7 +52,7 @@ def test_rotation_matches_exact_zoh_to_1e12(scenario, n_modes):
 def test_at_a_node_the_interpolant_is_the_exponential():
     model = FlexibleSpacecraftModel(scenario=SolarRotationScenario(rate_deg_s=0.5))
     theta = math.radians(2 * PANEL_WIDTH_DEG)   # a panel edge is a node
-    phi = model._shared.panels((), theta)
+    phi = model._shared.panels(Configuration(), theta)
     exact = expm(model._van_loan(Configuration(paddle_angle=theta), math.nan))[:model.n]
     np.testing.assert_array_equal(phi, exact)
 

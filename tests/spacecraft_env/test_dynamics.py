@@ -240,3 +240,79 @@ def test_modal_matches_eigenvalues_and_table2_without_coupling():
                                       + [ANTENNA_FREQUENCIES_HZ[:2]] * 2))
     np.testing.assert_allclose(freq, expected, rtol=1e-10)
     np.testing.assert_allclose(zeta, 0.01, rtol=1e-10)
+
+
+def test_mass_centre_shift_gives_the_reduced_mass_inertia_and_moves_every_root():
+    from spacecraft_env.modes import coupling_matrix
+    from spacecraft_env.parameters import DockingModule
+    from spacecraft_env.scenarios import DockingScenario
+
+    module = DockingModule(mass=900.0, position=(1.2, -0.7, 3.0), time=5.0)
+    plain = FlexibleSpacecraftModel(scenario=DockingScenario(modules=(module,)))
+    shifted = FlexibleSpacecraftModel(
+        scenario=DockingScenario(modules=(module,), mass_centre_shift=True))
+    p = plain.params
+    m0 = p.hub_mass + sum(a.mass for a in p.appendages)
+    r = np.asarray(module.position)
+    # closed form: the module's parallel-axis term with the reduced mass m m0 / (m + m0)
+    mu = module.mass * m0 / (module.mass + m0)
+    own = module.inertia_about_system_centre() - module.mass * (r @ r * np.eye(3)
+                                                                 - np.outer(r, r))
+    expected = plain.inertia(0.0) + own + mu * (r @ r * np.eye(3) - np.outer(r, r))
+    np.testing.assert_allclose(shifted.inertia(10.0), expected, rtol=1e-12)
+    np.testing.assert_array_equal(shifted.inertia(0.0), plain.inertia(0.0))  # before docking
+    # a non-rotating appendage's coupling is the one of its root seen from the new centre
+    c = module.mass * r / (module.mass + m0)
+    f = shifted.coupling(10.0)
+    start = 3
+    for a in p.appendages:
+        if not a.rotates:
+            cols = slice(start - 3, start - 3 + a.n_modes)
+            np.testing.assert_allclose(
+                f[:, cols], coupling_matrix(a.mass, a.length, np.asarray(a.hinge) - c,
+                                            np.asarray(a.span_axis), np.asarray(a.bending_axis),
+                                            a.n_modes), rtol=1e-12, atol=1e-12)
+        start += a.n_modes
+
+
+@pytest.mark.parametrize("momentum", [(0.0, 0.0, 0.0), (20.0, -5.0, 40.0)])
+def test_capture_conserves_angular_momentum(momentum):
+    import gymnasium as gym
+
+    from spacecraft_env.parameters import DockingModule
+    from spacecraft_env.scenarios import DockingScenario
+
+    module = DockingModule(mass=800.0, position=(0.5, 0.0, 3.0), time=10.0,
+                           angular_momentum=momentum)
+    env = gym.make("FlexibleSpacecraft-v1", scenario=DockingScenario(modules=(module,)),
+                   snr_db=None).unwrapped
+    env.reset(seed=0, options={"initial_rate": [0.002, -0.001, 0.003]})
+    model, nd = env.model, env.model.n_dof
+
+    def body_momentum():   # top rows of M(t) delta': the total angular momentum, N m s
+        t = env.time
+        return (model.mass_matrix(t) @ env._x[nd:])[:3]
+
+    history = []
+    for _ in range(200):
+        history.append(body_momentum())
+        env.step(np.zeros(3, dtype=np.float32))
+    history = np.array(history)
+    capture = 100          # step 100 starts at t = 10 s; its state is the one before the capture
+    scale = np.abs(history[0]).max()
+    np.testing.assert_allclose(history[:capture] - history[0], 0.0, atol=1e-12 * scale)
+    np.testing.assert_allclose(history[capture + 1:] - history[0] - momentum, 0.0,
+                               atol=1e-12 * scale)
+    rates = np.array(env._x[nd:nd + 3])
+    assert not np.allclose(rates, [0.002, -0.001, 0.003], rtol=0.05)   # the rates did jump
+
+
+def test_co_rotating_modules_leave_the_rates_alone():
+    from spacecraft_env.parameters import DockingModule
+    from spacecraft_env.scenarios import DockingScenario
+
+    model = FlexibleSpacecraftModel(scenario=DockingScenario(
+        modules=(DockingModule(time=10.0),)))
+    assert model.capture_steps() == frozenset()
+    x = np.arange(model.n, dtype=float)
+    np.testing.assert_array_equal(model.capture(x, 10.0), x)
