@@ -3,8 +3,9 @@
 Measures, in one run on this machine:
 
 * single env (``gym.make``, with the standard wrappers) for each scenario,
-  first episode (a new env: cold matrix caches), a repeated episode (warm
-  caches) and ``randomize=True`` episodes (a new scenario draw every reset),
+  first episode (a new env with cold matrix caches, as in a new process),
+  a repeated episode (warm caches) and ``randomize=True`` episodes (a new
+  scenario draw every reset; the second of two, cold start),
 * ``gym.make_vec(..., num_envs=8)`` with ``vectorization_mode="sync"`` and
   ``"async"`` (subprocesses), env steps/s from new envs,
 * Gymnasium's ``Pendulum-v1`` the same way, as the yardstick.
@@ -32,13 +33,17 @@ IDS = {scenario: env_id for env_id, scenario in ENV_IDS.items()}
 def single_rate(env_id: str, steps: int, repeats: int = 3, **kwargs) -> tuple[float, float]:
     """Steps/s of a new env's first ``steps`` and of a second run after a reset.
 
-    Medians over ``repeats`` new envs (zero action); a run that ends its
-    episode resets and goes on. With ``randomize=True`` every reset draws a
-    new scenario, so the second run is a new draw too.
+    Medians over ``repeats`` new envs (zero action), each started with cold
+    matrix caches (``clear_cache`` empties the process-wide ones too); a run
+    that ends its episode resets and goes on. With ``randomize=True`` every
+    reset draws a new scenario, so the second run is a new draw too.
     """
     first, second = [], []
     for _ in range(repeats):
         env = gym.make(env_id, **kwargs)
+        model = getattr(env.unwrapped, "model", None)
+        if model is not None:
+            model.clear_cache()   # cold: also the process-wide caches other envs filled
         action = np.zeros(env.action_space.shape, dtype=np.float32)
         env.reset(seed=0)
         for rates in (first, second):

@@ -160,7 +160,9 @@ class FlexibleSpacecraftModel:
         rotation episode within about 64 MB.
         The configuration-level caches behind it (exact exponentials per
         docked configuration, angle interpolants) are bounded separately and
-        shared by :meth:`with_scenario` copies, so they survive episodes.
+        shared by every model of the same parameters and ``dt`` in the
+        process (new envs, vector envs, :meth:`with_scenario` copies), so
+        they survive episodes and envs.
 
     Attributes
     ----------
@@ -207,7 +209,7 @@ class FlexibleSpacecraftModel:
         cache_size = max(int(cache_size), 2 * _BLOCK_STEPS)
         self._cache_size = int(cache_size)
         self._cache: OrderedDict = OrderedDict()
-        self._shared = _SharedDiscretization(self)
+        self._shared = _shared_discretization(self)
 
     # ------------------------------------------------------------------ setup
     def _build_constant_parts(self) -> None:
@@ -674,17 +676,39 @@ class FlexibleSpacecraftModel:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._key, self._key_of = _scenario_key(self.scenario)
-        self._shared = _SharedDiscretization(self)
+        self._shared = _shared_discretization(self)
+
+
+#: Configuration-level caches per physics ``(params, dt)``, shared by every model
+#: of the process (a new env, each env of a vector env); least recently used go first.
+_SHARED: OrderedDict = OrderedDict()
+_MAX_SHARED_PHYSICS = 4
+
+
+def _shared_discretization(model: FlexibleSpacecraftModel) -> _SharedDiscretization:
+    """The process-wide ZOH caches for ``model``'s physics (created on first use)."""
+    key = (model.params, model.dt)
+    shared = _SHARED.get(key)
+    if shared is None:
+        shared = _SHARED[key] = _SharedDiscretization(model)
+        while len(_SHARED) > _MAX_SHARED_PHYSICS:
+            _SHARED.popitem(last=False)
+    else:
+        _SHARED.move_to_end(key)
+    return shared
 
 
 class _SharedDiscretization:
-    """The configuration-level ZOH caches of one model and its scenario copies.
+    """The configuration-level ZOH caches of every model with the same physics.
 
     ``exact(cfg)`` holds the exponential of each piecewise-constant
     configuration (bounded LRU); ``panels`` the angle interpolants of the
     rotating scenarios (:class:`~spacecraft_env.discretization.AnglePanels`).
     Both depend on the physics and ``dt`` only, never on the scenario's
-    timing, so :meth:`FlexibleSpacecraftModel.with_scenario` shares them.
+    timing or the outputs, so every model of the same ``(params, dt)`` in the
+    process shares them (:func:`_shared_discretization`), as do
+    :meth:`FlexibleSpacecraftModel.with_scenario` copies. Their values do not
+    depend on what is cached, so sharing never changes a result.
     """
 
     def __init__(self, model: FlexibleSpacecraftModel, max_configs: int = 64) -> None:

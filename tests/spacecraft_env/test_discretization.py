@@ -73,6 +73,7 @@ def test_matrices_do_not_depend_on_query_order_or_cache_state():
 
 def test_episodes_with_other_rates_reuse_the_panels():
     base = FlexibleSpacecraftModel(scenario=PaddleRotationScenario())
+    base.clear_cache()                  # the panels are process-wide: start from none
     for k in range(2500):
         base._discrete_ab(k * base.dt)
     built = len(base._shared.panels)
@@ -85,6 +86,10 @@ def test_episodes_with_other_rates_reuse_the_panels():
         for k in range(0, 2500, 7):
             other._discrete_ab(k * other.dt)
     assert len(base._shared.panels) == built
+    # a new model (a new env) of the same physics finds them too; other physics does not
+    assert FlexibleSpacecraftModel(scenario="solar_rotation")._shared is base._shared
+    other = FlexibleSpacecraftModel(ets8_parameters(n_modes=3), scenario="solar_rotation")
+    assert other._shared is not base._shared
 
 
 def test_panel_cache_is_bounded():
@@ -106,6 +111,7 @@ def test_panel_cache_is_bounded():
 def test_pickled_model_rebuilds_its_caches():
     model = FlexibleSpacecraftModel(scenario="solar_rotation")
     a = model._discrete_ab(12.3)[0].copy()
+    model.clear_cache()
     clone = pickle.loads(pickle.dumps(model))
-    assert len(clone._shared.panels) == 0
+    assert len(clone._cache) == 0 and clone._shared is model._shared
     np.testing.assert_array_equal(clone._discrete_ab(12.3)[0], a)
