@@ -3,7 +3,8 @@
 Runs the adaptive LQG (default settings) on a scenario, records what its
 identifier was fed (applied torque, measured outputs), refits the default
 identifier on that record and on an open-loop record of the same plant
-(1 N m identification inputs), and prints the h-step-ahead prediction mean
+(1 N m identification inputs), and prints, beside the ceiling (the true
+model run from the true state on the closed-loop record), the h-step-ahead prediction mean
 square error from the identifier's own state (``identifiers.h_step_predictions``)
 divided by persistence's (``y_{k+h} = y_k``), after t = 100 s, for attitude
 and rate at 1, 3 and 10 s. Below 1 the model beats persistence.
@@ -32,14 +33,16 @@ from identifiers import (
 )
 from spacecraft_env import env_id
 from spacecraft_lab.control import env_kwargs_for
+from spacecraft_lab.identification import truth_sequence
 
 HORIZONS = (10, 30, 100)
 START = 1000          # t = 100 s
 
 
 def mse_ratios(ident, u: np.ndarray, y: np.ndarray, layout) -> dict[tuple[str, int], float]:
-    """h-step MSE of the identifier's predictions over persistence's, per group and h."""
-    seq = ident.fit(u, y)
+    """h-step MSE of the identifier's predictions (or of a given model sequence)
+    over persistence's, per group and h."""
+    seq = ident.fit(u, y) if hasattr(ident, "fit") else ident
     pred = h_step_predictions(seq, u, horizons=HORIZONS)
     pers = persistence_predictions(y, horizons=HORIZONS)
     out = {}
@@ -57,7 +60,7 @@ def main() -> None:
     parser.add_argument("--scenario", default="paddle_rotation")
     parser.add_argument("--seeds", type=int, default=3)
     args = parser.parse_args()
-    closed, opened = [], []
+    closed, opened, ceiling = [], [], []
     for seed in range(args.seeds):
         env = gym.make(env_id(args.scenario), **env_kwargs_for(args.scenario))
         ctrl = AdaptiveLQG(env.unwrapped)
@@ -67,6 +70,9 @@ def main() -> None:
         y = traj.observations[:-1][:, ctrl._meas_obs].astype(float)
         u = traj.torque
         closed.append(mse_ratios(default_identifier(layout, n=22, dt=0.1), u, y, layout))
+        # the ceiling: the true model of each step run from the true state, same record
+        ceiling.append(mse_ratios(truth_sequence(env.unwrapped.model, traj.states),
+                                  u, y, layout))
         rng = np.random.default_rng(seed)
         uo = identification_inputs(u.shape[0], rng)
         yo = add_measurement_noise(env.unwrapped.model.simulate(uo)[1], 40.0, rng)
@@ -76,6 +82,7 @@ def main() -> None:
     print(f"{'record':<34}" + "".join(f"{g[:4]} {h / 10:g}s".rjust(12)
                                       for g in ("attitude", "rate") for h in HORIZONS))
     for name, rows in (("adaptive LQG loop (its own data)", closed),
+                       ("  same record, true model (ceiling)", ceiling),
                        ("open loop, 1 N m identification", opened)):
         cells = "".join(f"{np.median([r[g, h] for r in rows]):>12.2f}"
                         for g in ("attitude", "rate") for h in HORIZONS)
