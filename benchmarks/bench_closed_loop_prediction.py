@@ -19,6 +19,7 @@ Usage: ``python benchmarks/bench_closed_loop_prediction.py [--scenario NAME] [--
 from __future__ import annotations
 
 import argparse
+import ast
 
 import gymnasium as gym
 import numpy as np
@@ -31,6 +32,7 @@ from identifiers import (
     identification_inputs,
     persistence_predictions,
 )
+from identifiers.modal_basis import Resonator
 from spacecraft_env import env_id
 from spacecraft_lab.control import env_kwargs_for
 from spacecraft_lab.identification import truth_sequence
@@ -59,26 +61,47 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paddle_rotation")
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--snr-db", type=float, default=40.0,
+                        help="sensor SNR, dB (a negative value: noise-free sensors)")
+    parser.add_argument("--excitation", type=float, default=None,
+                        help="steady excitation budget after warm-up, N m per axis "
+                             "(default: the adaptive LQG's 0.1)")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="identifier keyword for the refits (Python literal), e.g. "
+                             "detect_changes=False; repeatable")
     args = parser.parse_args()
+    options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
+    if options.pop("true_modes", False):     # the truth's modes as the prior, kept
+        model0 = gym.make(env_id(args.scenario)).unwrapped.model
+        freq, zeta = model0.modal(0.0)
+        options.update(prior=[Resonator(f, z) for f, z in zip(freq, zeta, strict=True)],
+                       rediscover=None)
+    snr = None if args.snr_db < 0 else args.snr_db
     closed, opened, ceiling = [], [], []
     for seed in range(args.seeds):
-        env = gym.make(env_id(args.scenario), **env_kwargs_for(args.scenario))
+        env = gym.make(env_id(args.scenario), **env_kwargs_for(args.scenario, snr_db=snr))
         ctrl = AdaptiveLQG(env.unwrapped)
+        if args.excitation is not None:
+            ctrl.excitation.amplitude = args.excitation
         traj = run_episode(env, ctrl, seed=seed)
         layout = ctrl.measured_layout
         # the identifier got (u_k, y_k): y_k observed before action k (observations[0]: reset)
         y = traj.observations[:-1][:, ctrl._meas_obs].astype(float)
         u = traj.torque
-        closed.append(mse_ratios(default_identifier(layout, n=22, dt=0.1), u, y, layout))
+        closed.append(mse_ratios(default_identifier(layout, n=22, dt=0.1, **options), u, y,
+                                 layout))
         # the ceiling: the true model of each step run from the true state, same record
         ceiling.append(mse_ratios(truth_sequence(env.unwrapped.model, traj.states),
                                   u, y, layout))
         rng = np.random.default_rng(seed)
         uo = identification_inputs(u.shape[0], rng)
-        yo = add_measurement_noise(env.unwrapped.model.simulate(uo)[1], 40.0, rng)
-        opened.append(mse_ratios(default_identifier(layout, n=22, dt=0.1), uo, yo, layout))
-    print(f"{args.scenario}: h-step prediction MSE / persistence MSE after t = 100 s, "
-          f"median over {args.seeds} seeds (below 1: the model beats persistence)")
+        yo = add_measurement_noise(env.unwrapped.model.simulate(uo)[1], snr, rng)
+        opened.append(mse_ratios(default_identifier(layout, n=22, dt=0.1, **options), uo, yo,
+                                 layout))
+    print(f"{args.scenario}, SNR {snr} dB, steady excitation "
+          f"{args.excitation if args.excitation is not None else 0.1} N m: h-step prediction "
+          f"MSE / persistence MSE after t = 100 s, median over {args.seeds} seeds "
+          f"(below 1: the model beats persistence)")
     print(f"{'record':<34}" + "".join(f"{g[:4]} {h / 10:g}s".rjust(12)
                                       for g in ("attitude", "rate") for h in HORIZONS))
     for name, rows in (("adaptive LQG loop (its own data)", closed),
