@@ -41,6 +41,7 @@ from spacecraft_env import SCENARIOS
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
+from spacecraft_lab.plots import plot_rl_comparison
 from spacecraft_lab.reporting import rl_table
 from spacecraft_lab.sweeps import (
     BACKENDS,
@@ -245,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
                            formatter_class=fmt)
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
                        help="output directories of 'spacecraft train'")
+    table.add_argument("--plot", type=Path, default=None, metavar="PNG",
+                       help="also draw the learning curves of all runs (median and range "
+                            "over seeds) to this file")
 
     sweep = sub.add_parser("sweep", help="Monte-Carlo grid of identify/control tasks",
                            formatter_class=fmt)
@@ -327,6 +331,10 @@ def _train(args: argparse.Namespace) -> int:
 
 def _rl_table(args: argparse.Namespace) -> int:
     print(rl_table(args.dirs))
+    if args.plot is not None:
+        plot_rl_comparison(args.plot, [json.loads((Path(d) / "metrics.json").read_text())
+                                       for d in args.dirs])
+        print(f"wrote {args.plot}")
     return 0
 
 

@@ -30,6 +30,7 @@ __all__ = [
     "plot_learning_curves",
     "plot_prediction_horizons",
     "plot_rigid_gain",
+    "plot_rl_comparison",
     "save",
 ]
 
@@ -272,6 +273,48 @@ def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
     axes[0].legend(fontsize=8)
     fig.suptitle(f"{metrics['algo'].upper()}, features: {metrics['features']}, "
                  f"{metrics['scenario']}")
+    save(fig, path)
+
+
+def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> None:
+    """Learning curves of several ``spacecraft train`` runs: median and range over seeds.
+
+    Evaluation attitude RMS (log scale) and return against env steps, one
+    colour per run (algorithm and features); the adaptive and fixed LQG on
+    the same evaluation seeds as horizontal lines, 2x the adaptive dotted.
+    """
+    fig = Figure(figsize=(12, 4.5))
+    axes = fig.subplots(1, 2)
+    for m in runs:
+        curves = [r["curve"] for r in m["runs"] if r["curve"]]
+        if not curves:
+            continue
+        length = min(len(c) for c in curves)
+        steps = np.array([c["timesteps"] for c in curves[0][:length]])
+        label = f"{m['algo'].upper()}, {m['features']} ({len(curves)} seeds)"
+        for ax, key in zip(axes, ("attitude_rms_deg", "return"), strict=True):
+            values = np.array([[c[key] for c in curve[:length]] for curve in curves])
+            line, = ax.plot(steps, np.median(values, axis=0), "o-", ms=3, label=label)
+            ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
+                            color=line.get_color(), alpha=0.15)
+    last = runs[-1]
+    for name, key, style in (("adaptive LQG", "adaptive_lqg", "--"),
+                             ("fixed LQG", "fixed_lqg", "-.")):
+        if key in last:
+            axes[0].axhline(last[key]["attitude_rms_deg"], color="k", ls=style, label=name)
+            axes[1].axhline(last[key]["return"], color="k", ls=style)
+    axes[0].axhline(last["target_attitude_rms_deg"], color="gray", ls=":",
+                    label="2x adaptive LQG")
+    axes[0].set_yscale("log")
+    axes[0].set_ylabel("attitude RMS (deg), evaluation seeds")
+    axes[1].set_ylabel("return, evaluation seeds")
+    axes[1].set_yscale("symlog", linthresh=1e4)
+    for ax in axes:
+        ax.set_xlabel("env steps")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    task = ("randomized " if last.get("randomize") else "") + last["scenario"]
+    fig.suptitle(f"RL on {task}: median (line) and range (band) over training seeds")
     save(fig, path)
 
 

@@ -132,18 +132,42 @@ def control_table(table: dict[str, dict], oracle: str | None = None) -> str:
 
 
 def rl_table(directories: Sequence[str | Path]) -> str:
-    """Markdown table of several ``spacecraft train`` output directories."""
-    rows, baseline = [], None
+    """Markdown table of several ``spacecraft train`` output directories.
+
+    Per directory: the final evaluation's attitude RMS, vibration and return
+    as the median [min, max] over training seeds, and the env steps each
+    seed needed to come within 2x of the adaptive LQG's attitude RMS; then
+    the adaptive and fixed LQG on the same evaluation seeds (taken from the
+    last directory).
+    """
+    def spread(values: list[float], fmt: str) -> str:
+        values = [v for v in values if v is not None and np.isfinite(v)]
+        if not values:
+            return "-"
+        return (f"{np.median(values):{fmt}} [{min(values):{fmt}}, {max(values):{fmt}}]"
+                if len(values) > 1 else f"{values[0]:{fmt}}")
+
+    rows, last = [], None
     for directory in directories:
         m = json.loads((Path(directory) / "metrics.json").read_text())
-        baseline = m["adaptive_lqg"]
+        last = m
+        finals = [r["final"] for r in m["runs"]]
         reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
-        rows.append(f"| {m['algo'].upper()} | {m['features']} | {m['timesteps']:,} "
-                    f"| {m['final_attitude_rms_deg']:.3f} | {m['final_return']:.4g} "
-                    f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
-    head = ["| agent | features | env steps | final attitude RMS (deg) | final return "
-            "| env steps to <= 2x adaptive LQG RMS |", "|---|---|---|---|---|---|"]
-    if baseline is not None:
-        rows.append(f"| adaptive LQG | - | - | {baseline['attitude_rms_deg']:.3f} "
-                    f"| {baseline['return']:.4g} | - |")
+        task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]
+        rows.append(
+            f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
+            f"| {len(finals)} | {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
+            f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
+            f"| {spread([f['return'] for f in finals], '.3g')} "
+            f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
+    head = ["| agent | features | task | env steps | seeds | final attitude RMS (deg) "
+            "| vibration RMS (mm) | return | env steps to <= 2x adaptive LQG RMS |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    if last is not None:
+        for name, key in (("adaptive LQG", "adaptive_lqg"), ("fixed LQG", "fixed_lqg")):
+            if key in last:
+                b = last[key]
+                rows.append(f"| {name} | - | - | - | - | {b['attitude_rms_deg']:.2f} "
+                            f"| {spread([b.get('vibration_rms_mm')], '.2f')} "
+                            f"| {b['return']:.3g} | - |")
     return "\n".join(head + rows) + "\n"

@@ -34,3 +34,12 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     assert {"eval/attitude_rms_deg", "eval/vibration_rms_mm", "eval/return",
             "eval/stable_share"} <= tags
     assert "time/fps" in tags
+    # the comparison table and figure read the run back
+    from spacecraft_lab.plots import plot_rl_comparison
+    from spacecraft_lab.reporting import rl_table
+
+    table = rl_table([tmp_path / "out"])
+    assert "| PPO | oracle | randomized docking | 2,048 | 1 |" in table
+    assert "| fixed LQG |" in table and "| adaptive LQG |" in table
+    plot_rl_comparison(tmp_path / "cmp.png", [m])
+    assert (tmp_path / "cmp.png").stat().st_size > 10_000
