@@ -280,8 +280,9 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
     """Learning curves of several ``spacecraft train`` runs: median and range over seeds.
 
     Evaluation attitude RMS (log scale) and return against env steps, one
-    colour per run (algorithm and features); the adaptive and fixed LQG on
-    the same evaluation seeds as horizontal lines, 2x the adaptive dotted.
+    colour per run (algorithm and features); the adaptive and fixed LQG and
+    zero torque on the same evaluation seeds as horizontal lines, 2x the
+    adaptive dotted.
     """
     fig = Figure(figsize=(12, 4.5))
     axes = fig.subplots(1, 2)
@@ -298,11 +299,12 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
                             color=line.get_color(), alpha=0.15)
     last = runs[-1]
-    for name, key, style in (("adaptive LQG", "adaptive_lqg", "--"),
-                             ("fixed LQG", "fixed_lqg", "-.")):
+    for name, key, style, colour in (("adaptive LQG", "adaptive_lqg", "--", "k"),
+                                     ("fixed LQG", "fixed_lqg", "-.", "k"),
+                                     ("zero torque", "zero_torque", "--", "tab:red")):
         if key in last:
-            axes[0].axhline(last[key]["attitude_rms_deg"], color="k", ls=style, label=name)
-            axes[1].axhline(last[key]["return"], color="k", ls=style)
+            axes[0].axhline(last[key]["attitude_rms_deg"], color=colour, ls=style, label=name)
+            axes[1].axhline(last[key]["return"], color=colour, ls=style)
     axes[0].axhline(last["target_attitude_rms_deg"], color="gray", ls=":",
                     label="2x adaptive LQG")
     axes[0].set_yscale("log")

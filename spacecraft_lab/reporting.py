@@ -137,8 +137,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     Per directory: the final evaluation's attitude RMS, vibration and return
     as the median [min, max] over training seeds, and the env steps each
     seed needed to come within 2x of the adaptive LQG's attitude RMS; then
-    the adaptive and fixed LQG on the same evaluation seeds (taken from the
-    last directory).
+    the adaptive and fixed LQG and zero torque (the trivial baseline) on the
+    same evaluation seeds (taken from the last directory).
     """
     def spread(values: list[float], fmt: str) -> str:
         values = [v for v in values if v is not None and np.isfinite(v)]
@@ -164,7 +164,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             "| vibration RMS (mm) | return | env steps to <= 2x adaptive LQG RMS |",
             "|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
-        for name, key in (("adaptive LQG", "adaptive_lqg"), ("fixed LQG", "fixed_lqg")):
+        for name, key in (("adaptive LQG", "adaptive_lqg"), ("fixed LQG", "fixed_lqg"),
+                          ("zero torque", "zero_torque")):
             if key in last:
                 b = last[key]
                 rows.append(f"| {name} | - | - | - | - | {b['attitude_rms_deg']:.2f} "

@@ -42,7 +42,8 @@ from spacecraft_env import env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 
-__all__ = ["ALGORITHMS", "EVAL_SEEDS", "FEATURES", "NormalizedPolicy", "run_training"]
+__all__ = ["ALGORITHMS", "EVAL_SEEDS", "FEATURES", "NormalizedPolicy", "ZeroTorque",
+           "run_training"]
 
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
@@ -50,6 +51,15 @@ ALGORITHMS = ("ppo", "sac")
 FEATURES = ("none", "identified", "oracle")
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
+
+
+class ZeroTorque(Controller):
+    """The trivial baseline: no torque at all."""
+
+    name = "zero torque"
+
+    def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
+        return np.zeros(3, dtype=np.float32)
 
 
 class NormalizedPolicy(Controller):
@@ -117,6 +127,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     baseline_env = gym.make(env_id(scenario), **env_kwargs)
     baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
     fixed = _evaluate(FixedLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
+    zero = _evaluate(ZeroTorque(), scenario, "none", env_kwargs)
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
@@ -145,7 +156,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
-        "adaptive_lqg": baseline, "fixed_lqg": fixed,
+        "adaptive_lqg": baseline, "fixed_lqg": fixed, "zero_torque": zero,
         "target_attitude_rms_deg": target, "runs": runs,
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
         "final_vibration_rms_mm": float(np.mean([r["final"]["vibration_rms_mm"] for r in runs])),

@@ -41,5 +41,6 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     table = rl_table([tmp_path / "out"])
     assert "| PPO | oracle | randomized docking | 2,048 | 1 |" in table
     assert "| fixed LQG |" in table and "| adaptive LQG |" in table
+    assert "| zero torque |" in table
     plot_rl_comparison(tmp_path / "cmp.png", [m])
     assert (tmp_path / "cmp.png").stat().st_size > 10_000
