@@ -144,8 +144,11 @@ class FlexibleSpacecraftEnv(gym.Env):
         Modes per appendage, 1..8 (ignored when ``params`` is given).
     params : SpacecraftParameters, optional
         Full parameter set (default: ETS-VIII).
-    outputs : sequence of str
-        Observation groups, see above.
+    outputs : sequence of str, optional
+        Observation groups, see above. Default: the three sensor groups, and
+        on the slew task also ``"reference"``: the target is part of the
+        task, so a policy (or a controller called through ``predict``) sees
+        it in the observation, never only in ``info``.
     snr_db : float or None
         Measurement signal-to-noise ratio in dB relative to the nominal levels
         (paper: 40), in [-40, 300]; None is noiseless.
@@ -179,7 +182,7 @@ class FlexibleSpacecraftEnv(gym.Env):
 
     def __init__(self, scenario: str | Scenario = "constant", *, randomize: bool = False,
                  n_modes: int = 2, params: SpacecraftParameters | None = None,
-                 outputs: Sequence[str] = OUTPUT_GROUPS, snr_db: float | None = 40.0,
+                 outputs: Sequence[str] | None = None, snr_db: float | None = 40.0,
                  max_torque: float = 10.0, dt: float = 0.1, task: str = "regulation",
                  initial_attitude_deg: float = 2.0, slew_range_deg: float = 10.0,
                  disturbance_torque: float | Sequence[float] = 0.0,
@@ -195,6 +198,8 @@ class FlexibleSpacecraftEnv(gym.Env):
             raise TypeError(f"randomize must be True or False, got {randomize!r}")
         self.randomize = bool(randomize)
         self.model = FlexibleSpacecraftModel(params, self._base_scenario, OUTPUT_GROUPS, dt)
+        if outputs is None:      # a policy must see the target it is asked to reach
+            outputs = OUTPUT_GROUPS + (("reference",) if task == "slew" else ())
         if isinstance(outputs, str):
             outputs = (outputs,)
         outputs = tuple(outputs)

@@ -272,7 +272,8 @@ def test_predict_reads_an_observed_reference_as_act_reads_info(make):
         # the observed reference is float32: equal to rounding, not bit for bit
         np.testing.assert_allclose(predicted, action, rtol=0, atol=1e-4)
         obs, _, _, _, info = env.step(action)
-    blind_env = FlexibleSpacecraftEnv("docking", task="slew")
+    blind_env = FlexibleSpacecraftEnv("docking", task="slew",
+                                      outputs=("attitude", "rate", "deflection"))
     blind = make(blind_env)
     obs, info = blind_env.reset(seed=4)
     blind.reset(0)

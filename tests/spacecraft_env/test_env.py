@@ -309,3 +309,13 @@ def test_randomized_docking_records_its_draw_in_reset_info():
     assert abs(after[0, 2]) + abs(after[1, 2]) > abs(model.inertia(0.0)[1, 2]) + 1.0
     _, again = gym.make("FlexibleSpacecraftDocking-v1", randomize=True).reset(seed=3)
     assert again["scenario"] == draws[0]
+
+
+def test_the_slew_task_observes_its_reference_by_default():
+    slew = gym.make("FlexibleSpacecraftDocking-v1", task="slew")
+    obs, info = slew.reset(seed=2)
+    assert slew.unwrapped.outputs[-1] == "reference"
+    np.testing.assert_allclose(obs[-3:], info["reference"], rtol=1e-6)
+    assert np.abs(obs[-3:]).max() > 0
+    regulation = gym.make("FlexibleSpacecraftDocking-v1")
+    assert regulation.unwrapped.outputs == ("attitude", "rate", "deflection")
