@@ -82,10 +82,11 @@ def _vector3(name: str, value: Any) -> np.ndarray:
 class FlexibleSpacecraftEnv(gym.Env):
     """Attitude control of the time-varying ETS-VIII flexible spacecraft.
 
-    The plant is the exact zero-order-hold sample of the rigid-flexible
-    coupling model (:class:`~spacecraft_env.dynamics.FlexibleSpacecraftModel`)
-    whose inertia and coupling follow a time-varying scenario (docking, solar
-    paddle rotation).
+    The plant is the zero-order-hold sample of the rigid-flexible coupling
+    model (:class:`~spacecraft_env.dynamics.FlexibleSpacecraftModel`; exact,
+    or for a turning paddle equal to the exact one to rounding) whose inertia
+    and coupling follow a time-varying scenario (docking, solar paddle
+    rotation).
 
     Action space
         ``Box(-1, 1, (3,), float32)``: roll/pitch/yaw torque normalized by
