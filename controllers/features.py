@@ -54,6 +54,24 @@ _CLIP = 10.0
 _UPPER = np.triu_indices(3)
 
 
+def _appended_space(env: gym.Env, n_features: int) -> spaces.Box:
+    """The env's observation space with ``n_features`` channels in [-10, 10] appended."""
+    low = np.concatenate([env.observation_space.low,
+                          np.full(n_features, -_CLIP, dtype=np.float32)])
+    high = np.concatenate([env.observation_space.high,
+                           np.full(n_features, _CLIP, dtype=np.float32)])
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+
+def _put_modes(block: np.ndarray, freq: np.ndarray, zeta: np.ndarray) -> None:
+    """Write the k slowest frequencies (Hz) then their damping ratios into ``block``
+    (length 2k, a view); fewer modes than k leave the rest as it is (0)."""
+    k = block.size // 2
+    count = min(k, freq.size)
+    block[:count] = freq[:count]
+    block[k:k + count] = zeta[:count]
+
+
 def _gain_scale(env: gym.Env) -> float:
     """Mean diagonal of the nominal inertia, kg m^2: makes ``J^-1`` about 1."""
     return float(np.mean(np.diag(env.unwrapped.model.nominal().inertia(0.0))))
@@ -107,12 +125,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self._max_torque = float(base.max_torque)
         n = identifier.n
         self.n_features = n + 6 + 2 * self.n_modes + self._meas_obs.size + 1
-        low = np.concatenate([env.observation_space.low,
-                              np.full(self.n_features, -_CLIP, dtype=np.float32)])
-        high = np.concatenate([env.observation_space.high,
-                               np.full(self.n_features, _CLIP, dtype=np.float32)])
-        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
-                                            dtype=np.float32)
+        self.observation_space = _appended_space(env, self.n_features)
         self._action = None
         self._last_y = None
 
@@ -145,10 +158,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
             except (ValueError, np.linalg.LinAlgError):
                 pass                        # keep the last gain
         out[n:n + 6] = self._gain
-        freq, zeta = model.modal()
-        count = min(k, freq.size)
-        out[n + 6:n + 6 + count] = freq[:count]
-        out[n + 6 + k:n + 6 + k + count] = zeta[:count]
+        _put_modes(out[n + 6:n + 6 + 2 * k], *model.modal())
         pred = model.C @ x
         out[n + 6 + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
         out[-1] = 1.0
@@ -194,12 +204,7 @@ class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArg
         self.n_modes = int(n_modes)
         self._gain_scale = _gain_scale(env)
         self.n_features = 6 + 2 * self.n_modes
-        low = np.concatenate([env.observation_space.low,
-                              np.full(self.n_features, -_CLIP, dtype=np.float32)])
-        high = np.concatenate([env.observation_space.high,
-                               np.full(self.n_features, _CLIP, dtype=np.float32)])
-        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
-                                            dtype=np.float32)
+        self.observation_space = _appended_space(env, self.n_features)
         self._cache: dict = {}
 
     def reset(self, *, seed: int | None = None,
@@ -218,10 +223,7 @@ class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArg
             k = self.n_modes
             hit = np.zeros(self.n_features)
             hit[:6] = np.linalg.inv(model.inertia(t))[_UPPER] * self._gain_scale
-            freq, zeta = model.modal(t)
-            count = min(k, freq.size)
-            hit[6:6 + count] = freq[:count]
-            hit[6 + k:6 + k + count] = zeta[:count]
+            _put_modes(hit[6:6 + 2 * k], *model.modal(t))
             self._cache[key] = hit
         return hit
 
