@@ -351,14 +351,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._hp_x = HighPass(size, self.highpass)
         self._hp_y = HighPass(m, self.highpass)
         samples = list(self._history)[-replay:]
-        # regressor scales: RMS of the high-passed regressors over the replayed
-        # samples (unit-RMS columns)
-        probe_bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
-        probe_hp = HighPass(size, self.highpass)
+        # the high-passed regressors of the replayed samples, computed once: they set
+        # the regressor scales (unit-RMS columns) and are then replayed as they are,
+        # leaving the bank and its high-pass where the replay ends
         rows = []
         for uk, *_ in samples:
-            rows.append(probe_hp(probe_bank.regressor()))
-            probe_bank.step(uk)
+            rows.append(self._hp_x(self._bank.regressor()))
+            self._bank.step(uk)
         scale = np.sqrt(np.mean(np.array(rows) ** 2, axis=0))
         scale[self._bank.slices["free"]] = 1.0
         scale[self._bank.slices["step"]] = 1.0
@@ -400,7 +399,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         start_k = self._k - len(samples) + 1
         tail = len(samples) - min(len(samples), FILTER_TAIL)
         for j, (uk, yk, learn, real) in enumerate(samples):
-            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail)
+            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail,
+                         regressor=rows[j])
         self._next_discovery = self._k + 1 + (self.rediscover or 0)
 
     def _maybe_rediscover(self) -> None:
@@ -417,13 +417,19 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._rebuild(found, min(len(self._history), round(3.0 / (1.0 - self.forgetting))))
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
-                replay_k: int | None = None, filtering: bool = True) -> None:
+                replay_k: int | None = None, filtering: bool = True,
+                regressor: np.ndarray | None = None) -> None:
         """One sample: Kalman filter on the current model (if ``filtering``), the
         gains' RLS, the change test (live samples only), the filter bank, and an
-        export every ``refresh`` samples (if ``filtering``)."""
+        export every ``refresh`` samples (if ``filtering``). A replay passes the
+        sample's high-passed ``regressor``, computed when the bank was rebuilt
+        (the bank has then already run past it)."""
         k = self._k if replay_k is None else replay_k
         bank = self._bank
-        phi = self._hp_x(bank.regressor()) / self._scale
+        if regressor is None:
+            phi = self._hp_x(bank.regressor()) / self._scale
+        else:
+            phi = regressor / self._scale
         y_f = self._hp_y(y)
         if filtering and self._mats is not None:
             a, b, c, _, _ = self._mats
@@ -452,7 +458,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                     self._sigvar = 0.995 * self._sigvar + 0.005 * s2
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
-        bank.step(u)
+        if regressor is None:
+            bank.step(u)
         if filtering and ((k + 1) % self.refresh == 0 or self._mats is None):
             self._export()
         if replay_k is None:
