@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from spacecraft_conventions import __version__
 from spacecraft_env.dynamics import FlexibleSpacecraftModel, StateSpaceMatrices
-from spacecraft_env.env import FlexibleSpacecraftEnv, RewardWeights
+from spacecraft_env.env import REWARDS, FlexibleSpacecraftEnv, RewardWeights
 from spacecraft_env.parameters import (
     ANTENNA_FREQUENCIES_HZ,
     PADDLE_FREQUENCIES_HZ,
@@ -38,13 +38,16 @@ from spacecraft_env.scenarios import (
     SolarRotationScenario,
     make_scenario,
 )
+from spacecraft_env.wrappers import ActionRepeat
 
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
     "ENV_IDS",
     "MAX_EPISODE_STEPS",
     "PADDLE_FREQUENCIES_HZ",
+    "REWARDS",
     "SCENARIOS",
+    "ActionRepeat",
     "AppendageParameters",
     "CombinedScenario",
     "Configuration",

@@ -30,7 +30,11 @@ from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
 from spacecraft_env.scenarios import Scenario, make_scenario
 
-__all__ = ["FlexibleSpacecraftEnv", "RewardWeights"]
+__all__ = ["REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
+
+#: Reward forms (the ``reward`` argument): the negative stage cost, or its
+#: bounded survival form for learning agents.
+REWARDS = ("cost", "bounded")
 
 #: Accepted range of ``snr_db``: from noise 100x the nominal level to 1e-15 of it.
 SNR_RANGE_DB = (-40.0, 300.0)
@@ -53,19 +57,27 @@ class RewardWeights:
     :mod:`spacecraft_conventions.sensors`) with ``e`` the true
     attitude error (rad), ``omega`` the true body rates (rad/s), ``w`` the
     true tip deflections (m) and ``a`` the normalized action in [-1, 1].
+
+    ``saturation`` is the cost at which the bounded reward
+    (``reward="bounded"``: ``1 - min(cost / saturation, 1)``) reaches 0;
+    the default, 300, is the cost of a 10 deg error on all three axes (the
+    largest slew the slew task draws) with the default weights.
     """
 
     attitude: float = 1.0
     rate: float = 1.0
     vibration: float = 0.1
     torque: float = 0.01
+    saturation: float = 300.0
 
     def __post_init__(self) -> None:
-        for name in ("attitude", "rate", "vibration", "torque"):
+        for name in ("attitude", "rate", "vibration", "torque", "saturation"):
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"reward weight {name} must be finite and >= 0, got {value}")
             object.__setattr__(self, name, value)
+        if self.saturation == 0:
+            raise ValueError("reward weight saturation must be > 0")
 
 
 def _vector3(name: str, value: Any) -> np.ndarray:
@@ -103,13 +115,22 @@ class FlexibleSpacecraftEnv(gym.Env):
         0.01 deg, 0.001 deg/s, 0.1 mm). Values are clipped to the Box bounds
         (+-pi rad, +-pi rad/s, +-10 m), which lie far outside the model's range.
     Reward
-        Negative quadratic cost of the true attitude error, rates, deflections
-        and torque, see :class:`RewardWeights`.
+        ``reward="cost"`` (default): the negative quadratic stage cost of the
+        true attitude error, rates, deflections and torque, see
+        :class:`RewardWeights`; the controllers' returns are compared by it.
+        ``reward="bounded"``: ``1 - min(cost / saturation, 1)`` per step, in
+        [0, 1], with no termination penalty: staying alive and on target is
+        what pays, and leaving the bound forfeits every later reward. The
+        cost form spans six decades (a crash is charged up to about 1e6
+        times a typical stage cost), which swamps the return statistics a
+        learning agent normalizes by; with the bounded form (and
+        :class:`~spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew
+        task where it did not with the cost (docs/results/rl.md).
     Episode end
         ``terminated`` when any true attitude angle exceeds
         ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
         error passes 2 %); ``truncated`` only by the registered time limit
-        (2500 steps = 250 s). Leaving the bound costs, on the terminating
+        (2500 steps = 250 s). With ``reward="cost"``, leaving the bound costs, on the terminating
         step, every step left to the time limit at the stage cost of an
         attitude error at the bound on all three axes (the ``-v1`` ids; with
         ``-v0`` ending the episode stopped the cost, so crashing paid: full
@@ -173,6 +194,8 @@ class FlexibleSpacecraftEnv(gym.Env):
         the applied torque moves toward the (delayed) command by at most
         ``torque_rate_limit * dt`` per step, as a reaction wheel's
         acceleration limit does.
+    reward : {"cost", "bounded"}
+        Reward form, see above.
     reward_weights : RewardWeights, optional
     max_attitude_deg : float
         Termination bound on any attitude angle, deg.
@@ -189,7 +212,7 @@ class FlexibleSpacecraftEnv(gym.Env):
                  disturbance_torque: float | Sequence[float] = 0.0,
                  disturbance_std: float = 0.0, actuator_delay_steps: int = 0,
                  torque_rate_limit: float | None = None,
-                 reward_weights: RewardWeights | None = None,
+                 reward: str = "cost", reward_weights: RewardWeights | None = None,
                  max_attitude_deg: float = 20.0, render_mode: str | None = None) -> None:
         super().__init__()
         if params is None:
@@ -249,6 +272,9 @@ class FlexibleSpacecraftEnv(gym.Env):
                 raise ValueError(f"torque_rate_limit must be > 0 N m/s or None, "
                                  f"got {torque_rate_limit}")
         self.torque_rate_limit = torque_rate_limit
+        if reward not in REWARDS:
+            raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+        self.reward = reward
         self.reward_weights = reward_weights or RewardWeights()
         if not isinstance(self.reward_weights, RewardWeights):
             raise TypeError("reward_weights must be a RewardWeights instance")
@@ -414,12 +440,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x = ad @ x + bd @ total
         self._k += 1
         terminated = max(map(abs, self._x[:3].tolist())) > self.max_attitude
-        if terminated:
-            cost += self.termination_penalty()
+        if self.reward == "bounded":
+            reward = 1.0 - min(float(cost) / self.reward_weights.saturation, 1.0)
+        else:
+            reward = -float(cost + self.termination_penalty()) if terminated else -float(cost)
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
-        return obs, -float(cost), terminated, False, self._info()
+        return obs, reward, terminated, False, self._info()
 
     def termination_penalty(self) -> float:
         """Cost charged when the attitude bound is left at the current step.

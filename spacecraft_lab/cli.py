@@ -37,12 +37,12 @@ from pathlib import Path
 
 from controllers import LQRWeights
 from spacecraft_conventions import __version__
-from spacecraft_env import SCENARIOS
+from spacecraft_env import REWARDS, SCENARIOS
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.plots import plot_rl_comparison
-from spacecraft_lab.reporting import rl_table
+from spacecraft_lab.reporting import pooled_training_runs, rl_table
 from spacecraft_lab.sweeps import (
     BACKENDS,
     ResultStore,
@@ -52,7 +52,7 @@ from spacecraft_lab.sweeps import (
     run_sweep,
     summarize,
 )
-from spacecraft_lab.training import ALGORITHMS, FEATURES, run_training
+from spacecraft_lab.training import ACTION_REPEAT, ALGORITHMS, FEATURES, run_training
 
 __all__ = ["build_parser", "main"]
 
@@ -228,13 +228,23 @@ def build_parser() -> argparse.ArgumentParser:
                        help="observation features appended for the agent")
     train.add_argument("--timesteps", type=_integer(1), default=100_000,
                        help="training env steps per seed")
-    train.add_argument("--seeds", type=_integer(1), default=1, help="training seeds 0..N-1")
+    train.add_argument("--seeds", type=_integer(1), default=1,
+                       help="number of training seeds: first-seed .. first-seed + N - 1")
+    train.add_argument("--first-seed", type=_integer(0), default=0,
+                       help="first training seed (to split seeds over processes)")
     train.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="docking",
                        help="registered scenario")
     train.add_argument("--randomize", action="store_true",
                        help="draw a new scenario every episode (docking: masses, times, "
                             "off-axis offsets; rotation: rate); the task where model "
                             "knowledge matters")
+    train.add_argument("--repeat", type=_integer(1), default=ACTION_REPEAT,
+                       help="env steps each agent action is held for (ActionRepeat; "
+                            "10 = one decision per second)")
+    train.add_argument("--reward", choices=REWARDS, default="bounded",
+                       help="env reward form: 'bounded' (1 - min(cost / saturation, 1) "
+                            "per step alive) or 'cost' (negative stage cost and a "
+                            "termination penalty)")
     train.add_argument("--eval-every", type=_integer(1), default=20_000,
                        help="env steps between evaluations")
     train.add_argument("--out", type=_output_directory, default="results/train",
@@ -320,8 +330,10 @@ def _train(args: argparse.Namespace) -> int:
     m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
                      scenario=args.scenario, eval_every=args.eval_every,
                      tensorboard=None if args.tensorboard is None else str(args.tensorboard),
-                     randomize=args.randomize)
-    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps", "randomize",
+                     randomize=args.randomize, repeat=args.repeat, reward=args.reward,
+                     first_seed=args.first_seed)
+    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps", "randomize", "repeat",
+                                       "reward",
                                        "final_attitude_rms_deg", "final_vibration_rms_mm",
                                        "final_return", "adaptive_lqg", "fixed_lqg")}, indent=2))
     print("steps to 2x adaptive LQG RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
@@ -332,8 +344,7 @@ def _train(args: argparse.Namespace) -> int:
 def _rl_table(args: argparse.Namespace) -> int:
     print(rl_table(args.dirs))
     if args.plot is not None:
-        plot_rl_comparison(args.plot, [json.loads((Path(d) / "metrics.json").read_text())
-                                       for d in args.dirs])
+        plot_rl_comparison(args.plot, pooled_training_runs(args.dirs))
         print(f"wrote {args.plot}")
     return 0
 

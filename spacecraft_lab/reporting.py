@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_table", "identification_table", "rl_table"]
+__all__ = ["control_table", "identification_table", "pooled_training_runs", "rl_table"]
 
 
 def _median(cell: dict[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -131,14 +131,37 @@ def control_table(table: dict[str, dict], oracle: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, Any]]:
+    """The ``metrics.json`` of ``spacecraft train`` directories, one per setting.
+
+    Directories with equal algorithm, features, task, env steps, decision
+    period and reward are one setting: their seeds' runs are pooled (seeds
+    trained in separate processes with ``--first-seed``). Order of first
+    appearance.
+    """
+    settings: dict[tuple, dict[str, Any]] = {}
+    for directory in directories:
+        m = json.loads((Path(directory) / "metrics.json").read_text())
+        key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), m["timesteps"],
+               m.get("repeat", 1), m.get("reward", "cost"))
+        if key in settings:
+            settings[key]["runs"] = settings[key]["runs"] + m["runs"]
+        else:
+            settings[key] = dict(m)
+    return list(settings.values())
+
+
 def rl_table(directories: Sequence[str | Path]) -> str:
     """Markdown table of several ``spacecraft train`` output directories.
 
-    Per directory: the final evaluation's attitude RMS, vibration and return
-    as the median [min, max] over training seeds, and the env steps each
-    seed needed to come within 2x of the adaptive LQG's attitude RMS; then
-    the adaptive and fixed LQG and zero torque (the trivial baseline) on the
-    same evaluation seeds (taken from the last directory).
+    Per setting (directories with equal algorithm, features, task, env
+    steps, decision period and reward pool their seeds, so seeds trained in
+    separate processes make one row): the final evaluation's attitude RMS,
+    vibration and return as the median [min, max] over training seeds, and
+    the env steps each seed needed to come within 2x of the adaptive LQG's
+    attitude RMS; then the adaptive and fixed LQG and zero torque (the
+    trivial baseline) on the same evaluation seeds (taken from the last
+    directory).
     """
     def spread(values: list[float], fmt: str) -> str:
         values = [v for v in values if v is not None and np.isfinite(v)]
@@ -147,10 +170,10 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         return (f"{np.median(values):{fmt}} [{min(values):{fmt}}, {max(values):{fmt}}]"
                 if len(values) > 1 else f"{values[0]:{fmt}}")
 
-    rows, last = [], None
-    for directory in directories:
-        m = json.loads((Path(directory) / "metrics.json").read_text())
-        last = m
+    rows = []
+    pooled = pooled_training_runs(directories)
+    last = pooled[-1] if pooled else None
+    for m in pooled:
         finals = [r["final"] for r in m["runs"]]
         reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
         task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]

@@ -38,12 +38,12 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
-from spacecraft_env import env_id
+from spacecraft_env import REWARDS, ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 
-__all__ = ["ALGORITHMS", "EVAL_SEEDS", "FEATURES", "NormalizedPolicy", "ZeroTorque",
-           "run_training"]
+__all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "FEATURES", "HYPERPARAMETERS",
+           "NormalizedPolicy", "ZeroTorque", "run_training"]
 
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
@@ -51,6 +51,15 @@ ALGORITHMS = ("ppo", "sac")
 FEATURES = ("none", "identified", "oracle")
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
+#: Env steps per agent decision (1 s at dt = 0.1 s), see spacecraft_env.ActionRepeat.
+ACTION_REPEAT = 10
+#: Settings that differ from SB3's defaults, per algorithm. PPO's initial action
+#: noise is exp(-1) = 0.37 of full torque instead of 1 (3.7 N m, not 10 N m of
+#: random torque, which alone tumbles the spacecraft out of the bound).
+HYPERPARAMETERS: dict[str, dict[str, Any]] = {
+    "ppo": {"policy_kwargs": {"log_std_init": -1.0}},
+    "sac": {},
+}
 
 
 class ZeroTorque(Controller):
@@ -63,20 +72,34 @@ class ZeroTorque(Controller):
 
 
 class NormalizedPolicy(Controller):
-    """An SB3 model trained under ``VecNormalize``, as a harness controller."""
+    """An SB3 model trained under ``VecNormalize``, as a harness controller.
 
-    def __init__(self, model: Any, vec_normalize: Any, name: str) -> None:
+    ``repeat``: the model was trained under
+    :class:`~spacecraft_env.ActionRepeat`, so it decides every ``repeat``
+    env steps and its action is held in between, as in training.
+    """
+
+    def __init__(self, model: Any, vec_normalize: Any, name: str, repeat: int = 1) -> None:
         self.model = model
         self.vec_normalize = vec_normalize
         self.name = name
+        self.repeat = int(repeat)
+        self.reset()
+
+    def reset(self, seed: int | None = None) -> None:
+        self._held: np.ndarray | None = None
+        self._age = 0
 
     def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
-        norm = self.vec_normalize.normalize_obs(np.asarray(obs, dtype=np.float32)[None])
-        action, _ = self.model.predict(norm, deterministic=True)
-        return np.asarray(action[0], dtype=np.float32)
+        if self._held is None or self._age >= self.repeat:
+            norm = self.vec_normalize.normalize_obs(np.asarray(obs, dtype=np.float32)[None])
+            action, _ = self.model.predict(norm, deterministic=True)
+            self._held, self._age = np.asarray(action[0], dtype=np.float32), 0
+        self._age += 1
+        return self._held
 
 
-def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]):
+def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
     env = gym.make(env_id(scenario), **env_kwargs)
     if features == "identified":
         env = IdentifiedModelFeatures(env)
@@ -103,8 +126,18 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  seeds: int = 1, out: str | Path = "results/train", *,
                  scenario: str = "docking", eval_every: int = 20_000,
                  tensorboard: str | None = None, progress: bool = True,
-                 randomize: bool = False) -> dict:
-    """Train, evaluate and save SB3 agents; see the module docstring."""
+                 randomize: bool = False, repeat: int = ACTION_REPEAT,
+                 reward: str = "bounded", first_seed: int = 0) -> dict:
+    """Train, evaluate and save SB3 agents; see the module docstring.
+
+    Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
+    split over processes; ``spacecraft rl-table`` pools directories of equal
+    settings).
+
+    ``timesteps`` and ``eval_every`` count env steps (0.1 s samples), also
+    under ``repeat`` (agent decisions are ``timesteps / repeat``), so runs
+    with different ``repeat`` compare at equal simulated time.
+    """
     # optional dependency (the "rl" extra): imported where it is needed
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
@@ -118,11 +151,15 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
-    if timesteps < 1 or seeds < 1:
-        raise ValueError("timesteps and seeds must be >= 1")
+    if timesteps < 1 or seeds < 1 or first_seed < 0:
+        raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
+        raise ValueError(f"repeat must be an integer >= 1, got {repeat!r}")
+    if reward not in REWARDS:
+        raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {"task": "slew", "randomize": bool(randomize)}
+    env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
 
     baseline_env = gym.make(env_id(scenario), **env_kwargs)
     baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
@@ -131,22 +168,24 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
-    for seed in range(seeds):
+    for seed in range(first_seed, first_seed + seeds):
         venv = VecNormalize(
-            DummyVecEnv([lambda: Monitor(_make_env(scenario, features, env_kwargs))]),
+            DummyVecEnv([lambda: Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs),
+                                                      repeat))]),
             norm_obs=True, norm_reward=True, clip_obs=10.0)
         venv.seed(seed)
         model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
-                            tensorboard_log=tensorboard)
+                            tensorboard_log=tensorboard, **HYPERPARAMETERS[algo])
         curve: list[dict[str, float]] = []
         name = f"{algo}-{features}-seed{seed}"
 
         callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
-                                 eval_every, scenario, features, env_kwargs, progress)
-        model.learn(total_timesteps=timesteps, callback=callback,
+                                 eval_every, scenario, features, env_kwargs, progress, repeat)
+        model.learn(total_timesteps=-(-timesteps // repeat), callback=callback,
                     tb_log_name=name if tensorboard else "run")
         venv.training = False
-        final = _evaluate(NormalizedPolicy(model, venv, name), scenario, features, env_kwargs)
+        final = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario, features,
+                          env_kwargs)
         model.save(out / f"{name}.zip")
         venv.save(str(out / f"{name}_vecnormalize.pkl"))
         reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
@@ -155,6 +194,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
+        "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
         "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
         "adaptive_lqg": baseline, "fixed_lqg": fixed, "zero_torque": zero,
         "target_attitude_rms_deg": target, "runs": runs,
@@ -168,8 +208,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
 
 def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
-                  features, env_kwargs, progress):
-    """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` steps."""
+                  features, env_kwargs, progress, repeat):
+    """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` env
+    steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each)."""
 
     class EvalCallback(base):
         def __init__(self) -> None:
@@ -178,14 +219,14 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             self.next_eval = eval_every
 
         def _on_step(self) -> bool:
-            self.bar.update(self.training_env.num_envs)
-            if self.num_timesteps >= self.next_eval:
+            self.bar.update(self.training_env.num_envs * repeat)
+            if self.num_timesteps * repeat >= self.next_eval:
                 self.next_eval += eval_every
                 venv.training = False
-                score = _evaluate(NormalizedPolicy(model, venv, name), scenario, features,
-                                  env_kwargs)
+                score = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario,
+                                  features, env_kwargs)
                 venv.training = True
-                curve.append({"timesteps": int(self.num_timesteps), **score})
+                curve.append({"timesteps": int(self.num_timesteps * repeat), **score})
                 for key, value in score.items():
                     self.logger.record(f"eval/{key}", value)
             return True

@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 
 import spacecraft_env
 from controllers import OracleLQG, run_episode
-from spacecraft_env import ENV_IDS, FlexibleSpacecraftEnv
+from spacecraft_env import ENV_IDS, REWARDS, ActionRepeat, FlexibleSpacecraftEnv, RewardWeights
 
 IDS = sorted(ENV_IDS)
 
@@ -269,10 +269,12 @@ def test_paddle_rotation_id_turns_the_paddles_from_90_to_180_deg():
 
 @pytest.mark.parametrize("env_name", IDS)
 @pytest.mark.parametrize("task", ["regulation", "slew"])
-def test_crashing_does_not_pay(env_name, task):
-    """Full torque until the bound is left < zero torque < LQG, on every id and task."""
+@pytest.mark.parametrize("reward", REWARDS)
+def test_crashing_does_not_pay(env_name, task, reward):
+    """Full torque until the bound is left < zero torque < LQG, on every id, task and
+    reward form."""
     def score(policy):
-        env = gym.make(env_name, task=task)
+        env = gym.make(env_name, task=task, reward=reward)
         if policy == "lqg":
             traj = run_episode(env, OracleLQG(env.unwrapped), seed=0)
             return float(traj.rewards.sum()), traj.terminated
@@ -280,8 +282,8 @@ def test_crashing_does_not_pay(env_name, task):
         action = np.ones(3, dtype=np.float32) if policy == "crash" else np.zeros(3, np.float32)
         total, done, terminated = 0.0, False, False
         while not done:
-            _, reward, terminated, truncated, _ = env.step(action)
-            total += reward
+            _, r, terminated, truncated, _ = env.step(action)
+            total += r
             done = terminated or truncated
         return total, terminated
 
@@ -319,3 +321,79 @@ def test_the_slew_task_observes_its_reference_by_default():
     assert np.abs(obs[-3:]).max() > 0
     regulation = gym.make("FlexibleSpacecraftDocking-v1")
     assert regulation.unwrapped.outputs == ("attitude", "rate", "deflection")
+
+
+def test_bounded_reward_is_one_minus_the_saturated_cost():
+    """Both reward forms see the same stage cost: bounded = 1 - min(cost / saturation, 1)."""
+    weights = RewardWeights(saturation=20.0)
+    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=form, reward_weights=weights)
+            for form in ("cost", "bounded")]
+    for env in envs:
+        env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    seen = []
+    for _ in range(2500):
+        action = rng.uniform(-1, 1, 3).astype(np.float32)
+        (_, r_cost, term, *_), (_, r_bounded, term_b, *_) = (env.step(action) for env in envs)
+        assert term == term_b
+        if term:
+            break
+        assert r_bounded == pytest.approx(1.0 - min(-r_cost / 20.0, 1.0), abs=1e-12)
+        seen.append(r_bounded)
+    # the run covers both the graded range and saturation
+    assert min(seen) == 0.0 and 0.1 < max(seen) < 1.0
+
+
+@pytest.mark.parametrize("bad", [{"reward": "sparse"}, {"reward": None}])
+def test_unknown_reward_form_raises(bad):
+    with pytest.raises(ValueError, match="reward must be one of"):
+        FlexibleSpacecraftEnv("docking", **bad)
+
+
+def test_saturation_must_be_positive():
+    with pytest.raises(ValueError, match="saturation"):
+        RewardWeights(saturation=0.0)
+
+
+def test_action_repeat_sums_the_rewards_of_the_held_steps():
+    inner = gym.make("FlexibleSpacecraftSolarRotation-v1", task="slew")
+    wrapped = ActionRepeat(gym.make("FlexibleSpacecraftSolarRotation-v1", task="slew"), 7)
+    inner.reset(seed=2)
+    wrapped.reset(seed=2)
+    action = np.array([0.3, -0.2, 0.1], dtype=np.float32)
+    for _ in range(3):
+        steps = [inner.step(action) for _ in range(7)]
+        obs_w, r_w, *_, info = wrapped.step(action)
+        assert r_w == pytest.approx(sum(step[1] for step in steps), rel=1e-12)
+        assert info["repeated_steps"] == 7
+        assert info["time"] == pytest.approx(inner.unwrapped.time)
+        np.testing.assert_array_equal(obs_w, steps[-1][0])      # the last step's (noisy) obs
+    np.testing.assert_array_equal(wrapped.unwrapped.state, inner.unwrapped.state)
+
+
+def test_action_repeat_stops_at_the_end_of_the_episode():
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 1000)
+    env.reset(seed=0)
+    _, _, terminated, truncated, info = env.step(np.ones(3, dtype=np.float32))
+    assert terminated and not truncated            # full torque leaves the bound first
+    assert 1 <= info["repeated_steps"] < 1000
+    assert info["repeated_steps"] == env.unwrapped._k
+    # and at the time limit: 2500 steps are 3 actions of 1000 (the last one cut short)
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 1000)
+    env.reset(seed=0)
+    held = [env.step(np.zeros(3, dtype=np.float32))[4]["repeated_steps"] for _ in range(3)]
+    assert held == [1000, 1000, 500]
+
+
+def test_action_repeat_is_recorded_in_the_spec():
+    """Like Gymnasium's own wrappers: ``gym.make(env.spec)`` rebuilds it, repeat included."""
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 5)
+    again = gym.make(env.spec)
+    assert isinstance(again, ActionRepeat) and again.repeat == 5
+    assert pickle.loads(pickle.dumps(env)).repeat == 5
+
+
+@pytest.mark.parametrize("repeat", [0, -1, 1.5, True, "10"])
+def test_action_repeat_rejects_bad_repeat(repeat):
+    with pytest.raises(ValueError, match="repeat must be an integer >= 1"):
+        ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), repeat)

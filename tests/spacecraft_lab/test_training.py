@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from spacecraft_lab.training import run_training
+from spacecraft_lab.training import ACTION_REPEAT, NormalizedPolicy, run_training
 
 
 def test_training_job_writes_model_curves_and_metrics(tmp_path):
@@ -14,8 +16,37 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path):
     assert (tmp_path / "ppo-none-seed0.zip").exists()
     assert (tmp_path / "learning_curves.png").exists()
     assert m["runs"][0]["curve"] and np.isfinite(m["final_attitude_rms_deg"])
+    # the defaults: one decision per ACTION_REPEAT env steps, the bounded reward (returns
+    # are then counts of well-held steps: the LQG holds nearly all 2500)
+    assert m["repeat"] == ACTION_REPEAT and m["reward"] == "bounded"
+    assert 2000 < m["adaptive_lqg"]["return"] <= 2500
+    # curves count env steps, not decisions
+    assert m["runs"][0]["curve"][0]["timesteps"] >= 2048
     with pytest.raises(ValueError):
         run_training("dqn", "none", 10, 1, tmp_path)
+    with pytest.raises(ValueError, match="repeat"):
+        run_training("ppo", "none", 10, 1, tmp_path, repeat=0)
+    with pytest.raises(ValueError, match="reward"):
+        run_training("ppo", "none", 10, 1, tmp_path, reward="sparse")
+
+
+def test_normalized_policy_holds_each_decision_for_repeat_steps():
+    class Model:
+        calls = 0
+
+        def predict(self, obs, deterministic):
+            self.calls += 1
+            return np.full((1, 3), 0.1 * self.calls), None
+
+    class Identity:
+        def normalize_obs(self, obs):
+            return obs
+
+    policy = NormalizedPolicy(Model(), Identity(), "held", repeat=3)
+    actions = [round(float(policy.act(np.zeros(13))[0]), 6) for _ in range(7)]
+    assert actions == [0.1] * 3 + [0.2] * 3 + [0.3]
+    policy.reset(seed=0)                         # a new episode decides at once
+    assert round(float(policy.act(np.zeros(13))[0]), 6) == 0.4
 
 
 def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
@@ -44,3 +75,29 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     assert "| zero torque |" in table
     plot_rl_comparison(tmp_path / "cmp.png", [m])
     assert (tmp_path / "cmp.png").stat().st_size > 10_000
+
+
+def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
+    from spacecraft_lab.reporting import pooled_training_runs, rl_table
+
+    base = {"algo": "ppo", "features": "none", "scenario": "docking", "randomize": True,
+            "timesteps": 1000, "repeat": 10, "reward": "bounded",
+            "target_attitude_rms_deg": 2.0,
+            **{k: {"attitude_rms_deg": 1.0, "vibration_rms_mm": 1.0, "return": 1.0}
+               for k in ("adaptive_lqg", "fixed_lqg", "zero_torque")}}
+
+    def run(seed, rms):
+        final = {"attitude_rms_deg": rms, "vibration_rms_mm": 1.0, "return": 2.0}
+        return {"seed": seed, "final": final, "curve": [], "steps_to_2x_adaptive": None}
+
+    for name, features, seeds in (("a", "none", (0,)), ("b", "none", (1, 2)),
+                                  ("c", "oracle", (0,))):
+        (tmp_path / name).mkdir()
+        m = {**base, "features": features, "runs": [run(s, 3.0 + s) for s in seeds]}
+        (tmp_path / name / "metrics.json").write_text(json.dumps(m))
+    dirs = [tmp_path / n for n in "abc"]
+    pooled = pooled_training_runs(dirs)
+    assert [(m["features"], len(m["runs"])) for m in pooled] == [("none", 3), ("oracle", 1)]
+    table = rl_table(dirs)
+    assert "| PPO | none | randomized docking | 1,000 | 3 | 4.00 [3.00, 5.00] |" in table
+    assert "| PPO | oracle | randomized docking | 1,000 | 1 | 3.00 |" in table
