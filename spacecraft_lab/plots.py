@@ -309,8 +309,11 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
                     label="2x adaptive LQG")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("attitude RMS (deg), evaluation seeds")
-    axes[1].set_ylabel("return, evaluation seeds")
-    axes[1].set_yscale("symlog", linthresh=1e4)
+    bounded = last.get("reward", "cost") == "bounded"
+    axes[1].set_ylabel("return (bounded reward: steps held, of 2500)" if bounded
+                       else "return (negative cost), evaluation seeds")
+    if not bounded:            # cost returns span decades (crashes pay ~1e6)
+        axes[1].set_yscale("symlog", linthresh=1e4)
     for ax in axes:
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
