@@ -369,17 +369,16 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         # collinearity during transients
         floor = np.full(size, 1e-4)
         floor[self._bank.slices["flexible"]] = FLEXIBLE_FLOOR
-        for block in ("attitude", "rate"):
-            floor[self._bank.slices[block]] = self.rigid_floor
-        # the rigid gains forget faster than the rest: a docking changes them at once,
-        # and three well-excited gains per axis need little memory
         lam = np.full(size, self.forgetting)
-        for block in ("attitude", "rate"):
-            lam[self._bank.slices[block]] = self.rigid_forgetting
-        # the rigid gains are never 0: their floor bounds P but does not pull them
         hold = np.zeros(size, dtype=bool)
-        for block in ("attitude", "rate"):
-            hold[self._bank.slices[block]] = True
+        for block in ("attitude", "rate"):          # the rigid gains
+            rigid = self._bank.slices[block]
+            floor[rigid] = self.rigid_floor
+            # they forget faster than the rest: a docking changes them at once, and
+            # three well-excited gains per axis need little memory
+            lam[rigid] = self.rigid_forgetting
+            # they are never 0: their floor bounds P but does not pull them
+            hold[rigid] = True
         self._fits = [(rows, cols, RecursiveLeastSquares(rows.size, cols.size, lam[cols],
                                                          1e4, regularization=floor[cols],
                                                          hold=hold[cols], gate=self.gate))

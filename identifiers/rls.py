@@ -190,10 +190,10 @@ class RecursiveLeastSquares:
             The a-priori error, or None if the update was refused (a
             non-finite or overflowing gain or error; nothing changed).
         """
-        share = 1.0
+        share, p_phi = 1.0, None
         if self._gate_level is not None:
-            p_phi0 = dsymv(self._scale, self._q, phi, lower=0)
-            share = min(1.0, float(phi @ p_phi0) / self._gate_level)
+            p_phi = dsymv(self._scale, self._q, phi, lower=0)
+            share = min(1.0, float(phi @ p_phi) / self._gate_level)
         if share < 1.0:
             lam_vec = 1.0 - (1.0 - self._lam) * share
             lam = float(lam_vec.max())
@@ -203,8 +203,10 @@ class RecursiveLeastSquares:
             lam, rescale = self._lam_scalar, self._rescale
         if rescale is not None:
             self._q *= rescale                                   # per-parameter forgetting
+            p_phi = None                                         # the gate's P phi is stale
         scale = self._scale
-        p_phi = dsymv(scale, self._q, phi, lower=0)          # P phi, upper triangle only
+        if p_phi is None:
+            p_phi = dsymv(scale, self._q, phi, lower=0)      # P phi, upper triangle only
         denom = lam + phi @ p_phi
         err = y - self.theta @ phi
         if not self._safe(p_phi, denom, err):

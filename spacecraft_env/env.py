@@ -130,9 +130,9 @@ class FlexibleSpacecraftEnv(gym.Env):
         ``terminated`` when any true attitude angle exceeds
         ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
         error passes 2 %); ``truncated`` only by the registered time limit
-        (2500 steps = 250 s). With ``reward="cost"``, leaving the bound costs, on the terminating
-        step, every step left to the time limit at the stage cost of an
-        attitude error at the bound on all three axes (the ``-v1`` ids; with
+        (2500 steps = 250 s). With ``reward="cost"``, leaving the bound
+        costs, on the terminating step, every step left to the time limit at
+        the stage cost of an attitude error at the bound on all three axes (the ``-v1`` ids; with
         ``-v0`` ending the episode stopped the cost, so crashing paid: full
         torque until termination scored -2.0e5 against -2.5e5 for zero
         torque on the slew task). No policy that stays within the bound can

@@ -38,7 +38,7 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
-from spacecraft_env import REWARDS, ActionRepeat, env_id
+from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 
@@ -153,15 +153,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1 or first_seed < 0:
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
-    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
-        raise ValueError(f"repeat must be an integer >= 1, got {repeat!r}")
-    if reward not in REWARDS:
-        raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+    env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
+    # the env checks the reward form and the wrapper the repeat, before anything is written
+    baseline_env = ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
-
-    baseline_env = gym.make(env_id(scenario), **env_kwargs)
     baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
     fixed = _evaluate(FixedLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
     zero = _evaluate(ZeroTorque(), scenario, "none", env_kwargs)
