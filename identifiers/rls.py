@@ -9,9 +9,10 @@ Exponentially weighted RLS for a matrix regression ``y_k = Theta phi_k + e_k``
 
 Symmetric by construction
     Only the upper triangle of ``P`` is stored and used: ``P phi`` is a
-    symmetric matrix-vector product (``dsymv``) and the correction
-    ``- (P phi)(P phi)^T / denom`` a symmetric rank-1 update (``dsyr``) of
-    that triangle. The plain update lets the non-symmetric part of ``P``
+    symmetric matrix-vector product and the correction
+    ``- (P phi)(P phi)^T / denom`` a symmetric rank-1 update of that
+    triangle (one compiled pass per update:
+    :func:`identifiers.rls_kernel.rls_step`). The plain update lets the non-symmetric part of ``P``
     grow by ``1 / lambda`` per step until ``P`` turns indefinite; with one
     triangle there is no non-symmetric part to grow, and the symmetric
     recursion is numerically stable for ``lambda < 1`` (Verhaegen, 1989).
@@ -59,7 +60,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg.blas import dger, dsymv, dsyr
+
+from identifiers.rls_kernel import rls_step
 
 __all__ = ["RecursiveLeastSquares"]
 
@@ -130,13 +132,6 @@ class RecursiveLeastSquares:
         #: The scalar forgetting, or None when parameters forget at their own rates.
         self.forgetting: float | None = float(lam[0]) if np.all(lam == lam[0]) else None
         self._lam = lam.copy()
-        # vector forgetting: Q <- Q * outer(s, s) with s = lambda^(-1/2), scaled so the
-        # largest lambda goes into the scalar (exact for the scalar case)
-        lam_max = float(lam.max())
-        self._lam_scalar = lam_max
-        root = np.sqrt(lam_max / lam)
-        self._rescale = (None if self.forgetting is not None
-                         else np.asfortranarray(np.outer(root, root)))
         self.initial_covariance = float(initial_covariance)
         if regularization is None:
             regularization = 1.0 / self.initial_covariance
@@ -190,73 +185,17 @@ class RecursiveLeastSquares:
             The a-priori error, or None if the update was refused (a
             non-finite or overflowing gain or error; nothing changed).
         """
-        share, p_phi = 1.0, None
-        if self._gate_level is not None:
-            p_phi = dsymv(self._scale, self._q, phi, lower=0)
-            share = min(1.0, float(phi @ p_phi) / self._gate_level)
-        if share < 1.0:
-            lam_vec = 1.0 - (1.0 - self._lam) * share
-            lam = float(lam_vec.max())
-            rescale = (None if self.forgetting is not None
-                       else np.outer(np.sqrt(lam / lam_vec), np.sqrt(lam / lam_vec)))
-        else:
-            lam, rescale = self._lam_scalar, self._rescale
-        if rescale is not None:
-            self._q *= rescale                                   # per-parameter forgetting
-            p_phi = None                                         # the gate's P phi is stale
-        scale = self._scale
-        if p_phi is None:
-            p_phi = dsymv(scale, self._q, phi, lower=0)      # P phi, upper triangle only
-        denom = lam + phi @ p_phi
-        err = y - self.theta @ phi
-        if not self._safe(p_phi, denom, err):
-            if rescale is not None:
-                self._q /= rescale
+        phi = np.ascontiguousarray(phi, dtype=float)
+        y = np.ascontiguousarray(y, dtype=float)
+        err = np.empty(self.theta.shape[0])
+        accepted, self._scale, self._cycle = rls_step(
+            self.theta, self._q, phi, y, self._lam, self.forgetting is None,
+            -1.0 if self._gate_level is None else self._gate_level, self._pseudo_weights,
+            self.hold, self._scale, self._cycle, _OVERFLOW_GUARD, err)
+        if not accepted:
             self.n_rejected += 1
             return None
-        gain = p_phi / denom
-        self.theta = dger(1.0, err, gain, a=self.theta, overwrite_a=True)
-        # P <- P - (P phi)(P phi)^T / denom, i.e. Q <- Q - (P phi)(P phi)^T / (s denom)
-        self._q = dsyr(-1.0 / (scale * denom), p_phi, a=self._q, lower=0, overwrite_a=True)
-        if lam < 1.0:
-            self._scale /= lam
-            if self._pseudo_weights[self._cycle] > 0.0:
-                self._pseudo_update(np.sqrt(share))
-            else:
-                self._cycle = (self._cycle + 1) % self.theta.shape[1]
-            if self._scale > 1e8:
-                self._renormalize()
         return err
-
-    @staticmethod
-    def _safe(p_phi: np.ndarray, denom: float, err: np.ndarray) -> bool:
-        """Finite, positive denominator and no product that could overflow."""
-        if not (np.isfinite(denom) and denom > 0):
-            return False
-        peak_p = np.abs(p_phi).max()
-        peak_e = np.abs(err).max()
-        if not (np.isfinite(peak_p) and np.isfinite(peak_e)):
-            return False
-        return peak_p * peak_p / denom < _OVERFLOW_GUARD and peak_e * peak_p / denom \
-            < _OVERFLOW_GUARD
-
-    def _pseudo_update(self, share: float = 1.0) -> None:
-        """Rank-1 pseudo-observation ``0 = Theta (w e_i)`` (regularized forgetting)."""
-        i = self._cycle
-        self._cycle = (i + 1) % self.theta.shape[1]
-        w = self._pseudo_weights[i] * share
-        q = self._q
-        column = np.concatenate((q[:i, i], q[i, i:]))        # column i of the symmetric Q
-        p_phi = column * (self._scale * w)                   # P (w e_i)
-        denom = 1.0 + w * p_phi[i]
-        if not self.hold[i]:                  # pull toward 0; a held coordinate keeps its value
-            err = -w * self.theta[:, i]
-            self.theta = dger(1.0, err, p_phi / denom, a=self.theta, overwrite_a=True)
-        self._q = dsyr(-1.0 / (self._scale * denom), p_phi, a=q, lower=0, overwrite_a=True)
-
-    def _renormalize(self) -> None:
-        self._q *= self._scale
-        self._scale = 1.0
 
     def reset(self) -> None:
         """Back to ``Theta = 0``, ``P = P_0``."""
@@ -280,5 +219,5 @@ class RecursiveLeastSquares:
         d = self.theta.shape[1]
         if p.shape != (d, d) or not np.all(np.isfinite(p)) or not np.allclose(p, p.T):
             raise ValueError(f"covariance must be a finite symmetric ({d}, {d}) matrix")
-        self._q = np.asfortranarray(p)
+        self._q = np.array(p, order="F")          # a copy: updated in place
         self._scale = 1.0

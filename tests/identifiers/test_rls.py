@@ -177,3 +177,46 @@ def test_fast_forgetting_parameters_track_a_jump_the_slow_ones_do_not_lose():
 def test_bad_vector_forgetting(lam):
     with pytest.raises(ValueError, match="forgetting"):
         RecursiveLeastSquares(1, 4, lam)
+
+
+# ------------------------------------------------------------------ the compiled kernel
+def _dense_reference(phi, y, lam, p0, delta, hold, gate):
+    """The documented recursion on a dense P, in plain NumPy: excitation gate,
+    vector forgetting, gain, rank-1 correction and the floor's pseudo-row."""
+    n, d = phi.shape
+    theta, p = np.zeros((y.shape[1], d)), p0 * np.eye(d)
+    weights = np.sqrt(d * (1.0 - lam) * delta)
+    gate_level = gate * d * float((1.0 - lam).max())
+    cycle = 0
+    for k in range(n):
+        share = min(1.0, float(phi[k] @ p @ phi[k]) / gate_level)
+        lam_eff = 1.0 - (1.0 - lam) * share
+        lam_max = lam_eff.max()
+        r = np.sqrt(lam_max / lam_eff)
+        p = p * np.outer(r, r)
+        p_phi = p @ phi[k]
+        denom = lam_max + phi[k] @ p_phi
+        theta = theta + np.outer(y[k] - theta @ phi[k], p_phi / denom)
+        p = (p - np.outer(p_phi, p_phi) / denom) / lam_max
+        i, cycle = cycle, (cycle + 1) % d
+        w = weights[i] * np.sqrt(share)
+        p_e = p[:, i] * w
+        denom = 1.0 + w * p_e[i]
+        if not hold[i]:
+            theta = theta + np.outer(-w * theta[:, i], p_e / denom)
+        p = p - np.outer(p_e, p_e) / denom
+    return theta, p
+
+
+def test_compiled_update_equals_the_dense_recursion_with_gate_floor_and_hold():
+    phi, _, y = _data(n=600, d=9, q=3)
+    phi[300:] *= 0.05                       # a quiet stretch: the gate and the floor act
+    lam = np.linspace(0.97, 0.995, 9)
+    delta = np.linspace(1e-3, 1e-1, 9)
+    hold = np.arange(9) < 3
+    rls = RecursiveLeastSquares(3, 9, lam, 10.0, regularization=delta, hold=hold, gate=0.25)
+    for k in range(len(phi)):
+        rls.update(phi[k], y[k])
+    theta, p = _dense_reference(phi, y, lam, 10.0, delta, hold, 0.25)
+    np.testing.assert_allclose(rls.theta, theta, rtol=1e-9, atol=1e-12 * np.abs(theta).max())
+    np.testing.assert_allclose(rls.P, p, rtol=1e-9, atol=1e-12 * np.abs(p).max())
