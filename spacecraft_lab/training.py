@@ -22,6 +22,8 @@ and, with ``--tensorboard``, TensorBoard logs.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -122,6 +124,22 @@ def _evaluate(controller: Controller, scenario: str, features: str,
             "stable_share": float(np.mean([m["stable"] for m in per_seed]))}
 
 
+@contextmanager
+def _one_torch_thread(torch) -> Iterator[None]:
+    """torch on one intra-op thread inside, the caller's setting restored after.
+
+    The policies are small MLPs updated on one env's batches: more threads do
+    not pay, and a reduction split over a machine-dependent thread count
+    changes the training's bits, so results would depend on the core count.
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
 def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100_000,
                  seeds: int = 1, out: str | Path = "results/train", *,
                  scenario: str = "docking", eval_every: int = 20_000,
@@ -139,6 +157,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     with different ``repeat`` compare at equal simulated time.
     """
     # optional dependency (the "rl" extra): imported where it is needed
+    import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.monitor import Monitor
@@ -164,34 +183,36 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
-    for seed in range(first_seed, first_seed + seeds):
-        venv = VecNormalize(
-            DummyVecEnv([lambda: Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs),
-                                                      repeat))]),
-            norm_obs=True, norm_reward=True, clip_obs=10.0)
-        venv.seed(seed)
-        model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
-                            tensorboard_log=tensorboard, **HYPERPARAMETERS[algo])
-        curve: list[dict[str, float]] = []
-        name = f"{algo}-{features}-seed{seed}"
+    with _one_torch_thread(torch):
+        for seed in range(first_seed, first_seed + seeds):
+            venv = VecNormalize(
+                DummyVecEnv([lambda: Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs),
+                                                          repeat))]),
+                norm_obs=True, norm_reward=True, clip_obs=10.0)
+            venv.seed(seed)
+            model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
+                                tensorboard_log=tensorboard, **HYPERPARAMETERS[algo])
+            curve: list[dict[str, float]] = []
+            name = f"{algo}-{features}-seed{seed}"
 
-        callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
-                                 eval_every, scenario, features, env_kwargs, progress, repeat)
-        model.learn(total_timesteps=-(-timesteps // repeat), callback=callback,
-                    tb_log_name=name if tensorboard else "run")
-        venv.training = False
-        final = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario, features,
-                          env_kwargs)
-        model.save(out / f"{name}.zip")
-        venv.save(str(out / f"{name}_vecnormalize.pkl"))
-        reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
-        runs.append({"seed": seed, "final": final, "curve": curve,
-                     "steps_to_2x_adaptive": reached})
+            callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
+                                     eval_every, scenario, features, env_kwargs, progress, repeat)
+            model.learn(total_timesteps=-(-timesteps // repeat), callback=callback,
+                        tb_log_name=name if tensorboard else "run")
+            venv.training = False
+            final = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario, features,
+                              env_kwargs)
+            model.save(out / f"{name}.zip")
+            venv.save(str(out / f"{name}_vecnormalize.pkl"))
+            reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
+            runs.append({"seed": seed, "final": final, "curve": curve,
+                         "steps_to_2x_adaptive": reached})
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
         "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
+        "torch_threads": 1,
         "adaptive_lqg": baseline, "fixed_lqg": fixed, "zero_torque": zero,
         "target_attitude_rms_deg": target, "runs": runs,
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),

@@ -4,10 +4,17 @@ from __future__ import annotations
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
-from spacecraft_lab.training import ACTION_REPEAT, NormalizedPolicy, run_training
+from spacecraft_env import env_id
+from spacecraft_lab.training import (
+    ACTION_REPEAT,
+    NormalizedPolicy,
+    _one_torch_thread,
+    run_training,
+)
 
 
 def test_training_job_writes_model_curves_and_metrics(tmp_path):
@@ -19,6 +26,7 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path):
     # the defaults: one decision per ACTION_REPEAT env steps, the bounded reward (returns
     # are then counts of well-held steps: the LQG holds nearly all 2500)
     assert m["repeat"] == ACTION_REPEAT and m["reward"] == "bounded"
+    assert m["torch_threads"] == 1
     assert 2000 < m["adaptive_lqg"]["return"] <= 2500
     # curves count env steps, not decisions
     assert m["runs"][0]["curve"][0]["timesteps"] >= 2048
@@ -28,6 +36,30 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path):
         run_training("ppo", "none", 10, 1, tmp_path, repeat=0)
     with pytest.raises(ValueError, match="reward"):
         run_training("ppo", "none", 10, 1, tmp_path, reward="sparse")
+
+
+def test_training_does_not_depend_on_the_callers_torch_threads():
+    """run_training trains inside _one_torch_thread: the same bits whatever the caller
+    set (unpinned, 1 and 2 threads differ by about 3e-7 after two PPO updates here)."""
+    torch = pytest.importorskip("torch")
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    before = torch.get_num_threads()
+    params = []
+    try:
+        for threads in (2, 1):
+            torch.set_num_threads(threads)
+            with _one_torch_thread(torch):
+                venv = DummyVecEnv([lambda: gym.make(env_id("docking"), task="slew")])
+                venv.seed(0)
+                model = PPO("MlpPolicy", venv, seed=0, n_steps=512, batch_size=128)
+                model.learn(1024)
+            assert torch.get_num_threads() == threads          # the caller's setting is back
+            params.append(torch.cat([p.detach().flatten() for p in model.policy.parameters()]))
+    finally:
+        torch.set_num_threads(before)
+    assert torch.equal(params[0], params[1])
 
 
 def test_normalized_policy_holds_each_decision_for_repeat_steps():
