@@ -6,11 +6,13 @@ mostly in call overhead (eight calls and a dozen temporaries per update).
 :func:`rls_step` does one whole update, the excitation gate, the vector
 forgetting rescale, the overflow guard, the gain, the estimate, the
 symmetric rank-1 correction of the stored upper triangle and the
-regularized-forgetting pseudo-row, in one compiled pass with no
-allocation but the error it returns. The arithmetic is that of
-:class:`~identifiers.rls.RecursiveLeastSquares` (whose docstring states
-the algorithm); only the order of the additions differs from BLAS, so
-results agree to rounding.
+regularized-forgetting pseudo-row, in one compiled pass with no BLAS call
+(its only allocations are a few work vectors of length d). The arithmetic
+is that of :class:`~identifiers.rls.RecursiveLeastSquares` (whose
+docstring states the algorithm); only the order of the additions differs
+from a BLAS implementation, so results agree to rounding
+(``tests/identifiers/test_rls.py`` checks the pass against the dense
+recursion).
 
 Compiled with numba (``cache=True``: compiled once per machine and loaded
 from ``__pycache__`` afterwards). With ``NUMBA_DISABLE_JIT=1`` the same
