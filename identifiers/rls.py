@@ -15,8 +15,9 @@ Symmetric by construction
     :func:`identifiers.rls_kernel.rls_step`). The plain update lets the
     non-symmetric part of ``P`` grow by ``1 / lambda`` per step until ``P``
     turns indefinite; with one triangle there is no non-symmetric part to
-    grow, and the symmetric recursion is numerically stable for ``lambda < 1`` (Verhaegen, 1989).
-    ``P`` is kept as a scalar times a matrix, so forgetting is a rescale.
+    grow, and the symmetric recursion is numerically stable for
+    ``lambda < 1`` (Verhaegen, 1989). ``P`` is kept as a scalar times a
+    matrix, so forgetting is a rescale.
 
 Forgetting that really forgets, with a bounded covariance
     Forgetting is applied at every step, in every direction. Where data
