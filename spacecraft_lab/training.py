@@ -184,6 +184,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     runs = []
     with _one_torch_thread(torch):
+        torch_threads = torch.get_num_threads()
         for seed in range(first_seed, first_seed + seeds):
             venv = VecNormalize(
                 DummyVecEnv([lambda: Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs),
@@ -212,7 +213,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
         "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
-        "torch_threads": 1,
+        "torch_threads": torch_threads,
         "adaptive_lqg": baseline, "fixed_lqg": fixed, "zero_torque": zero,
         "target_attitude_rms_deg": target, "runs": runs,
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
