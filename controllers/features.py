@@ -28,7 +28,8 @@ prediction error          m      ``y_k - C xhat_{k|k-1}`` per measured output,
 model ready               1      1 once the identifier has a model, else 0
 ========================  =====  ==============================================
 
-Before warm-up every feature but the flag is 0.
+Before warm-up every feature but the flag is 0 (in every episode, unless
+``keep_identifier`` carries the identifier over episode resets).
 
 :class:`OracleModelFeatures` appends the same rigid-body gain, frequencies
 and damping ratios computed from the true current plant: the ceiling of
@@ -94,12 +95,23 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
     gain_every : int
         Steps between refreshes of the rigid-body gain feature (its Schur
         split costs several updates' worth; 10 steps are 1 s).
+    keep_identifier : bool
+        Carry the identifier over episode resets
+        (:meth:`~identifiers.OnlineIdentifier.restart`: modes and gains
+        kept, signals and state estimate restarted), so every episode after
+        the first has features from its first step, as an identifier running
+        on board through successive manoeuvres would. Default False: each
+        episode starts the identifier afresh, and every feature but the flag
+        is 0 until its warm-up ends. With True an episode's observations
+        depend on the episodes before it on the same wrapper.
     """
 
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None, n_modes: int = 4,
-                 state_scale: float = 10.0, gain_every: int = 10) -> None:
+                 state_scale: float = 10.0, gain_every: int = 10,
+                 keep_identifier: bool = False) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
-                                                 state_scale=state_scale, gain_every=gain_every)
+                                                 state_scale=state_scale, gain_every=gain_every,
+                                                 keep_identifier=keep_identifier)
         gym.ObservationWrapper.__init__(self, env)
         base = env.unwrapped
         model = base.model
@@ -120,6 +132,8 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self.n_modes = int(n_modes)
         self.state_scale = float(state_scale)
         self.gain_every = int(gain_every)
+        self.keep_identifier = bool(keep_identifier)
+        self._gain = np.zeros(6)
         self._gain_scale = _gain_scale(env)
         self._rate_rows = measured.indices("rate") if "rate" in measured.names else None
         self._max_torque = float(base.max_torque)
@@ -131,10 +145,13 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        self.identifier.reset()
+        if self.keep_identifier:
+            self.identifier.restart()
+        else:
+            self.identifier.reset()
+            self._gain = np.zeros(6)
         self._action = None
         self._last_y = None
-        self._gain = np.zeros(6)
         self._steps = 0
         return super().reset(seed=seed, options=options)
 

@@ -158,6 +158,20 @@ class OnlineIdentifier(ABC):
         self._su = self._sy = None
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
 
+    def restart(self) -> None:
+        """Begin a new record of the same plant family (a new episode), keeping what was learnt.
+
+        The next sample does not follow the last one in time: an episode
+        reset, a data gap. An identifier that can carry its estimates over
+        keeps them and restarts only what describes the old record's signals
+        (past windows, filter states, the state estimate).
+        :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier` does;
+        this default forgets everything (:meth:`reset`), because the
+        past-window methods also keep data windows and bases built from the
+        old record.
+        """
+        self.reset()
+
     def _check_sizes(self, r: int, m: int) -> None:
         """Reject sizes the method cannot identify an order-n model from (the
         past-window methods need ``p m >= n``)."""

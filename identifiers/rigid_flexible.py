@@ -274,6 +274,37 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._last_innovation: np.ndarray | None = None
         self._real = True
 
+    def restart(self) -> None:
+        """Begin a new record of the same plant family (a new episode), keeping what was learnt.
+
+        Kept: the modes, every gain estimate with its covariance, the
+        regressor scales, the sensor-noise estimate, the change test's
+        calibration and the exported model, so the model is available from
+        the first sample of the new record. Restarted: the filter bank and
+        the high-passes (the old record's torques do not act on the new
+        one), the Kalman filter (state unknown: ``x = 0``, ``P = P_0``), the
+        record kept for the mode searches (a search over the junction would
+        see a jump) and the next search's time. The rigid-body gains'
+        covariance is discounted as at a detected change (the plant may have
+        changed between records, e.g. randomized episodes).
+
+        Before the warm-up has ended there is nothing to keep but the
+        warm-up samples; they are kept, so the warm-up can span short
+        records.
+        """
+        if self._bank is None:
+            return
+        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
+        self._hp_x = HighPass(self._bank.size, self.highpass)
+        self._hp_y = HighPass(self.n_outputs, self.highpass)
+        self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
+        self._discount_rigid()
+        self._detector.restart()
+        self._history.clear()
+        self._last_innovation = None
+        self._next_discovery = self._k + (self.rediscover or 0)
+        self._quiet = self.p
+
     def _check_sizes(self, r: int, m: int) -> None:
         if r != 3:
             raise ValueError(f"u must hold the 3 body torques, got {r} inputs")
@@ -535,6 +566,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         keep their memory: the modes move little at a docking and need long
         records.
         """
+        self._discount_rigid()
+        self._bank.restart()
+        self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))))
+
+    def _discount_rigid(self) -> None:
+        """Multiply the covariance of the rigid gains and initial-condition terms by
+        ``discount``."""
         bank = self._bank
         idx = np.arange(bank.size)
         touched = np.concatenate([idx[bank.slices[b]]
@@ -542,8 +580,6 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         for _, cols, rls in self._fits:
             factor = np.where(np.isin(cols, touched), np.sqrt(self.discount), 1.0)
             rls.set_covariance(rls.P * np.outer(factor, factor))
-        bank.restart()
-        self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))))
 
     # ------------------------------------------------------------ the model
     def _export(self) -> None:

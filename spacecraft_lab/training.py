@@ -1,13 +1,14 @@
 """Training stable-baselines3 agents on the spacecraft environments.
 
-``spacecraft train --algo ppo|sac --features none|identified|oracle
+``spacecraft train --algo ppo|sac --features none|identified|identified-kept|oracle
 --timesteps N --seeds S [--randomize] --out DIR`` calls :func:`run_training`:
 for each seed it trains an agent on a registered environment (slew task;
 ``--randomize`` draws a new scenario every episode, e.g. docking masses,
 times and offsets), Monitor-wrapped, with observations and rewards
 normalized by ``VecNormalize``, optionally with
-:class:`controllers.IdentifiedModelFeatures` or (the ceiling)
-:class:`controllers.OracleModelFeatures` appended. Every ``eval_every``
+:class:`controllers.IdentifiedModelFeatures` (``identified``: the identifier
+restarts every episode; ``identified-kept``: it is carried over episode
+resets) or (the ceiling) :class:`controllers.OracleModelFeatures` appended. Every ``eval_every``
 steps the current policy is evaluated through the same harness as the
 controllers (:func:`controllers.run_episode`), and the evaluation (attitude
 RMS, vibration, return, share of stable episodes) goes to SB3's logger
@@ -44,15 +45,19 @@ from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 
-__all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "FEATURES", "HYPERPARAMETERS",
-           "NormalizedPolicy", "ZeroTorque", "run_training"]
+__all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
+           "HYPERPARAMETERS", "NormalizedPolicy", "ZeroTorque", "run_training"]
 
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
 #: Observation features the agent may get on top of the env's.
-FEATURES = ("none", "identified", "oracle")
+FEATURES = ("none", "identified", "identified-kept", "oracle")
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
+#: Seed of the discarded episode that precedes the evaluation episodes when the
+#: identifier is carried over episodes (``identified-kept``): evaluated
+#: episodes then start with a learnt model, as in training.
+EVAL_WARMUP_SEED = 999
 #: Env steps per agent decision (1 s at dt = 0.1 s), see spacecraft_env.ActionRepeat.
 ACTION_REPEAT = 10
 #: Settings that differ from SB3's defaults, per algorithm. PPO's initial action
@@ -103,8 +108,8 @@ class NormalizedPolicy(Controller):
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
     env = gym.make(env_id(scenario), **env_kwargs)
-    if features == "identified":
-        env = IdentifiedModelFeatures(env)
+    if features in ("identified", "identified-kept"):
+        env = IdentifiedModelFeatures(env, keep_identifier=features == "identified-kept")
     elif features == "oracle":
         env = OracleModelFeatures(env)
     return env
@@ -113,11 +118,21 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
 def _evaluate(controller: Controller, scenario: str, features: str,
               env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
     per_seed = []
-    for seed in seeds:
+    if features == "identified-kept":
+        # one env: its identifier learns through a first, discarded episode and
+        # is carried into every evaluated one
         env = _make_env(scenario, features, env_kwargs)
-        traj = run_episode(env, controller, seed=seed)
-        per_seed.append(episode_metrics(traj, env.unwrapped.model))
+        run_episode(env, controller, seed=EVAL_WARMUP_SEED)
+        for seed in seeds:
+            traj = run_episode(env, controller, seed=seed)
+            per_seed.append(episode_metrics(traj, env.unwrapped.model))
         env.close()
+    else:
+        for seed in seeds:
+            env = _make_env(scenario, features, env_kwargs)
+            traj = run_episode(env, controller, seed=seed)
+            per_seed.append(episode_metrics(traj, env.unwrapped.model))
+            env.close()
     return {"attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
             "vibration_rms_mm": float(np.mean([m["vibration_rms_mm"] for m in per_seed])),
             "return": float(np.mean([m["return"] for m in per_seed])),

@@ -96,3 +96,22 @@ def test_oracle_features_follow_the_true_plant_through_docking():
     after = np.linalg.inv(model.inertia(190.0))[np.triu_indices(3)] * j0
     np.testing.assert_allclose(obs[10:16], after, rtol=1e-6)
     assert obs[10] < 0.9 * np.linalg.inv(model.inertia(0.0))[0, 0] * j0
+
+
+@pytest.mark.parametrize("keep", [False, True])
+def test_keep_identifier_carries_the_model_over_episode_resets(keep):
+    env = IdentifiedModelFeatures(gym.make("FlexibleSpacecraftDocking-v1"), keep_identifier=keep)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(520):                 # past the default identifier's 500-sample warm-up
+        obs, *_ = env.step(rng.uniform(-0.3, 0.3, 3).astype(np.float32))
+    assert obs[-1] == 1.0
+    gain = obs[10 + 22:10 + 22 + 6].copy()
+    obs, _ = env.reset(seed=1)
+    assert env.observation_space.contains(obs)
+    if keep:       # a model from the first step on: the flag and the learnt gain
+        assert obs[-1] == 1.0
+        np.testing.assert_array_equal(obs[10 + 22:10 + 22 + 6], gain)
+        np.testing.assert_array_equal(obs[10:10 + 22], 0.0)      # the state starts afresh
+    else:
+        assert obs[-1] == 0.0 and np.all(obs[10:] == 0)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from identifiers import (
+    ImprovedRPBSID,
     Resonator,
     RigidFlexibleIdentifier,
     add_measurement_noise,
@@ -118,6 +119,53 @@ def test_reset_starts_over(constant_record):
     ident.reset()
     again = ident.fit(u[:600], y[:600])
     np.testing.assert_array_equal(first.A[-1], again.A[-1])
+
+
+def test_restart_carries_the_model_into_a_new_record_of_the_same_plant(constant_record):
+    truth, u, _, y = constant_record
+    ident = default_identifier()
+    ident.fit(u, y)
+    before = ident.model
+    gain = rigid_body_gain(before, RATE)
+    ident.restart()
+    # the model is kept, the state estimate starts afresh
+    np.testing.assert_array_equal(ident.model.A, before.A)
+    np.testing.assert_array_equal(rigid_body_gain(ident.model, RATE), gain)
+    np.testing.assert_array_equal(ident.state, np.zeros(22))
+    # a new record (other inputs, other noise) is predicted from its first seconds
+    _, u2, _, y2 = _spacecraft("constant", 1, n_samples=400)
+    seq = ident.fit(u2, y2)
+    assert seq.valid.all()
+    h = 30
+    pred = h_step_predictions(seq, u2, (h,))[h]
+    pers = persistence_predictions(y2, (h,))[h]
+    rows = STANDARD_OUTPUTS.indices("rate")
+    window = slice(50, 400 - h)
+    model_mse = np.nanmean((pred[window, rows] - y2[window, rows]) ** 2)
+    persistence_mse = np.nanmean((pers[window, rows] - y2[window, rows]) ** 2)
+    assert model_mse < 0.2 * persistence_mse
+    assert relative_gain_error(rigid_body_gain(ident.model, RATE),
+                               np.linalg.inv(truth.inertia(0.0))) < 0.1
+
+
+def test_restart_before_the_warm_up_ends_keeps_collecting(constant_record):
+    _, u, _, y = constant_record
+    ident = default_identifier()
+    for k in range(300):
+        ident.update(u[k], y[k])
+    ident.restart()
+    for k in range(300, 500):
+        ident.update(u[k], y[k])
+    assert ident.model is not None
+
+
+def test_the_default_restart_of_a_past_window_method_starts_afresh(constant_record):
+    _, u, _, y = constant_record
+    ident = ImprovedRPBSID(n=22, p=15)
+    ident.fit(u, y)
+    assert ident.model is not None
+    ident.restart()
+    assert ident.model is None and ident.n_samples == 0
 
 
 @pytest.mark.parametrize(("kwargs", "error", "match"), [

@@ -133,3 +133,32 @@ def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
     table = rl_table(dirs)
     assert "| PPO | none | randomized docking | 1,000 | 3 | 4.00 [3.00, 5.00] |" in table
     assert "| PPO | oracle | randomized docking | 1,000 | 1 | 3.00 |" in table
+
+
+def test_evaluation_with_the_identifier_kept_starts_every_episode_with_a_model():
+    from spacecraft_lab.training import EVAL_SEEDS, ZeroTorque, _evaluate
+
+    class FirstObservation(ZeroTorque):
+        """Zero torque that records the model flag of each episode's first observation."""
+
+        def __init__(self) -> None:
+            self.flags: list[float] = []
+            self._first = True
+
+        def reset(self, seed: int | None = None) -> None:
+            self._first = True
+
+        def act(self, obs, info=None):
+            if self._first:
+                self.flags.append(float(obs[-1]))
+                self._first = False
+            return np.full(3, 0.05, dtype=np.float32)
+
+    kwargs = {"task": "slew", "max_episode_steps": 600}
+    for features, expected in (("identified", 0.0), ("identified-kept", 1.0)):
+        ctrl = FirstObservation()
+        score = _evaluate(ctrl, "docking", features, kwargs)
+        assert np.isfinite(score["attitude_rms_deg"])
+        evaluated = ctrl.flags[-len(EVAL_SEEDS):]        # after the warm-up episode, if any
+        assert evaluated == [expected] * len(EVAL_SEEDS), features
+    assert len(ctrl.flags) == len(EVAL_SEEDS) + 1
