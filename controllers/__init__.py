@@ -16,7 +16,7 @@
   from the true plant (the ceiling, privileged).
 """
 
-from controllers.acceptance import GainAcceptance, effective_gains
+from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
 from controllers.adaptive import AdaptiveLQG
 from controllers.base import Controller, PolicyController
 from controllers.baselines import (
@@ -67,6 +67,7 @@ __all__ = [
     "effective_gains",
     "episode_metrics",
     "equilibrium_state",
+    "input_disk_margin",
     "nominal_model",
     "output_weight",
     "run_episode",

@@ -17,6 +17,11 @@ so :class:`GainAcceptance` checks, for a candidate gain on a model:
    error, relative to that of persistence, must be below
    ``max_prediction_error``: a model that does not predict the data clearly
    better than no model is not designed on.
+4. **Margins at the plant input** (:meth:`GainAcceptance.check_margin`):
+   the disk margin :func:`input_disk_margin` of the output-feedback loop
+   (the gain on the model's Kalman predictor, with the integral) must be at
+   least ``min_disk_margin``. LQR's state-feedback margins do not survive
+   a state estimator (Doyle 1978); this is the check that they did.
 
 A rejected gain is not flown; the caller falls back to the reference design.
 """
@@ -30,7 +35,89 @@ import numpy as np
 from controllers.lqg import augment_integral, equilibrium_state
 from controllers.riccati import spectral_radius
 
-__all__ = ["GainAcceptance", "effective_gains"]
+__all__ = ["GainAcceptance", "effective_gains", "input_disk_margin", "margin_frequencies"]
+
+#: Frequencies (rad/s) the margin is evaluated at, before the model's own.
+MARGIN_GRID_POINTS = 48
+
+
+def margin_frequencies(dt: float, n_points: int = MARGIN_GRID_POINTS,
+                       low: float = 1e-3) -> np.ndarray:
+    """Log-spaced frequencies (rad/s) from ``low`` to just below Nyquist ``pi / dt``."""
+    return np.geomspace(low, 0.999 * np.pi / dt, n_points)
+
+
+def input_disk_margin(a: np.ndarray, b: np.ndarray, c: np.ndarray, k: np.ndarray,
+                      gain: np.ndarray, att_rows: np.ndarray, dt: float,
+                      frequencies: np.ndarray | None = None) -> float:
+    """Symmetric disk margin at the plant input of an observer-based LQG loop.
+
+    The loop: plant ``x+ = A x + B u``, ``y = C x``, with the attitude
+    integral ``z+ = z + dt C_att x`` when ``gain`` has the integral columns;
+    compensator ``xhat+ = A xhat + B u + K (y - C xhat)`` (the model's
+    Kalman predictor), ``u = -G_x xhat - G_z z``. Broken at the torque
+    input, its loop transfer is ``L(z) = C_k(z) P(z)`` and the margin is ::
+
+        alpha = min over w of sigma_min(I + L(e^{j w dt}))
+
+    the distance of the return difference from singularity: the loop
+    tolerates any simultaneous gain change within ``[1 / (1 + alpha),
+    1 / (1 - alpha)]`` and phase change up to ``2 asin(alpha / 2)`` on all
+    input channels at once. 1 is what continuous LQR guarantees; 0 means
+    the loop is at the edge of instability.
+
+    Parameters
+    ----------
+    a, b, c, k : ndarray
+        Model ``(n, n)``, ``(n, 3)``, ``(m, n)`` and its predictor gain
+        ``(n, m)``, physical units.
+    gain : (3, n) or (3, n + 3) ndarray
+        ``[G_x]`` or ``[G_x, G_z]``.
+    att_rows : ndarray of int
+        Rows of ``c`` that measure attitude.
+    dt : float
+        Sample time, s.
+    frequencies : ndarray, optional
+        Frequencies (rad/s) to evaluate at; default :func:`margin_frequencies`
+        plus the angles of the model's oscillatory poles (where lightly
+        damped modes put narrow features a log grid would step over).
+
+    Returns
+    -------
+    float
+        ``alpha`` (0 where ``I + L`` is singular or not finite).
+    """
+    n, r = b.shape
+    m = c.shape[0]
+    g_x = gain[:, :n]
+    if frequencies is None:
+        z_poles = np.linalg.eigvals(a)
+        angles = np.abs(np.angle(z_poles[np.abs(z_poles.imag) > 1e-9])) / dt
+        frequencies = np.concatenate([margin_frequencies(dt), angles])
+    w = np.asarray(frequencies, dtype=float)
+    zs = np.exp(1j * w * dt)[:, None, None]
+    # plant with the integral: u -> (y, z)
+    if gain.shape[1] > n:
+        a_p, b_p = augment_integral(a, b, c[att_rows], dt)
+        n_int = gain.shape[1] - n
+        c_p = np.zeros((m + n_int, n + n_int))
+        c_p[:m, :n] = c
+        c_p[m:, n:] = np.eye(n_int)
+        g_z = gain[:, n:]
+    else:
+        a_p, b_p, c_p, n_int, g_z = a, b, c, 0, np.zeros((r, 0))
+    eye_p = np.eye(a_p.shape[0])
+    plant = c_p @ np.linalg.solve(zs * eye_p - a_p, np.broadcast_to(b_p, (w.size, *b_p.shape)))
+    # compensator: (y, z) -> -u
+    a_c = a - k @ c - b @ g_x
+    b_c = np.hstack([k, -b @ g_z])
+    comp = g_x @ np.linalg.solve(zs * np.eye(n) - a_c, np.broadcast_to(b_c, (w.size, *b_c.shape)))
+    if n_int:
+        comp[:, :, m:] += g_z
+    ret = np.eye(r) + comp @ plant
+    if not np.all(np.isfinite(ret)):
+        return 0.0
+    return float(np.linalg.svd(ret, compute_uv=False)[:, -1].min())
 
 
 def effective_gains(a: np.ndarray, c: np.ndarray, gain_x: np.ndarray, att_rows: np.ndarray,
@@ -83,16 +170,23 @@ class GainAcceptance:
     max_prediction_error : float
         Largest 1 s rate prediction error (mean square) of the model relative
         to persistence's.
+    min_disk_margin : float
+        Smallest disk margin at the plant input (:func:`input_disk_margin`;
+        0.4: gain within [0.71, 1.67] and phase within 23 deg on all axes at
+        once).
     """
 
     floor: float = 0.3
     max_prediction_error: float = 0.5
+    min_disk_margin: float = 0.4
 
     def __post_init__(self) -> None:
         if not 0 <= self.floor:
             raise ValueError(f"floor must be >= 0, got {self.floor}")
         if not self.max_prediction_error > 0:
             raise ValueError(f"max_prediction_error must be > 0, got {self.max_prediction_error}")
+        if not 0 <= self.min_disk_margin < 1:
+            raise ValueError(f"min_disk_margin must be in [0, 1), got {self.min_disk_margin}")
 
     def check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
               att_rows: np.ndarray, rate_rows: np.ndarray, reference: tuple[float, float],
@@ -111,6 +205,10 @@ class GainAcceptance:
         prediction_error : float
             The model's recent relative one-step rate prediction error.
         dt : float
+
+        The margin test (4.) is :meth:`check_margin`: the caller evaluates
+        the margin, which costs more than the rest, only for a gain that
+        passes these.
         """
         n = a.shape[0]
         if not np.all(np.isfinite(gain)):
@@ -128,6 +226,12 @@ class GainAcceptance:
             a_cl, b_cl = a, b
         if spectral_radius(a_cl - b_cl @ gain) >= 1.0:
             return "unstable"
+        return None
+
+    def check_margin(self, disk_margin: float) -> str | None:
+        """None if the loop's disk margin (:func:`input_disk_margin`) passes, else "margin"."""
+        if not np.isfinite(disk_margin) or disk_margin < self.min_disk_margin:
+            return "margin"
         return None
 
     @staticmethod

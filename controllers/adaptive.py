@@ -11,7 +11,9 @@ Every control step k (docs/design/control.md):
 3. the gain's acceptance test (:class:`~controllers.acceptance.GainAcceptance`:
    effective stiffness and damping on every axis against the robust fixed
    design's, stability with the integral, the model's recent prediction
-   agreement). A gain that fails does not fly: the robust fixed design
+   agreement, and the disk margin at the torque input of the loop with the
+   model's Kalman predictor, evaluated every :data:`MARGIN_EVERY`
+   samples). A gain that fails does not fly: the robust fixed design
    (:class:`~controllers.baselines.RobustLQG`), which runs alongside all
    the time, acts instead;
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
@@ -36,7 +38,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike
 
-from controllers.acceptance import GainAcceptance
+from controllers.acceptance import GainAcceptance, input_disk_margin
 from controllers.base import Controller
 from controllers.baselines import RobustLQG, _LQGController
 from controllers.excitation import BinaryExcitation
@@ -52,6 +54,9 @@ log = logging.getLogger(__name__)
 AGREEMENT_MEMORY = 100
 #: Horizon (samples) of the prediction-agreement measure: 1 s.
 AGREEMENT_HORIZON = 10
+#: Samples between evaluations of the loop's disk margin (it costs about a
+#: re-design's worth; the gain moves little in 1 s).
+MARGIN_EVERY = 10
 
 
 class AdaptiveLQG(_LQGController):
@@ -126,6 +131,8 @@ class AdaptiveLQG(_LQGController):
         self._bridge_until = 0
         self._events_seen = 0
         self._err2 = self._sig2 = 0.0
+        self._margin: float | None = None
+        self._margin_due = 0
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
@@ -176,6 +183,12 @@ class AdaptiveLQG(_LQGController):
             return None
         reason = self.acceptance.check(a, b, c, gain, self._att_rows, self._rate_rows,
                                        self._softest_reference, agreement, self.dt)
+        if reason is None and model.K is not None:
+            if self._margin is None or self._k >= self._margin_due:
+                self._margin = input_disk_margin(a, b, c, model.K, gain, self._att_rows,
+                                                 self.dt)
+                self._margin_due = self._k + MARGIN_EVERY
+            reason = self.acceptance.check_margin(self._margin)
         if reason is not None:
             self.stats["rejected"] += 1
             self.stats["rejected_by"][reason] = self.stats["rejected_by"].get(reason, 0) + 1

@@ -152,6 +152,8 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
             self._gain = np.zeros(6)
         self._action = None
         self._last_y = None
+        self._modes_of: np.ndarray | None = None
+        self._modes: tuple[np.ndarray, np.ndarray] | None = None
         self._steps = 0
         return super().reset(seed=seed, options=options)
 
@@ -175,7 +177,11 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
             except (ValueError, np.linalg.LinAlgError):
                 pass                        # keep the last gain
         out[n:n + 6] = self._gain
-        _put_modes(out[n + 6:n + 6 + 2 * k], *model.modal())
+        if self._modes_of is None or not np.array_equal(model.A, self._modes_of):
+            # the model's A changes only when the identifier exports (every few
+            # samples), while its eigenvalues cost as much as an update
+            self._modes_of, self._modes = model.A, model.modal()
+        _put_modes(out[n + 6:n + 6 + 2 * k], *self._modes)
         pred = model.C @ x
         out[n + 6 + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
         out[-1] = 1.0

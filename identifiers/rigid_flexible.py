@@ -267,6 +267,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._next_discovery = 0
         self.n_rediscoveries = 0
         self._mats = None
+        self._torque_noise: tuple = (None, None)
         self._phases: dict[tuple[int, int], np.ndarray] = {}
         self._resvar: np.ndarray | None = None
         self._sigvar: np.ndarray | None = None
@@ -549,8 +550,11 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _process_noise(self) -> np.ndarray:
         """Unmodelled torque through B, plus an attitude random walk at half the noise."""
-        b = self._mats[1]
-        q = (self.process_torque / self._su.mean()) ** 2 * (b @ b.T)
+        if self._torque_noise[0] is not self._mats:      # B changes only at an export
+            b = self._mats[1]
+            self._torque_noise = (self._mats,
+                                  (self.process_torque / self._su.mean()) ** 2 * (b @ b.T))
+        q = self._torque_noise[1].copy()
         att = self.layout.slice("attitude")
         q[:3, :3] += np.diag(0.25 * self._r[att])
         return q

@@ -11,6 +11,7 @@ from controllers import (
     AdaptiveLQG,
     BinaryExcitation,
     FixedLQG,
+    GainAcceptance,
     LQRWeights,
     OracleLQG,
     OracleLQR,
@@ -21,6 +22,7 @@ from controllers import (
     check_weights,
     dlqr,
     episode_metrics,
+    input_disk_margin,
     run_episode,
 )
 from spacecraft_env import ConstantScenario, FlexibleSpacecraftEnv
@@ -183,6 +185,46 @@ def test_adaptive_lqg_runs_and_counts_its_safeguards():
     assert stats["redesigns"] + stats["rejected"] + stats["failed_designs"] > 0
     assert np.all(np.isfinite(traj.actions))
     assert stats["excitation_rms_Nm"] > 0
+
+
+def test_disk_margin_of_a_scalar_observer_loop_closed_form():
+    """x+ = a x + u, y = x, predictor gain k, u = -g xhat:
+    L(z) = g k / ((z - (a - k - g)) (z - a)); alpha = min |1 + L|."""
+    a, k, g, dt = 0.5, 0.4, 0.3, 0.1
+    w = np.geomspace(1e-2, 30.0, 200)
+    z = np.exp(1j * w * dt)
+    expected = np.min(np.abs(1 + g * k / ((z - (a - k - g)) * (z - a))))
+    got = input_disk_margin(np.array([[a]]), np.array([[1.0]]), np.array([[1.0]]),
+                            np.array([[k]]), np.array([[g]]), np.array([0]), dt, w)
+    assert got == pytest.approx(expected, rel=1e-12)
+
+
+def test_disk_margin_with_the_integral_closed_form():
+    """Same loop with the integral z+ = z + dt x and u = -g xhat - h z."""
+    a, k, g, h, dt = 0.9, 0.5, 0.2, 0.05, 0.1
+    w = np.geomspace(1e-2, 30.0, 200)
+    z = np.exp(1j * w * dt)
+    plant_y, plant_z = 1 / (z - a), dt / ((z - 1) * (z - a))
+    a_c = a - k - g
+    loop = g / (z - a_c) * (k * plant_y - h * plant_z) + h * plant_z
+    expected = np.min(np.abs(1 + loop))
+    got = input_disk_margin(np.array([[a]]), np.array([[1.0]]), np.array([[1.0]]),
+                            np.array([[k]]), np.array([[g, h]]), np.array([0]), dt, w)
+    assert got == pytest.approx(expected, rel=1e-12)
+    with pytest.raises(ValueError, match="min_disk_margin"):
+        GainAcceptance(min_disk_margin=1.0)
+    assert GainAcceptance(min_disk_margin=0.4).check_margin(0.39) == "margin"
+    assert GainAcceptance(min_disk_margin=0.4).check_margin(0.41) is None
+
+
+def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
+    env = gym.make("FlexibleSpacecraftDocking-v1")
+    # the prediction test off: only the margin can reject the identified gains
+    strict = AdaptiveLQG(env.unwrapped, acceptance=GainAcceptance(
+        max_prediction_error=np.inf, min_disk_margin=0.999))
+    traj = run_episode(env, strict, seed=0, max_steps=560)
+    assert traj.controller_stats["rejected_by"].get("margin", 0) > 0
+    assert traj.controller_stats["redesigns"] == 0
 
 
 def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
