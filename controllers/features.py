@@ -12,7 +12,8 @@ feature                   size   scaling
 ========================  =====  ==============================================
 state estimate            n      identifier state (its internal coordinates,
                                  already normalized by the nominal sensor
-                                 ranges) divided by ``state_scale`` (10)
+                                 ranges) divided by ``state_scale`` (10);
+                                 absent with ``include_state=False``
 rigid-body gain           6      upper triangle (xx, xy, xz, yy, yz, zz) of the
                                  identified ``J^-1``
                                  (:func:`identifiers.rigid_body_gain`, from
@@ -104,14 +105,20 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         episode starts the identifier afresh, and every feature but the flag
         is 0 until its warm-up ends. With True an episode's observations
         depend on the episodes before it on the same wrapper.
+    include_state : bool
+        Append the identifier's state estimate (default True). Its
+        coordinates are the identifier's own and change when it rebuilds
+        its model (e.g. when a mode search moves the modes); without it the
+        features are the gain, the modes, the prediction error and the flag.
     """
 
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None, n_modes: int = 4,
                  state_scale: float = 10.0, gain_every: int = 10,
-                 keep_identifier: bool = False) -> None:
+                 keep_identifier: bool = False, include_state: bool = True) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
                                                  state_scale=state_scale, gain_every=gain_every,
-                                                 keep_identifier=keep_identifier)
+                                                 keep_identifier=keep_identifier,
+                                                 include_state=include_state)
         gym.ObservationWrapper.__init__(self, env)
         base = env.unwrapped
         model = base.model
@@ -137,8 +144,9 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         self._gain_scale = _gain_scale(env)
         self._rate_rows = measured.indices("rate") if "rate" in measured.names else None
         self._max_torque = float(base.max_torque)
-        n = identifier.n
-        self.n_features = n + 6 + 2 * self.n_modes + self._meas_obs.size + 1
+        self.include_state = bool(include_state)
+        self._n_state = identifier.n if self.include_state else 0
+        self.n_features = self._n_state + 6 + 2 * self.n_modes + self._meas_obs.size + 1
         self.observation_space = _appended_space(env, self.n_features)
         self._action = None
         self._last_y = None
@@ -164,12 +172,12 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
 
     def _features(self, y: np.ndarray) -> np.ndarray:
         ident = self.identifier
-        n, k = ident.n, self.n_modes
+        n, k = self._n_state, self.n_modes
         out = np.zeros(self.n_features)
         model, x = ident.model, ident.state
         if model is None or x is None or not np.all(np.isfinite(model.A)):
             return out
-        out[:n] = x / self.state_scale
+        out[:n] = x[:n] / self.state_scale
         if self._rate_rows is not None and self._steps % self.gain_every == 0:
             try:
                 gain = rigid_body_gain(model, self._rate_rows)

@@ -1,14 +1,16 @@
 """Training stable-baselines3 agents on the spacecraft environments.
 
-``spacecraft train --algo ppo|sac --features none|identified|identified-kept|oracle
---timesteps N --seeds S [--randomize] --out DIR`` calls :func:`run_training`:
-for each seed it trains an agent on a registered environment (slew task;
-``--randomize`` draws a new scenario every episode, e.g. docking masses,
-times and offsets), Monitor-wrapped, with observations and rewards
-normalized by ``VecNormalize``, optionally with
-:class:`controllers.IdentifiedModelFeatures` (``identified``: the identifier
-restarts every episode; ``identified-kept``: it is carried over episode
-resets) or (the ceiling) :class:`controllers.OracleModelFeatures` appended. Every ``eval_every``
+``spacecraft train --algo ppo|sac --features F --timesteps N --seeds S
+[--randomize] --out DIR`` calls :func:`run_training`: for each seed it
+trains an agent on a registered environment (slew task; ``--randomize``
+draws a new scenario every episode, e.g. docking masses, times and
+offsets), Monitor-wrapped, with observations and rewards normalized by
+``VecNormalize``. ``F`` (:data:`FEATURES`) appends nothing (``none``),
+:class:`controllers.IdentifiedModelFeatures` (``identified``: the
+identifier restarts every episode; ``identified-kept``: it is carried over
+episode resets; ``identified-kept-no-state``: carried over, and without
+the identifier's state estimate among the features) or (the ceiling)
+:class:`controllers.OracleModelFeatures` (``oracle``). Every ``eval_every``
 steps the current policy is evaluated through the same harness as the
 controllers (:func:`controllers.run_episode`), and the evaluation (attitude
 RMS, vibration, return, share of stable episodes) goes to SB3's logger
@@ -51,7 +53,9 @@ __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEA
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
 #: Observation features the agent may get on top of the env's.
-FEATURES = ("none", "identified", "identified-kept", "oracle")
+FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle")
+#: Feature settings whose identifier is carried over episode resets.
+_KEPT = ("identified-kept", "identified-kept-no-state")
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
 #: Seed of the discarded episode that precedes the evaluation episodes when the
@@ -108,8 +112,9 @@ class NormalizedPolicy(Controller):
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
     env = gym.make(env_id(scenario), **env_kwargs)
-    if features in ("identified", "identified-kept"):
-        env = IdentifiedModelFeatures(env, keep_identifier=features == "identified-kept")
+    if features.startswith("identified"):
+        env = IdentifiedModelFeatures(env, keep_identifier=features in _KEPT,
+                                      include_state=not features.endswith("no-state"))
     elif features == "oracle":
         env = OracleModelFeatures(env)
     return env
@@ -118,7 +123,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
 def _evaluate(controller: Controller, scenario: str, features: str,
               env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
     per_seed = []
-    if features == "identified-kept":
+    if features in _KEPT:
         # one env: its identifier learns through a first, discarded episode and
         # is carried into every evaluated one
         env = _make_env(scenario, features, env_kwargs)

@@ -115,3 +115,14 @@ def test_keep_identifier_carries_the_model_over_episode_resets(keep):
         np.testing.assert_array_equal(obs[10:10 + 22], 0.0)      # the state starts afresh
     else:
         assert obs[-1] == 0.0 and np.all(obs[10:] == 0)
+
+
+def test_features_without_the_state_estimate():
+    env = _wrapped(n_modes=3, include_state=False)
+    assert env.observation_space.shape == (10 + 6 + 6 + 10 + 1,)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(150):
+        obs, *_ = env.step(rng.uniform(-0.3, 0.3, 3).astype(np.float32))
+    assert obs[-1] == 1.0 and env.observation_space.contains(obs)
+    assert np.all(obs[10:16][[0, 3, 5]] > 0.1)      # the gain comes first now
