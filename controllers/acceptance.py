@@ -106,18 +106,33 @@ def input_disk_margin(a: np.ndarray, b: np.ndarray, c: np.ndarray, k: np.ndarray
         g_z = gain[:, n:]
     else:
         a_p, b_p, c_p, n_int, g_z = a, b, c, 0, np.zeros((r, 0))
-    eye_p = np.eye(a_p.shape[0])
-    plant = c_p @ np.linalg.solve(zs * eye_p - a_p, np.broadcast_to(b_p, (w.size, *b_p.shape)))
-    # compensator: (y, z) -> -u
-    a_c = a - k @ c - b @ g_x
+    a_c = a - k @ c - b @ g_x          # compensator: (y, z) -> -u
     b_c = np.hstack([k, -b @ g_z])
-    comp = g_x @ np.linalg.solve(zs * np.eye(n) - a_c, np.broadcast_to(b_c, (w.size, *b_c.shape)))
+    try:
+        plant = c_p @ _resolvent_times(zs, a_p, b_p)
+        comp = g_x @ _resolvent_times(zs, a_c, b_c)
+    except np.linalg.LinAlgError:
+        # a pole exactly on the unit circle at one of the frequencies: |L| is
+        # infinite there, far from the minimum; leave those frequencies out
+        keep = [i for i in range(w.size)
+                if np.linalg.cond(zs[i] * np.eye(a_p.shape[0]) - a_p) < 1e12
+                and np.linalg.cond(zs[i] * np.eye(n) - a_c) < 1e12]
+        if not keep:
+            return 0.0
+        zs = zs[keep]
+        plant = c_p @ _resolvent_times(zs, a_p, b_p)
+        comp = g_x @ _resolvent_times(zs, a_c, b_c)
     if n_int:
         comp[:, :, m:] += g_z
     ret = np.eye(r) + comp @ plant
     if not np.all(np.isfinite(ret)):
         return 0.0
     return float(np.linalg.svd(ret, compute_uv=False)[:, -1].min())
+
+
+def _resolvent_times(zs: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(z I - A)^-1 B`` for every ``z`` of ``zs`` (shape ``(F, 1, 1)``): ``(F, n, r)``."""
+    return np.linalg.solve(zs * np.eye(a.shape[0]) - a, np.broadcast_to(b, (zs.shape[0], *b.shape)))
 
 
 def effective_gains(a: np.ndarray, c: np.ndarray, gain_x: np.ndarray, att_rows: np.ndarray,

@@ -217,6 +217,17 @@ def test_disk_margin_with_the_integral_closed_form():
     assert GainAcceptance(min_disk_margin=0.4).check_margin(0.41) is None
 
 
+def test_disk_margin_skips_a_frequency_at_an_undamped_pole():
+    """An undamped mode puts a model pole on the unit circle at the frequency the
+    margin is evaluated at (the pole angles are on its grid): no error, a finite
+    margin from the other frequencies."""
+    dt, w0 = 0.1, 0.5
+    a = np.array([[np.cos(w0 * dt), np.sin(w0 * dt)], [-np.sin(w0 * dt), np.cos(w0 * dt)]])
+    b, c, k = np.array([[0.0], [0.1]]), np.array([[1.0, 0.0]]), np.array([[0.5], [0.2]])
+    margin = input_disk_margin(a, b, c, k, np.array([[0.1, 0.2]]), np.array([0]), dt)
+    assert 0.0 < margin < np.inf
+
+
 def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
     env = gym.make("FlexibleSpacecraftDocking-v1")
     # the prediction test off: only the margin can reject the identified gains
