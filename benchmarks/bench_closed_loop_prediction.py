@@ -28,7 +28,13 @@ t = 100 s beside the robust fixed design (the fallback), the default
 adaptive LQG and the output-feedback oracle LQG, with the share of steps
 the fallback flew and the rejections by reason.
 
-Usage: ``python benchmarks/bench_closed_loop_prediction.py [--scenario NAME] [--seeds 3] [--fly]``
+``--loop previous`` runs the loop as it was before the adaptive LQG read its
+rigid states from the sensors: the identifier's own Kalman state, the
+open-loop identifier settings and the agreement threshold 0.5 (the
+diagnosis in docs/results/control.md was printed with it).
+
+Usage: ``python benchmarks/bench_closed_loop_prediction.py [--scenario NAME] [--seeds 3] [--fly]
+[--loop current|previous]``
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ from controllers import (
     run_episode,
 )
 from identifiers import (
+    CLOSED_LOOP_SETTINGS,
     add_measurement_noise,
     default_identifier,
     h_step_predictions,
@@ -62,6 +69,27 @@ from spacecraft_lab.control import env_kwargs_for
 from spacecraft_lab.identification import truth_sequence
 
 HORIZONS = (10, 30, 100)
+#: The loop before the rigid states were read from the sensors.
+PREVIOUS_LOOP = {"rigid_state": "filter", "max_prediction_error": 0.5, "closed_loop": False}
+
+
+def adaptive(env, loop: str, options: dict | None = None,
+             max_prediction_error: float | None = None) -> AdaptiveLQG:
+    """The adaptive LQG of ``loop`` ("current" or "previous"), its identifier
+    built with ``options`` on top of the loop's settings."""
+    base = env.unwrapped
+    previous = loop == "previous"
+    settings = {} if previous else dict(CLOSED_LOOP_SETTINGS)
+    settings.update(options or {})
+    probe = AdaptiveLQG(base)
+    ident = default_identifier(probe.measured_layout, n=base.model.n, dt=base.model.dt,
+                               **settings)
+    if max_prediction_error is None:
+        max_prediction_error = (PREVIOUS_LOOP["max_prediction_error"] if previous
+                                else GainAcceptance().max_prediction_error)
+    return AdaptiveLQG(base, identifier=ident,
+                       acceptance=GainAcceptance(max_prediction_error=max_prediction_error),
+                       rigid_state=PREVIOUS_LOOP["rigid_state"] if previous else "measured")
 START = 1000          # t = 100 s
 GAIN_EVERY = 25       # samples between rigid-gain checks (2.5 s)
 
@@ -108,6 +136,8 @@ def main() -> None:
                              "detect_changes=False; repeatable")
     parser.add_argument("--fly", action="store_true",
                         help="also fly the identified gains without the agreement test")
+    parser.add_argument("--loop", choices=("current", "previous"), default="current",
+                        help="the adaptive loop whose record is refitted (see the docstring)")
     args = parser.parse_args()
     options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
     if options.pop("true_modes", False):     # the truth's modes as the prior, kept
@@ -120,7 +150,7 @@ def main() -> None:
     torque_rms, gains = [], []
     for seed in range(args.seeds):
         env = gym.make(env_id(args.scenario), **env_kwargs_for(args.scenario, snr_db=snr))
-        ctrl = AdaptiveLQG(env.unwrapped)
+        ctrl = adaptive(env, args.loop)
         if args.excitation is not None:
             ctrl.excitation.amplitude = args.excitation
         traj = run_episode(env, ctrl, seed=seed)
@@ -163,24 +193,17 @@ def main() -> None:
           f"in the loop {g[0]:.3f}, identified open loop {g[1]:.3f}, nominal design inertia "
           f"(trivial baseline) {g[2]:.3f}")
     if args.fly:
-        fly(args.scenario, args.seeds, snr, options)
+        fly(args.scenario, args.seeds, snr, options, args.loop)
 
 
-def fly(scenario: str, seeds: int, snr: float | None, options: dict) -> None:
+def fly(scenario: str, seeds: int, snr: float | None, options: dict, loop: str) -> None:
     """Attitude RMS after t = 100 s with the identified gains flown (see the docstring)."""
-    def flown(env):
-        base = env.unwrapped
-        probe = AdaptiveLQG(base)
-        ident = default_identifier(probe.measured_layout, n=base.model.n, dt=base.model.dt,
-                                   **options)
-        return AdaptiveLQG(base, identifier=ident,
-                           acceptance=GainAcceptance(max_prediction_error=np.inf))
-
     cases = {"robust LQG (the fallback)": lambda env: RobustLQG(env.unwrapped),
-             "adaptive LQG (default)": lambda env: AdaptiveLQG(env.unwrapped),
-             "identified gains flown": flown,
+             f"adaptive LQG ({loop} loop)": lambda env: adaptive(env, loop),
+             "identified gains flown": lambda env: adaptive(env, loop, options, np.inf),
              "oracle LQG": lambda env: OracleLQG(env.unwrapped)}
-    print(f"\nflying the identified gains ({scenario}, identifier options {options or 'none'}): "
+    print(f"\nflying the identified gains ({scenario}, {loop} loop, identifier options "
+          f"{options or 'none'}): "
           f"attitude RMS after t = 100 s, median [min, max] over {seeds} seeds")
     for name, make in cases.items():
         rms, share, rejected = [], [], {}
@@ -196,7 +219,7 @@ def fly(scenario: str, seeds: int, snr: float | None, options: dict) -> None:
                     rejected[reason] = rejected.get(reason, 0) + count
         extra = (f"   fallback flew {np.median(share):.0%} of steps; rejections {rejected}"
                  if share else "")
-        print(f"  {name:<28}{np.median(rms):.4f} [{min(rms):.4f}, {max(rms):.4f}] deg{extra}")
+        print(f"  {name:<30}{np.median(rms):.4f} [{min(rms):.4f}, {max(rms):.4f}] deg{extra}")
 
 
 if __name__ == "__main__":

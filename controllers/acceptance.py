@@ -15,8 +15,13 @@ so :class:`GainAcceptance` checks, for a candidate gain on a model:
 2. **Stability on the model** (with the integral): spectral radius below 1.
 3. **Prediction agreement.** The model's recent 1 s-ahead rate prediction
    error, relative to that of persistence, must be below
-   ``max_prediction_error``: a model that does not predict the data clearly
-   better than no model is not designed on.
+   ``max_prediction_error`` (default 2): a guard against a model that has
+   lost track of the data (diverged, or modes rebuilt wrongly), not a
+   demand that it predict better than persistence. In the quiet closed loop
+   even the true model scores only 0.34-0.45 on this measure, the nominal
+   rigid model about 0.55, and identified models whose gains fly better
+   than the robust design's about 1.1-1.3 (docs/results/control.md): a
+   threshold below 1 rejected every identified gain.
 4. **Margins at the plant input** (:meth:`GainAcceptance.check_margin`):
    the disk margin :func:`input_disk_margin` of the output-feedback loop
    (the gain on the model's Kalman predictor, with the integral) must be at
@@ -32,10 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.lqg import augment_integral, equilibrium_state
+from controllers.lqg import augment_integral
 from controllers.riccati import spectral_radius
 
-__all__ = ["GainAcceptance", "effective_gains", "input_disk_margin", "margin_frequencies"]
+__all__ = ["GainAcceptance", "effective_gains", "input_disk_margin", "margin_frequencies",
+           "unit_states"]
 
 #: Frequencies (rad/s) the margin is evaluated at, before the model's own.
 MARGIN_GRID_POINTS = 48
@@ -157,17 +163,34 @@ def effective_gains(a: np.ndarray, c: np.ndarray, gain_x: np.ndarray, att_rows: 
         that attitude, and per unit rate (N m s/rad) for the least-norm state
         with that rate, zero attitude and zero other outputs.
     """
+    x_p, x_d = unit_states(a, c, att_rows, rate_rows)
+    return gain_x @ x_p, gain_x @ x_d
+
+
+def unit_states(a: np.ndarray, c: np.ndarray, att_rows: np.ndarray,
+                rate_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The model states of a unit attitude at rest and of a unit rate, per axis.
+
+    Returns
+    -------
+    X_p, X_d : (n, 3) ndarray
+        Column j of ``X_p``: the zero-input equilibrium with attitude ``e_j``
+        (least squares, :func:`~controllers.lqg.equilibrium_state`); of
+        ``X_d``: the least-norm state with rate ``e_j``, zero attitude and
+        zero other outputs. They depend on the model only, not on a gain.
+    """
     n = a.shape[0]
-    k_p = np.column_stack([gain_x @ equilibrium_state(a, c[att_rows], e) for e in np.eye(3)])
+    if not n:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    eye = np.eye(3)
+    lhs_p = np.vstack([a - np.eye(n), c[att_rows]])
+    x_p = np.linalg.lstsq(lhs_p, np.vstack([np.zeros((n, 3)), eye]), rcond=None)[0]
     rows = np.concatenate([att_rows, rate_rows])
     others = np.setdiff1d(np.arange(c.shape[0]), rows)
-    lhs = np.vstack([c[rows], c[others]]) if others.size else c[rows]
-    states = []
-    for e in np.eye(3):
-        rhs = np.concatenate([np.zeros(3), e, np.zeros(others.size)])
-        states.append(np.linalg.lstsq(lhs, rhs, rcond=None)[0] if n else np.zeros(0))
-    k_d = np.column_stack([gain_x @ x for x in states])
-    return k_p, k_d
+    lhs_d = np.vstack([c[rows], c[others]])
+    rhs_d = np.vstack([np.zeros((3, 3)), eye, np.zeros((others.size, 3))])
+    x_d = np.linalg.lstsq(lhs_d, rhs_d, rcond=None)[0]
+    return x_p, x_d
 
 
 def _softest(matrix: np.ndarray) -> float:
@@ -192,7 +215,7 @@ class GainAcceptance:
     """
 
     floor: float = 0.3
-    max_prediction_error: float = 0.5
+    max_prediction_error: float = 2.0
     min_disk_margin: float = 0.4
 
     def __post_init__(self) -> None:
@@ -202,6 +225,7 @@ class GainAcceptance:
             raise ValueError(f"max_prediction_error must be > 0, got {self.max_prediction_error}")
         if not 0 <= self.min_disk_margin < 1:
             raise ValueError(f"min_disk_margin must be in [0, 1), got {self.min_disk_margin}")
+        self._unit_states: tuple | None = None
 
     def check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
               att_rows: np.ndarray, rate_rows: np.ndarray, reference: tuple[float, float],
@@ -230,7 +254,14 @@ class GainAcceptance:
             return "non-finite gain"
         if not np.isfinite(prediction_error) or prediction_error > self.max_prediction_error:
             return "prediction"
-        k_p, k_d = effective_gains(a, c, gain[:, :n], att_rows, rate_rows)
+        cached = self._unit_states
+        if (cached is None or not np.array_equal(cached[0], a)
+                or not np.array_equal(cached[1], c)):
+            # the unit states depend on the model alone: a model kept over several
+            # steps (an identifier exports every few samples) pays for them once
+            cached = self._unit_states = (a.copy(), c.copy(),
+                                          *unit_states(a, c, att_rows, rate_rows))
+        k_p, k_d = gain[:, :n] @ cached[2], gain[:, :n] @ cached[3]
         if _softest(k_p) < self.floor * reference[0]:
             return "stiffness"
         if _softest(k_d) < self.floor * reference[1]:

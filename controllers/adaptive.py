@@ -4,7 +4,13 @@ Every control step k (docs/design/control.md):
 
 1. the identifier's state corrected by the current measurement,
    ``x_{k|k}`` (:meth:`~identifiers.OnlineIdentifier.filtered_state`: a
-   Kalman filter on the current identified model);
+   Kalman filter on the current identified model). With
+   ``rigid_state="measured"`` (the default, for identifiers whose state has
+   attitude and rate states, :attr:`~identifiers.OnlineIdentifier.rigid_states`)
+   the attitude and rate states are then read from the sensors, less the
+   filter's flexible contribution to them: the filter's own rigid estimate
+   drifts with the identified model's errors (measured in
+   docs/results/control.md), while attitude and rate are measured directly;
 2. the gain re-designed on the current identified ``(A, B, C)`` by the
    warm-started Riccati iteration, with integral action on the attitude
    error (:class:`~controllers.lqg.LQGLaw`);
@@ -43,7 +49,7 @@ from controllers.base import Controller
 from controllers.baselines import RobustLQG, _LQGController
 from controllers.excitation import BinaryExcitation
 from controllers.lqg import LQRWeights, equilibrium_state
-from identifiers import OnlineIdentifier, default_identifier
+from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["AdaptiveLQG"]
@@ -68,7 +74,8 @@ class AdaptiveLQG(_LQGController):
         Environment the controller is built for (layout, torque scale).
     identifier : identifiers.OnlineIdentifier, optional
         Default: :func:`identifiers.default_identifier` for the measured
-        sensor groups, n the truth model's order.
+        sensor groups, n the truth model's order, with
+        :data:`identifiers.CLOSED_LOOP_SETTINGS`.
     weights : LQRWeights
     excitation : BinaryExcitation, optional
         Default: 1 N m per axis until the identifier is warmed up and 20 s
@@ -86,6 +93,11 @@ class AdaptiveLQG(_LQGController):
         the excitation budget is the warm-up's (0: none).
     iterations : int
         Riccati iterations per re-design.
+    rigid_state : {"measured", "filter"}
+        Where the attitude and rate states come from (see step 1 above);
+        "measured" needs an identifier with
+        :attr:`~identifiers.OnlineIdentifier.rigid_states` and falls back
+        to "filter" otherwise.
     """
 
     name = "adaptive LQG"
@@ -93,11 +105,16 @@ class AdaptiveLQG(_LQGController):
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,
                  weights: LQRWeights | None = None, excitation: BinaryExcitation | None = None,
                  acceptance: GainAcceptance | None = None, fallback: Controller | None = None,
-                 bridge_s: float = 20.0, iterations: int = 4) -> None:
+                 bridge_s: float = 20.0, iterations: int = 4,
+                 rigid_state: str = "measured") -> None:
         super().__init__(env, weights)
         model = self.env.model
         if identifier is None:
-            identifier = default_identifier(self.measured_layout, n=model.n, dt=model.dt)
+            identifier = default_identifier(self.measured_layout, n=model.n, dt=model.dt,
+                                            **CLOSED_LOOP_SETTINGS)
+        if rigid_state not in ("measured", "filter"):
+            raise ValueError(f"rigid_state must be 'measured' or 'filter', got {rigid_state!r}")
+        self.rigid_state = rigid_state
         self.identifier = identifier
         warm = int(getattr(identifier, "warmup", 500)) + round(20.0 / self.dt)
         self.excitation = excitation or BinaryExcitation(warmup_steps=warm)
@@ -133,6 +150,7 @@ class AdaptiveLQG(_LQGController):
         self._err2 = self._sig2 = 0.0
         self._margin: float | None = None
         self._margin_due = 0
+        self._rigid_maps: tuple | None = None
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
@@ -163,6 +181,31 @@ class AdaptiveLQG(_LQGController):
             self._err2 = lam * self._err2 + (1 - lam) * float(e @ e)
             self._sig2 = lam * self._sig2 + (1 - lam) * float(d @ d)
         return self._err2 / self._sig2 if self._sig2 > 0 else np.inf
+
+    def _measured_rigid(self, x: np.ndarray, y: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """``x`` with its attitude and rate states read from ``y`` (where finite):
+        the least-squares solution of ``C_g[:, rigid] x_rigid = y_g - C_g[:, rest] x_rest``
+        for each of the two sensor groups g."""
+        slices = self.identifier.rigid_states
+        if slices is None:
+            return x
+        cached = self._rigid_maps
+        if cached is None or not np.array_equal(cached[0], c):
+            # per sensor group: the pseudo-inverse of its rigid block and the
+            # block of the other states; they change only with the model
+            states = np.arange(x.size)
+            maps = []
+            for rows, cols in zip((self._att_rows, self._rate_rows), slices, strict=True):
+                rigid = states[cols]
+                rest = np.setdiff1d(states, rigid)
+                maps.append((rows, rigid, rest, np.linalg.pinv(c[np.ix_(rows, rigid)]),
+                             c[np.ix_(rows, rest)]))
+            cached = self._rigid_maps = (c.copy(), maps)
+        x = x.copy()
+        for rows, cols, rest, inverse, others in cached[1]:
+            if np.all(np.isfinite(y[rows])):
+                x[cols] = inverse @ (y[rows] - others @ x[rest])
+        return x
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:
         """Keep (filtered state, rates, applied torque) of the last samples."""
@@ -216,6 +259,8 @@ class AdaptiveLQG(_LQGController):
         x = None
         if model is not None and np.all(np.isfinite(model.A)):
             x = self.identifier.filtered_state(y)
+            if x is not None and self.rigid_state == "measured":
+                x = self._measured_rigid(x, y, model.C)
             agreement = self._agreement(y, model, x)
             self.gain = self._design(model, agreement)
         bridging = self._k < self._bridge_until

@@ -28,7 +28,7 @@ from identifiers.base import (
 from identifiers.batch import PBSIDResult, pbsid
 from identifiers.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
 from identifiers.classical import ClassicalRPBSID
-from identifiers.defaults import DEFAULT_SETTINGS, default_identifier
+from identifiers.defaults import CLOSED_LOOP_SETTINGS, DEFAULT_SETTINGS, default_identifier
 from identifiers.evaluation import (
     HORIZONS,
     add_measurement_noise,
@@ -58,6 +58,7 @@ from identifiers.windowed import WindowedPBSID
 from spacecraft_conventions import __version__
 
 __all__ = [
+    "CLOSED_LOOP_SETTINGS",
     "DEFAULT_SETTINGS",
     "HORIZONS",
     "ChangeEvent",

@@ -386,6 +386,13 @@ class OnlineIdentifier(ABC):
         x = self._current_state()
         return None if x is None else x.copy()
 
+    @property
+    def rigid_states(self) -> tuple[slice, slice] | None:
+        """Slices of the model state that are the attitude and the body rate, if
+        the identifier's state has that physical layout (default None: a
+        subspace method's state is in coordinates of its own)."""
+        return None
+
     def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
         """State estimate at the current sample given its measurement, ``x_{k|k}``.
 

@@ -18,7 +18,7 @@ from identifiers.base import OnlineIdentifier
 from identifiers.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["DEFAULT_SETTINGS", "default_identifier"]
+__all__ = ["CLOSED_LOOP_SETTINGS", "DEFAULT_SETTINGS", "default_identifier"]
 
 #: Settings of the recommended identifier (read from the constructor's
 #: defaults, which are the single source; docs/design/identification.md
@@ -27,6 +27,16 @@ DEFAULT_SETTINGS: Mapping[str, Any] = MappingProxyType({
     name: param.default
     for name, param in inspect.signature(RigidFlexibleIdentifier).parameters.items()
     if param.kind is param.KEYWORD_ONLY and name not in ("input_scale", "output_scale")})
+
+#: Overrides of :data:`DEFAULT_SETTINGS` for an identifier inside a feedback
+#: loop that holds the spacecraft still (the adaptive LQG's): the Kalman
+#: filter assumes 0.05 N m of unmodelled torque instead of 10 (the open-loop
+#: value, 100 times the loop's torque after warm-up, made the filter follow
+#: the sensor noise into the modal states) and the rigid-body gains remember
+#: 100 s instead of 20 s (the loop's 0.1 N m of excitation carries little
+#: information per second). docs/results/control.md gives the measurements.
+CLOSED_LOOP_SETTINGS: Mapping[str, Any] = MappingProxyType({
+    "process_torque": 0.05, "rigid_forgetting": 0.999})
 
 
 def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,

@@ -62,7 +62,13 @@ from identifiers.modal_discovery import discover_resonators, merge_resonators
 from identifiers.rls import RecursiveLeastSquares
 from spacecraft_conventions import MEASURES, NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "RESOLUTION", "RigidFlexibleIdentifier"]
+__all__ = ["ATTITUDE_STATES", "FILTER_TAIL", "FLEXIBLE_FLOOR", "RATE_STATES", "RESOLUTION",
+           "RigidFlexibleIdentifier"]
+
+#: States of the exported model that are the attitude (its first three) and
+#: the body rate (the next three); the flexible modes follow.
+ATTITUDE_STATES = slice(0, 3)
+RATE_STATES = slice(3, 6)
 
 #: Tikhonov floor of the flexible couplings (unit-RMS regressors): the
 #: information a coupling keeps when the data stop exciting it.
@@ -598,13 +604,14 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         c = np.zeros((m, order))
         g = theta[rate, bank.slices["rate"]]                  # normalized inverse inertia
         dt, ratio = self.dt, self._ratio
-        a[:3, :3] = np.eye(3)
-        a[:3, 3:6] = dt * ratio * np.eye(3)
-        a[3:6, 3:6] = np.eye(3)
-        b[:3] = 0.5 * dt * dt * ratio * g
-        b[3:6] = dt * g
-        c[att, :3] = np.eye(3)
-        c[rate, 3:6] = np.eye(3)
+        psi, omega = ATTITUDE_STATES, RATE_STATES
+        a[psi, psi] = np.eye(3)
+        a[psi, omega] = dt * ratio * np.eye(3)
+        a[omega, omega] = np.eye(3)
+        b[psi] = 0.5 * dt * dt * ratio * g
+        b[omega] = dt * g
+        c[att, psi] = np.eye(3)
+        c[rate, omega] = np.eye(3)
         modes_a, modes_b = bank.mode_matrices
         flexible = theta[:, bank.slices["flexible"]].reshape(m, len(self.resonators), 3, 2)
         j = 6
@@ -666,6 +673,11 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             y_n = y / self._sy
         y_n = np.where(np.abs(y_n) <= self.max_abs, y_n, np.nan)
         return self._kf.filtered(self._mats[2], self._r, y_n)
+
+    @property
+    def rigid_states(self) -> tuple[slice, slice]:
+        """Slices of the model state that are the attitude and the body rate."""
+        return ATTITUDE_STATES, RATE_STATES
 
     @property
     def events(self) -> list[ChangeEvent]:

@@ -228,6 +228,23 @@ def test_disk_margin_skips_a_frequency_at_an_undamped_pole():
     assert 0.0 < margin < np.inf
 
 
+def test_adaptive_lqg_reads_attitude_and_rate_states_from_the_sensors():
+    env = gym.make("FlexibleSpacecraftDocking-v1")
+    ctrl = AdaptiveLQG(env.unwrapped)
+    traj = run_episode(env, ctrl, seed=0, max_steps=560)
+    y = traj.observations[-1][ctrl._meas_obs].astype(float)
+    x = ctrl.identifier.filtered_state(y)
+    c = ctrl.identifier.model.C
+    measured = ctrl._measured_rigid(x, y, c)
+    rows = np.concatenate([ctrl._att_rows, ctrl._rate_rows])
+    # the model reproduces the measured attitude and rate exactly; the filter alone does not
+    np.testing.assert_allclose(c[rows] @ measured, y[rows], rtol=0, atol=1e-12)
+    assert np.max(np.abs(c[rows] @ x - y[rows])) > 1e-9
+    np.testing.assert_array_equal(measured[6:], x[6:])          # flexible states untouched
+    with pytest.raises(ValueError, match="rigid_state"):
+        AdaptiveLQG(env.unwrapped, rigid_state="sensors")
+
+
 def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
     env = gym.make("FlexibleSpacecraftDocking-v1")
     # the prediction test off: only the margin can reject the identified gains
