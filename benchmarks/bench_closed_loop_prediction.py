@@ -69,8 +69,11 @@ from spacecraft_lab.control import env_kwargs_for
 from spacecraft_lab.identification import truth_sequence
 
 HORIZONS = (10, 30, 100)
-#: The loop before the rigid states were read from the sensors.
-PREVIOUS_LOOP = {"rigid_state": "filter", "max_prediction_error": 0.5, "closed_loop": False}
+START = 1000          # t = 100 s
+GAIN_EVERY = 25       # samples between rigid-gain checks (2.5 s)
+#: The loop before the rigid states were read from the sensors (its identifier
+#: had the open-loop settings).
+PREVIOUS_LOOP = {"rigid_state": "filter", "max_prediction_error": 0.5}
 
 
 def adaptive(env, loop: str, options: dict | None = None,
@@ -90,8 +93,6 @@ def adaptive(env, loop: str, options: dict | None = None,
     return AdaptiveLQG(base, identifier=ident,
                        acceptance=GainAcceptance(max_prediction_error=max_prediction_error),
                        rigid_state=PREVIOUS_LOOP["rigid_state"] if previous else "measured")
-START = 1000          # t = 100 s
-GAIN_EVERY = 25       # samples between rigid-gain checks (2.5 s)
 
 
 def mse_ratios(seq, u: np.ndarray, y: np.ndarray, layout) -> dict[tuple[str, int], float]:

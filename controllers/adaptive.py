@@ -226,7 +226,7 @@ class AdaptiveLQG(_LQGController):
             return None
         reason = self.acceptance.check(a, b, c, gain, self._att_rows, self._rate_rows,
                                        self._softest_reference, agreement, self.dt)
-        if reason is None and model.K is not None:
+        if reason is None:
             if self._margin is None or self._k >= self._margin_due:
                 self._margin = input_disk_margin(a, b, c, model.K, gain, self._att_rows,
                                                  self.dt)

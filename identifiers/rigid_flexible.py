@@ -301,16 +301,21 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         """
         if self._bank is None:
             return
-        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
-        self._hp_x = HighPass(self._bank.size, self.highpass)
-        self._hp_y = HighPass(self.n_outputs, self.highpass)
-        self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
+        self._new_signal_state()
         self._discount_rigid()
         self._detector.restart()
         self._history.clear()
         self._last_innovation = None
         self._next_discovery = self._k + (self.rediscover or 0)
         self._quiet = self.p
+
+    def _new_signal_state(self) -> None:
+        """Fresh filter bank (on the current resonators), high-passes and Kalman
+        filter: everything that describes the signals of one record."""
+        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
+        self._hp_x = HighPass(self._bank.size, self.highpass)
+        self._hp_y = HighPass(self.n_outputs, self.highpass)
+        self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
 
     def _check_sizes(self, r: int, m: int) -> None:
         if r != 3:
@@ -383,11 +388,9 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     def _rebuild(self, resonators: list[Resonator], replay: int) -> None:
         """Build the estimator on ``resonators`` and replay the last ``replay`` samples."""
         self.resonators = tuple(resonators)
-        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
+        self._new_signal_state()
         size = self._bank.size
         m = self.n_outputs
-        self._hp_x = HighPass(size, self.highpass)
-        self._hp_y = HighPass(m, self.highpass)
         samples = list(self._history)[-replay:]
         # the high-passed regressors of the replayed samples, computed once: they set
         # the regressor scales (unit-RMS columns) and are then replayed as they are,
@@ -421,7 +424,6 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                                                          1e4, regularization=floor[cols],
                                                          hold=hold[cols], gate=self.gate))
                       for rows, cols in self._regression_groups()]
-        self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
         if self._detector is None:
             self._detector = RegressionGLR(threshold=self.change_threshold, dt=self.dt)
         else:

@@ -54,8 +54,12 @@ __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEA
 ALGORITHMS = ("ppo", "sac")
 #: Observation features the agent may get on top of the env's.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle")
-#: Feature settings whose identifier is carried over episode resets.
-_KEPT = ("identified-kept", "identified-kept-no-state")
+#: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
+_IDENTIFIED = {
+    "identified": {"keep_identifier": False, "include_state": True},
+    "identified-kept": {"keep_identifier": True, "include_state": True},
+    "identified-kept-no-state": {"keep_identifier": True, "include_state": False},
+}
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
 #: Seed of the discarded episode that precedes the evaluation episodes when the
@@ -112,9 +116,8 @@ class NormalizedPolicy(Controller):
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
     env = gym.make(env_id(scenario), **env_kwargs)
-    if features.startswith("identified"):
-        env = IdentifiedModelFeatures(env, keep_identifier=features in _KEPT,
-                                      include_state=not features.endswith("no-state"))
+    if features in _IDENTIFIED:
+        env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
     elif features == "oracle":
         env = OracleModelFeatures(env)
     return env
@@ -123,21 +126,20 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
 def _evaluate(controller: Controller, scenario: str, features: str,
               env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
     per_seed = []
-    if features in _KEPT:
+    kept = _IDENTIFIED.get(features, {}).get("keep_identifier", False)
+    shared = _make_env(scenario, features, env_kwargs) if kept else None
+    if shared is not None:
         # one env: its identifier learns through a first, discarded episode and
         # is carried into every evaluated one
-        env = _make_env(scenario, features, env_kwargs)
-        run_episode(env, controller, seed=EVAL_WARMUP_SEED)
-        for seed in seeds:
-            traj = run_episode(env, controller, seed=seed)
-            per_seed.append(episode_metrics(traj, env.unwrapped.model))
-        env.close()
-    else:
-        for seed in seeds:
-            env = _make_env(scenario, features, env_kwargs)
-            traj = run_episode(env, controller, seed=seed)
-            per_seed.append(episode_metrics(traj, env.unwrapped.model))
+        run_episode(shared, controller, seed=EVAL_WARMUP_SEED)
+    for seed in seeds:
+        env = shared or _make_env(scenario, features, env_kwargs)
+        traj = run_episode(env, controller, seed=seed)
+        per_seed.append(episode_metrics(traj, env.unwrapped.model))
+        if shared is None:
             env.close()
+    if shared is not None:
+        shared.close()
     return {"attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
             "vibration_rms_mm": float(np.mean([m["vibration_rms_mm"] for m in per_seed])),
             "return": float(np.mean([m["return"] for m in per_seed])),
