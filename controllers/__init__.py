@@ -13,7 +13,8 @@
   closed-loop harness.
 * :class:`IdentifiedModelFeatures`: the identifier as a model-learning
   component for RL agents; :class:`OracleModelFeatures`: the same features
-  from the true plant (the ceiling, privileged).
+  from the true plant (the ceiling, privileged); :class:`ResidualControl`: an
+  agent's action added to a controller's (residual RL on the adaptive LQG).
 """
 
 from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
@@ -38,6 +39,7 @@ from controllers.harness import (
     run_episode,
 )
 from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
+from controllers.residual import ResidualControl
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
 from spacecraft_conventions import __version__
 
@@ -55,6 +57,7 @@ __all__ = [
     "OracleLQR",
     "OracleModelFeatures",
     "PolicyController",
+    "ResidualControl",
     "RiccatiTracker",
     "RobustLQG",
     "ScheduledLQG",

@@ -27,7 +27,9 @@ Every control step k (docs/design/control.md):
    afterwards, steered toward the torque directions the identifier knows
    least; after each change the identifier detects (its events) the
    fallback flies for ``bridge_s``;
-5. the torque actually applied and the measurement go to the identifier.
+5. the measurement and the torque actually applied after it (the env's
+   ``info["torque"]``, which includes whatever a wrapper added to this
+   controller's action) go to the identifier, at the start of the next step.
 
 :attr:`AdaptiveLQG.stats` counts steps, steps flown by the fallback,
 re-designs, gains rejected (by reason), failed designs and non-finite
@@ -152,6 +154,7 @@ class AdaptiveLQG(_LQGController):
         self._margin_due = 0
         self._rigid_maps: tuple | None = None
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
+        self._sample: tuple[np.ndarray | None, np.ndarray] | None = None
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
                                       "nonfinite_observations": 0, "excitation_rms_Nm": 0.0}
@@ -214,6 +217,22 @@ class AdaptiveLQG(_LQGController):
             return
         self._past.append((x, y[self._rate_rows], torque))
 
+    def _commit(self, info: dict[str, Any] | None) -> None:
+        """The previous sample ``(u_{k-1}, y_{k-1})`` to the identifier and the
+        agreement record, with the torque actually applied after it
+        (:meth:`_applied_torque`: the env's report, so a wrapper that adds to
+        our action, e.g. an agent's residual, does not mislead the identifier).
+        Done at the start of step k, which is, for the identifier, the same
+        sequence of operations as at the end of step k-1."""
+        if self._sample is None:
+            return
+        (x, y), self._sample = self._sample, None
+        torque = self._applied_torque(info)
+        self._remember(x, y, torque)
+        # a non-finite measurement goes to the identifier too: it skips and counts it
+        # and keeps its past window aligned in time
+        self.identifier.update(torque, y)
+
     def _design(self, model: Any, agreement: float) -> np.ndarray | None:
         """A new accepted gain on ``model``, or None (counted by reason)."""
         a, b, c = model.A, model.B, model.C
@@ -249,6 +268,7 @@ class AdaptiveLQG(_LQGController):
     @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
         self.stats["steps"] += 1
+        self._commit(info)
         obs = self._observation(obs)
         if not np.all(np.isfinite(obs)):
             self.stats["nonfinite_observations"] += 1
@@ -283,10 +303,7 @@ class AdaptiveLQG(_LQGController):
         action = self._to_action(torque)
         if isinstance(self.fallback, _LQGController):
             self.fallback.applied_action = action
-        self._remember(x, y, action.astype(float) * self.max_torque)
         self.stats["excitation_rms_Nm"] = self.excitation.rms
         self._k += 1
-        # a non-finite measurement goes to the identifier too: it skips and counts it
-        # and keeps its past window aligned in time
-        self.identifier.update(action.astype(float) * self.max_torque, y)
+        self._sample = (x, y)          # to the identifier once the applied torque is known
         return action

@@ -189,14 +189,23 @@ class _LQGController(_EnvController):
             self.kf = KalmanPredictor(a.shape[0], initial_covariance=1e-3)
         elif self._pending is not None:
             pa, pb, pq = self._pending
-            if info is not None and "torque" in info:
-                applied = np.asarray(info["torque"], dtype=float)
-            else:   # without info: what a wrapping controller says it sent, else our own
-                sent = self.applied_action if self.applied_action is not None else self._last
-                applied = sent.astype(float) * self.max_torque
-            self.kf.predict(pa, pb, pq, applied)
+            self.kf.predict(pa, pb, pq, self._applied_torque(info))
         self._pending = (a, b, qn)
         return self.kf.correct(c, noise_var, y, a=a)
+
+    def _applied_torque(self, info: dict[str, Any] | None) -> np.ndarray:
+        """The torque (N m, (3,)) applied after this controller's last action.
+
+        What the env reports (``info["torque"]``: after saturation, actuator
+        delay and rate limit, and with anything a wrapper added to our
+        action, such as an excitation or an agent's residual); without
+        ``info``, what a wrapping controller says it sent
+        (:attr:`applied_action`), else our own last action.
+        """
+        if info is not None and "torque" in info:
+            return np.asarray(info["torque"], dtype=float)
+        sent = self.applied_action if self.applied_action is not None else self._last
+        return sent.astype(float) * self.max_torque
 
     def _apply(self, gain: np.ndarray, x: np.ndarray, a: np.ndarray, obs: np.ndarray,
                info: dict[str, Any] | None) -> np.ndarray:

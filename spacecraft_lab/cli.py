@@ -225,7 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)", formatter_class=fmt)
     train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
     train.add_argument("--features", choices=FEATURES, default="none",
-                       help="observation features appended for the agent")
+                       help="observation features appended for the agent, or (residual-*) "
+                       "the controller whose action the agent corrects")
     train.add_argument("--timesteps", type=_integer(1), default=100_000,
                        help="training env steps per seed")
     train.add_argument("--seeds", type=_integer(1), default=1,

@@ -10,7 +10,12 @@ offsets), Monitor-wrapped, with observations and rewards normalized by
 identifier restarts every episode; ``identified-kept``: it is carried over
 episode resets; ``identified-kept-no-state``: carried over, and without
 the identifier's state estimate among the features) or (the ceiling)
-:class:`controllers.OracleModelFeatures` (``oracle``). Every ``eval_every``
+:class:`controllers.OracleModelFeatures` (``oracle``). Two more settings
+use a model through a controller instead (residual RL,
+:class:`controllers.ResidualControl`): the agent's action is added to that
+of the self-tuning LQG on the identified model (``residual-adaptive``) or of
+the fixed LQG on the nominal model (``residual-fixed``, the comparator: what
+a model the identifier did not learn gives). Every ``eval_every``
 steps the current policy is evaluated through the same harness as the
 controllers (:func:`controllers.run_episode`), and the evaluation (attitude
 RMS, vibration, return, share of stable episodes) goes to SB3's logger
@@ -40,6 +45,7 @@ from controllers import (
     FixedLQG,
     IdentifiedModelFeatures,
     OracleModelFeatures,
+    ResidualControl,
     episode_metrics,
     run_episode,
 )
@@ -53,7 +59,8 @@ __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEA
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
 #: Observation features the agent may get on top of the env's.
-FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle")
+FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
+            "residual-adaptive", "residual-fixed")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -120,6 +127,10 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
     elif features == "oracle":
         env = OracleModelFeatures(env)
+    elif features == "residual-adaptive":
+        env = ResidualControl(env, AdaptiveLQG(env.unwrapped))
+    elif features == "residual-fixed":
+        env = ResidualControl(env, FixedLQG(env.unwrapped))
     return env
 
 

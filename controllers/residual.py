@@ -1,0 +1,114 @@
+"""Residual RL: an agent's action corrects a model-based controller's.
+
+:class:`ResidualControl` puts a controller (by default the self-tuning
+:class:`~controllers.adaptive.AdaptiveLQG`, which runs the online
+identifier) inside the environment. At every env step the controller acts
+on the current observation and the agent's action, scaled by ``scale``, is
+added to it:
+
+    u_k = clip(u_base(y_0..y_k) + scale * clip(a_k, -1, 1), -1, 1)
+
+so the agent starts from the controller's performance and learns what the
+law misses, instead of learning attitude control from scratch (residual
+policy learning, Silver et al. 2018; Johannink et al. 2019). This is the
+second way the identifier serves an agent, beside
+:class:`~controllers.features.IdentifiedModelFeatures`: through the
+controller it feeds. The base controller learns from the torque the env
+reports as applied (``info["torque"]``), residual included.
+
+Wrapper order: ``ActionRepeat(ResidualControl(env), repeat)``. Inside
+:class:`~spacecraft_env.ActionRepeat` the base controller still acts every
+sample while the agent's correction is held for ``repeat`` samples.
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import ArrayLike
+
+from controllers.adaptive import AdaptiveLQG
+from controllers.base import Controller
+
+__all__ = ["ResidualControl"]
+
+#: Seeds of the base controller's episodes (its excitation) are drawn below this.
+_SEED_BOUND = 2**31
+
+
+class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """The agent's action is added, scaled, to a controller's action.
+
+    Observation and action spaces are the env's. ``info`` gains
+    ``"base_action"`` (the controller's action) and ``"residual_action"``
+    (what was added to it after saturation: applied minus base), both
+    normalized torques, (3,).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment (the controller's observation layout).
+    controller : Controller, optional
+        The base law, built for ``env``. Default
+        :class:`~controllers.adaptive.AdaptiveLQG` (the identified model).
+    scale : float
+        Authority of the agent, as a fraction of full torque: an agent
+        action of 1 adds ``scale * max_torque`` (default 0.25, 2.5 N m on
+        the registered 10 N m actuators), in (0, 2].
+
+    Notes
+    -----
+    ``reset(seed=s)`` resets the controller with seed s (its dither);
+    an unseeded reset draws the controller's seed from a generator seeded
+    by the last seeded reset, so a seeded run of episodes is reproducible.
+    """
+
+    def __init__(self, env: gym.Env, controller: Controller | None = None,
+                 scale: float = 0.25) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, controller=controller, scale=scale)
+        gym.Wrapper.__init__(self, env)
+        if controller is None:
+            controller = AdaptiveLQG(env.unwrapped)
+        if not isinstance(controller, Controller):
+            raise TypeError(f"controller must be a controllers.Controller, "
+                            f"got {type(controller).__name__}")
+        if not (np.isfinite(scale) and 0.0 < scale <= 2.0):
+            raise ValueError(f"scale must be in (0, 2], got {scale}")
+        self.controller = controller
+        self.scale = float(scale)
+        self._seeds: np.random.Generator | None = None
+        self._obs: np.ndarray | None = None
+        self._info: dict[str, Any] | None = None
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        if seed is not None:
+            self._seeds = np.random.default_rng(seed)
+            controller_seed: int | None = seed
+        elif self._seeds is not None:
+            controller_seed = int(self._seeds.integers(_SEED_BOUND))
+        else:
+            controller_seed = None      # an unseeded env: unseeded dither, as Gymnasium does
+        self.controller.reset(controller_seed)
+        self._obs, self._info = obs, info
+        return obs, info
+
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
+                                              dict[str, Any]]:
+        if self._obs is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        residual = np.asarray(action, dtype=float)
+        if residual.shape != (3,):
+            raise ValueError(f"action must have shape (3,), got {residual.shape}")
+        if not np.all(np.isfinite(residual)):
+            raise ValueError(f"action must be finite, got {residual.tolist()}")
+        base = np.asarray(self.controller.act(self._obs, self._info), dtype=float)
+        applied = np.clip(base + self.scale * np.clip(residual, -1.0, 1.0), -1.0, 1.0)
+        obs, reward, terminated, truncated, info = self.env.step(applied.astype(np.float32))
+        info["base_action"] = base.astype(np.float32)
+        info["residual_action"] = (applied - base).astype(np.float32)
+        self._obs, self._info = obs, info
+        return obs, reward, terminated, truncated, info
