@@ -162,3 +162,21 @@ def test_evaluation_with_the_identifier_kept_starts_every_episode_with_a_model()
         evaluated = ctrl.flags[-len(EVAL_SEEDS):]        # after the warm-up episode, if any
         assert evaluated == [expected] * len(EVAL_SEEDS), features
     assert len(ctrl.flags) == len(EVAL_SEEDS) + 1
+
+
+def test_a_silent_residual_agent_scores_exactly_its_base_controller():
+    from controllers import FixedLQG
+    from spacecraft_lab.training import ZeroTorque, _evaluate
+
+    kwargs = {"task": "slew", "randomize": True, "max_episode_steps": 400}
+    base = FixedLQG(gym.make(env_id("docking"), **kwargs).unwrapped)
+    alone = _evaluate(base, "docking", "none", kwargs)
+    residual = _evaluate(ZeroTorque(), "docking", "residual-fixed", kwargs)
+    assert residual == alone
+
+    class FullResidual(ZeroTorque):
+        def act(self, obs, info=None):
+            return np.ones(3, dtype=np.float32)
+
+    pushed = _evaluate(FullResidual(), "docking", "residual-fixed", kwargs)
+    assert pushed["attitude_rms_deg"] != alone["attitude_rms_deg"]
