@@ -6,6 +6,7 @@ Attitude regulation or slew of the ETS-VIII rigid-flexible model under
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -284,7 +285,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self.render_mode = render_mode
         self._build_spaces()
         self._x = np.zeros(self.model.n)
-        self._ref = np.zeros(3)
+        self._set_reference(np.zeros(3))
         self._k = 0
         self._commands: deque = deque()
         self._torque = np.zeros(3)
@@ -301,6 +302,20 @@ class FlexibleSpacecraftEnv(gym.Env):
                       *(f"{LABEL_PREFIX[g]}_{axis}" for g in ("attitude_error", "reference")
                         for axis in AXES)]
         self._obs_index = np.concatenate([extended.indices(g) for g in self.outputs])
+        # each observed entry is one plant output (row ``_obs_source``, the reference
+        # rows read the constant 0 appended after the outputs) plus an offset: 0,
+        # minus the reference (attitude error) or the reference; built without
+        # concatenating the extended vector at every step
+        n_out = plant.size
+        source = np.r_[np.arange(n_out), np.arange(3), np.full(3, n_out)]
+        self._obs_source = source[self._obs_index]
+        self._y = np.zeros(n_out + 1)            # plant outputs, then the constant 0
+        self._clean = np.zeros(n_out)            # noiseless outputs C x of the current state
+        self._ref_terms = []                     # (sign, observation rows, their axes)
+        for sign, group in ((-1.0, "attitude_error"), (1.0, "reference")):
+            first = extended.indices(group)[0]
+            rows = np.flatnonzero((self._obs_index >= first) & (self._obs_index < first + 3))
+            self._ref_terms.append((sign, rows, self._obs_index[rows] - first))
         self.observation_labels = tuple(ext_labels[i] for i in self._obs_index)
         high = np.concatenate([np.full(size, _BOUND[g], dtype=np.float32)
                                for g, size in self.observation_layout.groups])
@@ -342,15 +357,29 @@ class FlexibleSpacecraftEnv(gym.Env):
         ref = _vector3("reference", reference)
         if np.any(np.abs(ref) >= self.max_attitude):
             raise ValueError(f"reference must stay within +-{np.rad2deg(self.max_attitude)} deg")
-        self._ref = ref
+        self._set_reference(ref)
 
     # ------------------------------------------------------------------- core
+    def _set_reference(self, ref: np.ndarray) -> None:
+        self._ref = ref
+        offset = np.zeros(self._obs_index.size)
+        for sign, rows, axes in self._ref_terms:
+            offset[rows] = sign * ref[axes]
+        self._obs_offset = offset
+        self._ref_outputs = np.zeros(self._clean.size)     # the reference on the attitude rows
+        self._ref_outputs[:3] = ref
+
     def _observe(self) -> np.ndarray:
-        y = self.model.C @ self._x
+        y = self._y
+        outputs = y[:-1]
+        np.matmul(self.model.C, self._x, out=self._clean)   # kept for the next step's cost
         if self.snr_db is not None:
-            y += self.noise_std * self.np_random.standard_normal(y.shape[0])
-        ext = np.concatenate((y, y[:3] - self._ref, self._ref))
-        obs = ext[self._obs_index]
+            np.add(self._clean, self.noise_std * self.np_random.standard_normal(outputs.shape[0]),
+                   out=outputs)
+        else:
+            outputs[:] = self._clean
+        obs = y[self._obs_source]
+        obs += self._obs_offset
         np.minimum(obs, self._obs_high, out=obs)   # np.clip's dispatch costs more than the work
         np.maximum(obs, self._obs_low, out=obs)
         return obs.astype(np.float32)
@@ -359,7 +388,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         t = self._k * self.model.dt
         return {"time": t, "state": self._x.copy(), "torque": self._torque.copy(),
                 "reference": self._ref.copy(),
-                "paddle_angle": float(self.model.configuration(t).paddle_angle)}
+                "paddle_angle": float(self.model.scenario.paddle_angle(t))}
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -393,7 +422,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x = np.zeros(self.model.n)
         self._x[:3] = psi0
         self._x[nd:nd + 3] = rate0
-        self._ref = ref
+        self._set_reference(ref)
         self._k = 0
         self._captures = self.model.capture_steps()
         self._torque = np.zeros(3)
@@ -412,11 +441,11 @@ class FlexibleSpacecraftEnv(gym.Env):
                             f"{a.dtype}")
         if a.shape != (3,):
             raise ValueError(f"action must have shape (3,), got {a.shape}")
-        a = a.astype(float)
-        if not np.isfinite(a).all():
-            raise ValueError(f"action must be finite (no NaN or inf), got {a.tolist()}")
-        np.minimum(a, 1.0, out=a)
-        np.maximum(a, -1.0, out=a)
+        # three numbers: Python's scalar checks and clip cost less than numpy's dispatch
+        values = a.tolist()
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"action must be finite (no NaN or inf), got {values}")
+        a = np.array([min(max(v, -1.0), 1.0) for v in values], dtype=float)
         torque = a * self.max_torque
         if self.actuator_delay_steps:
             self._commands.append(torque)
@@ -430,9 +459,9 @@ class FlexibleSpacecraftEnv(gym.Env):
             total = total + self.disturbance_std * self.np_random.standard_normal(3)
         x = self._x
         model = self.model
-        # cost of the state the action acts on, plus the action (stage cost)
-        err = model.C @ x
-        err[:3] -= self._ref
+        # cost of the state the action acts on, plus the action (stage cost); the
+        # noiseless outputs of that state are the last observation's
+        err = self._clean - self._ref_outputs
         cost = err @ (self._cost_weights * err) + self.reward_weights.torque * (a @ a)
         if self._k in self._captures:      # a module that brings its own momentum docks
             x = model.capture(x, self._k * model.dt)

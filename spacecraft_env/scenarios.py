@@ -90,6 +90,11 @@ class Scenario(ABC):
     def configuration(self, t: float) -> Configuration:
         """Configuration at time ``t`` (s)."""
 
+    def paddle_angle(self, t: float) -> float:
+        """Paddle angle (rad) at time ``t`` (s): ``configuration(t).paddle_angle``,
+        without building the configuration where a subclass can."""
+        return self.configuration(t).paddle_angle
+
     def event_times(self) -> tuple[float, ...]:
         """Instants (s) at which the dynamics jump (docking events)."""
         return ()
@@ -187,6 +192,9 @@ class DockingScenario(Scenario):
         return Configuration(modules=tuple(m for m in self.modules if t >= m.time),
                              mass_centre_shift=self.mass_centre_shift)
 
+    def paddle_angle(self, t: float) -> float:
+        return Configuration.paddle_angle       # docking never turns the paddles
+
     def event_times(self) -> tuple[float, ...]:
         return tuple(m.time for m in self.modules)
 
@@ -241,8 +249,10 @@ class SolarRotationScenario(Scenario):
             raise ValueError("rate_range must be (low, high) with low <= high")
 
     def configuration(self, t: float) -> Configuration:
-        return Configuration(paddle_angle=math.radians(self.initial_angle_deg
-                                                       + self.rate_deg_s * t))
+        return Configuration(paddle_angle=self.paddle_angle(t))
+
+    def paddle_angle(self, t: float) -> float:
+        return math.radians(self.initial_angle_deg + self.rate_deg_s * t)
 
     def parameters(self) -> dict:
         return {"name": self.name, "rate_deg_s": float(self.rate_deg_s),
@@ -289,9 +299,12 @@ class CombinedScenario(Scenario):
 
     def configuration(self, t: float) -> Configuration:
         docked = self.docking.configuration(t)
-        return Configuration(paddle_angle=self.rotation.configuration(t).paddle_angle,
+        return Configuration(paddle_angle=self.rotation.paddle_angle(t),
                              modules=docked.modules,
                              mass_centre_shift=docked.mass_centre_shift)
+
+    def paddle_angle(self, t: float) -> float:
+        return self.rotation.paddle_angle(t)
 
     def event_times(self) -> tuple[float, ...]:
         return self.docking.event_times()

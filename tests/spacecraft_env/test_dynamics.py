@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 from spacecraft_env import (
     ANTENNA_FREQUENCIES_HZ,
     PADDLE_FREQUENCIES_HZ,
+    SCENARIOS,
     DockingModule,
     DockingScenario,
     FlexibleSpacecraftModel,
@@ -316,3 +317,11 @@ def test_co_rotating_modules_leave_the_rates_alone():
     assert model.capture_steps() == frozenset()
     x = np.arange(model.n, dtype=float)
     np.testing.assert_array_equal(model.capture(x, 10.0), x)
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_scenario_paddle_angle_is_the_configurations(name):
+    rng = np.random.default_rng(7)
+    scenario = SCENARIOS[name]().randomized(rng)
+    for t in (0.0, 0.1, 37.3, 150.0, 249.9):
+        assert scenario.paddle_angle(t) == scenario.configuration(t).paddle_angle
