@@ -193,7 +193,15 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         pred = model.C @ x
         out[n + 6 + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing
         out[-1] = 1.0
-        return np.nan_to_num(out, nan=0.0, posinf=_CLIP, neginf=-_CLIP)
+        return out
+
+    @staticmethod
+    def _bounded(feats: np.ndarray) -> np.ndarray:
+        """``feats`` clipped to [-10, 10] in place, NaN (a missing output) to 0:
+        ``np.nan_to_num`` then ``np.clip``, in two cheaper calls."""
+        np.clip(feats, -_CLIP, _CLIP, out=feats)
+        feats[np.isnan(feats)] = 0.0
+        return feats
 
     @single_threaded_blas
     def observation(self, observation: np.ndarray) -> np.ndarray:
@@ -205,8 +213,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         feats = self._features(y)
         self._steps += 1
         self._last_y = y
-        full = np.concatenate([np.asarray(observation, dtype=float),
-                               np.clip(feats, -_CLIP, _CLIP)])
+        full = np.concatenate([np.asarray(observation, dtype=float), self._bounded(feats)])
         return full.astype(np.float32)
 
 
