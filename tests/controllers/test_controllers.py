@@ -270,7 +270,10 @@ def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
     action = ctrl.act(bad, info)
     assert np.all(np.isfinite(action))
     np.testing.assert_array_equal(ctrl.fallback._last, held)   # the fallback holds its action
-    assert ctrl.identifier.n_samples == samples + 1      # the sample is not lost ...
+    # a sample reaches the identifier at the next step, with the torque applied after it
+    obs, _, _, _, info = env.step(action)
+    ctrl.act(obs, info)
+    assert ctrl.identifier.n_samples == samples + 2      # the sample is not lost ...
     assert ctrl.identifier.n_skipped == skipped + 1      # ... it is skipped and counted
     assert ctrl.stats["nonfinite_observations"] == 1
 
@@ -365,8 +368,9 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
     returns, _ = evaluate_policy(ctrl, vec, n_eval_episodes=2, return_episode_rewards=True)
     copies = ctrl._batch
     assert len(copies) == 2 and copies[0].identifier is not copies[1].identifier
-    # each identifier saw its own env's 800 samples, none of the other's
-    assert [c.identifier.n_samples for c in copies] == [800, 800]
+    # each identifier saw its own env's samples, none of the other's: 799 of 800, the
+    # last one waits for the torque applied after it (reported at the next step)
+    assert [c.identifier.n_samples for c in copies] == [799, 799]
 
     alone = []
     for i in range(2):
