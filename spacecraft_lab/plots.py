@@ -301,7 +301,7 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
     last = runs[-1]
     for name, key, style, colour in (("adaptive LQG", "adaptive_lqg", "--", "k"),
                                      ("fixed LQG", "fixed_lqg", "-.", "k"),
-                                     ("zero torque", "zero_torque", "--", "tab:red")):
+                                     ("zero torque", "zero_torque", "--", "darkgoldenrod")):
         if key in last:
             axes[0].axhline(last[key]["attitude_rms_deg"], color=colour, ls=style, label=name)
             axes[1].axhline(last[key]["return"], color=colour, ls=style)
