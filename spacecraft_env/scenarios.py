@@ -127,7 +127,10 @@ class ConstantScenario(Scenario):
             raise ValueError("paddle_angle_deg must be finite")
 
     def configuration(self, t: float) -> Configuration:
-        return Configuration(paddle_angle=float(np.deg2rad(self.paddle_angle_deg)))
+        return Configuration(paddle_angle=self.paddle_angle(t))
+
+    def paddle_angle(self, t: float) -> float:
+        return float(np.deg2rad(self.paddle_angle_deg))
 
     def parameters(self) -> dict:
         return {"name": self.name, "paddle_angle_deg": float(self.paddle_angle_deg)}

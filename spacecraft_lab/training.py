@@ -58,7 +58,8 @@ __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEA
 
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
-#: Observation features the agent may get on top of the env's.
+#: What the agent gets on top of the env: observation features, or (residual-*) a
+#: controller whose action it corrects.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "residual-adaptive", "residual-fixed")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
@@ -67,6 +68,8 @@ _IDENTIFIED = {
     "identified-kept": {"keep_identifier": True, "include_state": True},
     "identified-kept-no-state": {"keep_identifier": True, "include_state": False},
 }
+#: Base controller of each residual setting (``ResidualControl``).
+_RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG}
 #: Evaluation episode seeds (disjoint from training seeds).
 EVAL_SEEDS = (1000, 1001, 1002)
 #: Seed of the discarded episode that precedes the evaluation episodes when the
@@ -127,10 +130,8 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
     elif features == "oracle":
         env = OracleModelFeatures(env)
-    elif features == "residual-adaptive":
-        env = ResidualControl(env, AdaptiveLQG(env.unwrapped))
-    elif features == "residual-fixed":
-        env = ResidualControl(env, FixedLQG(env.unwrapped))
+    elif features in _RESIDUAL:
+        env = ResidualControl(env, _RESIDUAL[features](env.unwrapped))
     return env
 
 
