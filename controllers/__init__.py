@@ -32,6 +32,7 @@ from controllers.baselines import (
 from controllers.excitation import BinaryExcitation
 from controllers.features import IdentifiedModelFeatures, OracleModelFeatures
 from controllers.harness import (
+    ComparisonInterrupted,
     Trajectory,
     compare,
     controller_shares,
@@ -47,6 +48,7 @@ __all__ = [
     "PD",
     "AdaptiveLQG",
     "BinaryExcitation",
+    "ComparisonInterrupted",
     "Controller",
     "FixedLQG",
     "GainAcceptance",

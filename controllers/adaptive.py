@@ -178,11 +178,14 @@ class AdaptiveLQG(_LQGController):
             xp = x0
             for _, _, u in past:
                 xp = model.A @ xp + model.B @ u
-            e = rates - model.C[self._rate_rows] @ xp
-            d = rates - y0
-            lam = 1.0 - 1.0 / AGREEMENT_MEMORY
-            self._err2 = lam * self._err2 + (1 - lam) * float(e @ e)
-            self._sig2 = lam * self._sig2 + (1 - lam) * float(d @ d)
+            e2 = float(np.sum((rates - model.C[self._rate_rows] @ xp) ** 2))
+            d2 = float(np.sum((rates - y0) ** 2))
+            # a non-finite term (a model that overflows over the horizon) never enters the
+            # running sums: one NaN there would reject every later gain
+            if np.isfinite(e2) and np.isfinite(d2):
+                lam = 1.0 - 1.0 / AGREEMENT_MEMORY
+                self._err2 = lam * self._err2 + (1 - lam) * e2
+                self._sig2 = lam * self._sig2 + (1 - lam) * d2
         return self._err2 / self._sig2 if self._sig2 > 0 else np.inf
 
     def _measured_rigid(self, x: np.ndarray, y: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -211,8 +214,10 @@ class AdaptiveLQG(_LQGController):
         return x
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:
-        """Keep (filtered state, rates, applied torque) of the last samples."""
-        if x is None or not np.all(np.isfinite(x)):
+        """Keep (filtered state, rates, applied torque) of the last samples; a sample
+        with a non-finite entry breaks the record (it restarts from the next good one)."""
+        if (x is None or not np.all(np.isfinite(x)) or not np.all(np.isfinite(torque))
+                or not np.all(np.isfinite(y[self._rate_rows]))):
             self._past.clear()
             return
         self._past.append((x, y[self._rate_rows], torque))

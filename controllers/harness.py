@@ -20,8 +20,8 @@ from controllers.base import Controller
 from identifiers import relative_gain_error, rigid_body_gain
 from spacecraft_conventions import DEG_PER_RAD, NOMINAL_SCALE, single_threaded_blas
 
-__all__ = ["AGGREGATED", "SCORED_FROM_S", "Trajectory", "compare", "controller_shares",
-           "episode_metrics", "run_episode"]
+__all__ = ["AGGREGATED", "SCORED_FROM_S", "ComparisonInterrupted", "Trajectory", "compare",
+           "controller_shares", "episode_metrics", "run_episode"]
 
 
 @dataclass
@@ -322,10 +322,56 @@ AGGREGATED = ("attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_
               "rejected_share", "fallback_share")
 
 
+class ComparisonInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`compare`, carrying what was complete.
+
+    Attributes
+    ----------
+    table, trajectories
+        As :func:`compare` returns them, over the seeds every controller
+        finished (empty dicts if none).
+    """
+
+    def __init__(self, table: dict[str, dict], trajectories: dict[str, list[Trajectory]],
+                 completed: int, total: int) -> None:
+        super().__init__(f"interrupted after {completed} of {total} seeds")
+        self.table, self.trajectories = table, trajectories
+        self.completed, self.total = completed, total
+
+
+def _over_seeds(values: np.ndarray, statistic: Callable[[np.ndarray], Any]) -> float:
+    """``statistic`` of the finite values; NaN (silently) when there is none, e.g. a
+    metric scored from 100 s on episodes shorter than that."""
+    finite = values[np.isfinite(values)]
+    return float(statistic(finite)) if finite.size else float("nan")
+
+
+def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+    arr = {k: np.array([m[k] for m in per_seed], dtype=float) for k in AGGREGATED}
+    return {
+        "per_seed": per_seed,
+        "median": {k: _over_seeds(v, np.median) for k, v in arr.items()},
+        "q25": {k: _over_seeds(v, lambda x: np.percentile(x, 25)) for k, v in arr.items()},
+        "q75": {k: _over_seeds(v, lambda x: np.percentile(x, 75)) for k, v in arr.items()},
+        "mean": {k: _over_seeds(v, np.mean) for k, v in arr.items()},
+        "std": {k: _over_seeds(v, np.std) for k, v in arr.items()},
+        "stable_runs": int(sum(m["stable"] for m in per_seed)),
+        "verdicts": {v: sum(m["verdict"] == v for m in per_seed)
+                     for v in sorted({m["verdict"] for m in per_seed})},
+        "runs": len(per_seed),
+    }
+
+
 def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
             seeds: Sequence[int], options: dict[str, Any] | None = None,
             progress: bool = True) -> tuple[dict[str, dict], dict[str, list[Trajectory]]]:
     """Run every controller on the same seeds.
+
+    Seeds are the outer loop (every controller flies seed 0, then seed 1,
+    ...), so an interruption leaves whole seeds: Ctrl-C raises
+    :class:`ComparisonInterrupted` holding the table of the seeds every
+    controller finished. Each controller keeps one environment; every
+    episode is seeded, so the order changes no number.
 
     Parameters
     ----------
@@ -345,35 +391,37 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
         "verdicts": {verdict: count}, "runs": int}.
     trajectories : dict
         Name -> the trajectory of every seed (for plots of the spread).
+
+    Raises
+    ------
+    ComparisonInterrupted
+        On Ctrl-C, with the complete seeds' results.
     """
-    table: dict[str, dict] = {}
-    trajectories: dict[str, list[Trajectory]] = {}
-    bar = tqdm(total=len(controllers) * len(seeds), desc="closed loop", disable=not progress)
-    for name, factory in controllers.items():
-        env = make_env()
-        ctrl = factory(env)
-        per_seed = []
-        for seed in seeds:
-            traj = run_episode(env, ctrl, seed=seed, options=options)
-            m = episode_metrics(traj, env.unwrapped.model)
-            m["seed"] = int(seed)
-            m["controller_stats"] = traj.controller_stats
-            per_seed.append(m)
-            trajectories.setdefault(name, []).append(traj)
-            bar.update()
-        env.close()
-        arr = {k: np.array([m[k] for m in per_seed], dtype=float) for k in AGGREGATED}
-        table[name] = {
-            "per_seed": per_seed,
-            "median": {k: float(np.nanmedian(v)) for k, v in arr.items()},
-            "q25": {k: float(np.nanpercentile(v, 25)) for k, v in arr.items()},
-            "q75": {k: float(np.nanpercentile(v, 75)) for k, v in arr.items()},
-            "mean": {k: float(np.nanmean(v)) for k, v in arr.items()},
-            "std": {k: float(np.nanstd(v)) for k, v in arr.items()},
-            "stable_runs": int(sum(m["stable"] for m in per_seed)),
-            "verdicts": {v: sum(m["verdict"] == v for m in per_seed)
-                         for v in sorted({m["verdict"] for m in per_seed})},
-            "runs": len(per_seed),
-        }
-    bar.close()
-    return table, trajectories
+    per_seed: dict[str, list[dict[str, Any]]] = {name: [] for name in controllers}
+    trajectories: dict[str, list[Trajectory]] = {name: [] for name in controllers}
+    envs = {name: make_env() for name in controllers}
+    done = 0
+    try:
+        ctrls = {name: factory(envs[name]) for name, factory in controllers.items()}
+        with tqdm(total=len(controllers) * len(seeds), desc="closed loop",
+                  disable=not progress) as bar:
+            for seed in seeds:
+                for name, ctrl in ctrls.items():
+                    env = envs[name]
+                    traj = run_episode(env, ctrl, seed=seed, options=options)
+                    m = episode_metrics(traj, env.unwrapped.model)
+                    m["seed"] = int(seed)
+                    m["controller_stats"] = traj.controller_stats
+                    per_seed[name].append(m)
+                    trajectories[name].append(traj)
+                    bar.update()
+                done += 1
+    except KeyboardInterrupt:
+        table = {name: _aggregate(rows[:done]) for name, rows in per_seed.items()} \
+            if done else {}
+        runs = {name: trajs[:done] for name, trajs in trajectories.items()} if done else {}
+        raise ComparisonInterrupted(table, runs, done, len(seeds)) from None
+    finally:
+        for env in envs.values():
+            env.close()
+    return {name: _aggregate(rows) for name, rows in per_seed.items()}, trajectories

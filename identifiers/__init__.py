@@ -2,7 +2,7 @@
 
 Streaming identifiers share one API: ``update(u, y)`` per sample,
 ``.model`` (a :class:`StateSpaceModel`, or None while warming up),
-``.state``, ``fit(U, Y)`` and ``reset()``.
+``.state``, ``.health``, ``fit(U, Y)`` and ``reset()``.
 
 * :func:`default_identifier`: the recommended identifier for the
   spacecraft's outputs, with its settings.
@@ -45,6 +45,7 @@ from identifiers.evaluation import (
     unstable_share,
     vaf,
 )
+from identifiers.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.improved import ImprovedRPBSID
 from identifiers.kalman import KalmanPredictor, steady_state_gain
 from identifiers.modal_basis import ModalFilterBank, Resonator
@@ -61,6 +62,8 @@ __all__ = [
     "CLOSED_LOOP_SETTINGS",
     "DEFAULT_SETTINGS",
     "HORIZONS",
+    "IdentifierHealth",
+    "IdentifierHealthWarning",
     "ChangeEvent",
     "ClassicalRPBSID",
     "ImprovedRPBSID",

@@ -19,7 +19,10 @@ validation, sizes inferred from the first sample, the past window
 
 from __future__ import annotations
 
+import copy
+import warnings
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
@@ -27,16 +30,37 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identifiers.health import (
+    HEALTH_EVERY,
+    MAX_ROLLBACKS,
+    IdentifierHealth,
+    IdentifierHealthWarning,
+    state_problem,
+)
 from identifiers.model import ModelSequence, StateSpaceModel
 from identifiers.rls import RecursiveLeastSquares
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = [
+    "OUTLIER_RUN",
     "OnlineIdentifier",
     "PredictionStateIdentifier",
     "RecursiveVARXIdentifier",
     "SystemRLSIdentifier",
 ]
+
+
+#: Longest run of consecutive samples the outlier guard rejects (0.5 s at
+#: dt = 0.1 s). A longer run is not a faulty sensor but a plant (or signal
+#: level) the guard's reference no longer describes: the samples are learned
+#: from again, or the guard would shut the identifier off for good.
+OUTLIER_RUN = 5
+
+#: Attributes that a rollback keeps at their current values: the counters,
+#: the health record itself and the sample clock.
+_KEPT_ON_ROLLBACK = ("n_samples", "n_skipped", "n_outliers", "n_idle", "n_rollbacks",
+                     "n_restarts",
+                     "_last_fault", "_fault_samples", "_good", "_k", "_healthy", "_warned")
 
 
 def _positive_int(name: str, value) -> int:
@@ -119,12 +143,26 @@ class OnlineIdentifier(ABC):
         as outliers (see :meth:`update`).
     n_outliers : int
         Of those, the ones rejected by the outlier guard.
+    n_idle : int
+        Samples passed over because they carried no information at all: zero
+        input and an output equal bit for bit to the previous one (a plant at
+        rest, or a frozen sensor). They move no estimate and no clock.
+    n_rollbacks, n_restarts : int
+        Faults of the internal state repaired by a rollback, or by a restart
+        of the estimator (see :attr:`health`).
     n_inputs, n_outputs : int or None
         r and m, inferred from the first sample.
     """
 
     #: Whether successive models share state coordinates.
     consistent_basis = True
+    #: Attributes that describe the recent signals rather than what was learnt
+    #: (past windows, filter states driven by the data): a rollback keeps their
+    #: current values, so they stay aligned with the samples still to come.
+    _SIGNAL_STATE: ClassVar[tuple[str, ...]] = ("_phi",)
+    #: Attributes whose items are never changed in place (lists of sample
+    #: tuples): the rollback copy shares their items instead of copying them.
+    _SHARED_ITEMS: ClassVar[tuple[str, ...]] = ("_pending",)
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
                  warmup: int | None = None, input_scale: ArrayLike | None = None,
@@ -154,9 +192,23 @@ class OnlineIdentifier(ABC):
         self.n_outliers = 0
         self._k = 0            # samples processed by the estimator
         self._quiet = 0
+        self._outlier_run = 0
+        self._skip_run = 0
+        self._last_y: np.ndarray | None = None
+        self.n_idle = 0
         self._phi = None
         self._su = self._sy = None
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        self._reset_health()
+
+    def _reset_health(self) -> None:
+        self.n_rollbacks = 0
+        self.n_restarts = 0
+        self._last_fault: str | None = None
+        self._fault_samples: deque[int] = deque(maxlen=MAX_ROLLBACKS + 1)
+        self._good: tuple[int, dict] | None = None     # (n_samples, copy of the state)
+        self._healthy = True
+        self._warned = False
 
     def restart(self) -> None:
         """Begin a new record of the same plant family (a new episode), keeping what was learnt.
@@ -252,9 +304,11 @@ class OnlineIdentifier(ABC):
         beyond ``max_abs`` (a corrupt reading: a million nominal levels), or
         (if ``outlier_threshold`` is set) an outlier of the one-step
         prediction error. Its unusable entries are replaced (inputs by 0,
-        outputs by their prediction) only to keep the past window aligned in
-        time, and learning pauses until that stand-in has left the window.
-        ``update`` never raises on such data.
+        outputs by their prediction) to keep the past window aligned in
+        time; the sample itself is not learned from. A single stand-in is off
+        by about the noise, so learning goes on; after two or more in a row
+        it pauses until they have left the window. ``update`` never raises on
+        such data (nor on any finite or non-finite data of the right shape).
 
         Raises
         ------
@@ -284,30 +338,140 @@ class OnlineIdentifier(ABC):
         self._process(u, y)
 
     def _process(self, u: np.ndarray, y: np.ndarray) -> None:
-        with np.errstate(over="ignore", invalid="ignore"):
-            u = u / self._su
-            y = y / self._sy
+        # a broken internal state must not raise (or warn) from inside the arithmetic:
+        # it is found by the health checks, which roll it back
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            self._process_sample(u, y)
+
+    def _process_sample(self, u: np.ndarray, y: np.ndarray) -> None:
+        u = u / self._su
+        y = y / self._sy
+        if self._last_y is not None and not np.any(u) and np.array_equal(y, self._last_y):
+            # zero input and the same output bit for bit: a plant at rest or a frozen
+            # sensor. No information; processing it would only let forgetting erase what
+            # was learnt (and a warm-up end on nothing). Skipped without moving the clock.
+            self.n_idle += 1
+            return
+        self._last_y = y
         usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
         usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs)
-        if usable_u.all() and usable_y.all() and not self._admissible(u, y):
-            self.n_outliers += 1
-            usable_y[:] = False                      # an outlier: predict every output
+        if usable_u.all() and usable_y.all():
+            verdict = self._admissible(u, y)
+            if np.all(verdict):
+                self._outlier_run = 0
+            else:
+                self._outlier_run += 1
+                if self._outlier_run <= OUTLIER_RUN:
+                    self.n_outliers += 1
+                    usable_y &= verdict              # an outlier: predict those outputs
+                else:
+                    self._accept_outlier_run(u, y)   # the guard's reference is stale
         if usable_u.all() and usable_y.all():
             learn = self._quiet == 0 and self._k >= self.p
             self._step(u, y, learn)
             if self._quiet:
                 self._quiet -= 1
+            self._skip_run = 0
         else:
             self.n_skipped += 1
             u = np.where(usable_u, u, 0.0)
-            y = np.where(usable_y, y, self._fill_output())
+            fill = self._fill_output()           # a broken estimator predicts NaN: 0 then
+            y = np.where(usable_y, y, np.where(np.isfinite(fill), fill, 0.0))
             self._step(u, y, False)
-            self._quiet = self.p + 1
+            # one stand-in in the past window is the one-step prediction, off by about
+            # the noise: learning goes on. From the second in a row, it pauses until the
+            # stand-ins have left the window.
+            self._skip_run += 1
+            if self._skip_run > 1:
+                self._quiet = self.p + 1
         self._k += 1
+        state = self._state_vector()
+        if self._k % HEALTH_EVERY == 0 or (state is not None and not np.all(np.isfinite(state))):
+            self._check_health()
 
-    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool:
-        """Whether a finite, in-range normalized sample may be learned from
-        (hook for outlier guards; default: always)."""
+    # ------------------------------------------------------------ health
+    def _accept_outlier_run(self, u: np.ndarray, y: np.ndarray) -> None:  # noqa: B027
+        """Hook: a sample beyond the outlier guard is learned from, because the run of
+        rejections exceeded :data:`OUTLIER_RUN` (default: nothing to update)."""
+
+    def _state_vector(self) -> np.ndarray | None:
+        """The estimator's own state vector, checked for finiteness every sample
+        (default: the ``_x`` attribute, if any)."""
+        return vars(self).get("_x")
+
+    def _health_problem(self) -> str | None:
+        """What is wrong with the internal state now (:func:`~identifiers.health.state_problem`)."""
+        mats = self._matrices() if self._k >= self.warmup else None
+        state = self._current_state() if mats is not None else None
+        return state_problem(self, mats, state)
+
+    def _snapshot(self) -> dict:
+        """A deep copy of the estimator state (items of :attr:`_SHARED_ITEMS` shared)."""
+        state = {k: v for k, v in vars(self).items() if k not in _KEPT_ON_ROLLBACK}
+        memo: dict[int, Any] = {}
+        for key in self._SHARED_ITEMS:
+            value = state.get(key)
+            if value is not None:
+                memo[id(value)] = copy.copy(value)
+        return copy.deepcopy(state, memo)
+
+    def _check_health(self) -> None:
+        """Check the internal state; keep a copy if it is good, roll back if it is not.
+
+        A fault is repaired by returning to the last good copy (the samples
+        since are lost; learning pauses until the past window holds only
+        samples after the rollback). More than :data:`~identifiers.health.MAX_ROLLBACKS`
+        faults within ten check periods, or a fault with no good copy,
+        restart the estimator: ``health.healthy`` is then False until a
+        check passes.
+        """
+        problem = self._health_problem()
+        if problem is None:
+            self._good = (self.n_samples, self._snapshot())
+            if not self._healthy and self.ready and self._matrices() is not None:
+                self._healthy, self._warned = True, False
+            return
+        self._last_fault = problem
+        self._fault_samples.append(self.n_samples)
+        recent = sum(self.n_samples - s <= 10 * HEALTH_EVERY for s in self._fault_samples)
+        if self._good is not None and recent <= MAX_ROLLBACKS:
+            kept = {k: v for k, v in vars(self).items()
+                    if k in _KEPT_ON_ROLLBACK or (k in self._SIGNAL_STATE and (
+                        not isinstance(v, np.ndarray) or np.all(np.isfinite(v))))}
+            restored = copy.deepcopy(self._good[1], {id(v): copy.copy(v) for k, v in
+                                                     self._good[1].items()
+                                                     if k in self._SHARED_ITEMS})
+            vars(self).update(restored)
+            vars(self).update(kept)
+            self.n_rollbacks += 1
+            self._quiet = max(self._quiet, self.p + 1)
+            self._after_rollback()
+        else:
+            kept = {k: getattr(self, k) for k in _KEPT_ON_ROLLBACK}
+            self.reset()
+            vars(self).update(kept)
+            self.n_restarts += 1
+            self._good = None
+            self._healthy = False
+
+    def _after_rollback(self) -> None:  # noqa: B027  (optional hook)
+        """Hook run after a rollback (default: nothing more)."""
+
+    @property
+    def health(self) -> IdentifierHealth:
+        """The identifier's report on itself (:class:`~identifiers.health.IdentifierHealth`)."""
+        good = None if self._good is None else self._good[0]
+        return IdentifierHealth(
+            healthy=self._healthy, samples=self.n_samples, skipped=self.n_skipped,
+            outliers=self.n_outliers, idle=self.n_idle, rollbacks=self.n_rollbacks,
+            restarts=self.n_restarts,
+            last_fault=self._last_fault, last_good_sample=good,
+            last_good_time_s=None if good is None else good * self.dt)
+
+    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:
+        """Whether a finite, in-range normalized sample may be learned from (hook for
+        outlier guards; default: always). A boolean mask over the outputs rejects the
+        sample and replaces only the outputs it marks False by their prediction."""
         return True
 
     def _physical(self, mats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
@@ -372,7 +536,16 @@ class OnlineIdentifier(ABC):
 
     @property
     def model(self) -> StateSpaceModel | None:
-        """Current identified model, or None until warmed up."""
+        """Current identified model, or None until warmed up (and, with an
+        :class:`~identifiers.health.IdentifierHealthWarning`, while the
+        estimator is restarting after a fault: see :attr:`health`)."""
+        if not self._healthy:
+            if not self._warned:
+                self._warned = True
+                warnings.warn(f"{type(self).__name__} restarted its estimator after a fault "
+                              f"({self._last_fault}); no model until it is healthy again "
+                              "(see .health)", IdentifierHealthWarning, stacklevel=2)
+            return None
         if not self.ready:
             return None
         mats = self._matrices()
@@ -462,9 +635,12 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         coefficients; the floor keeps its Markov parameters sane. With 0 the
         floor is the RLS default, the prior ``1 / P_0 = alpha_1``, which
         only keeps the covariance bounded where nothing is excited.
-    outlier_threshold : float, optional
+    outlier_threshold : float or None
         Reject samples whose one-step innovation exceeds this many running
-        RMS on any channel (see :meth:`_admissible`); default None (off).
+        RMS on any channel (see :meth:`_admissible`); default 30 (Gaussian
+        noise never gets there; a run of more than
+        :data:`OUTLIER_RUN` rejections is learned from as a change). None
+        turns the guard off.
     max_abs : float
         See :class:`OnlineIdentifier`.
     """
@@ -484,7 +660,8 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.9995, *, dt: float = 0.1,
                  warmup: int | None = 500, regularization: float = 1e-4,
                  varx_forgetting: float | None = None, varx_init: float = 0.9,
-                 outlier_threshold: float | None = None, input_scale: ArrayLike | None = None,
+                 outlier_threshold: float | None = 30.0,
+                 input_scale: ArrayLike | None = None,
                  output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
         forgetting = _forgetting("forgetting", forgetting)
         if not (np.isfinite(regularization) and regularization >= 0):
@@ -520,26 +697,37 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     def _fill_output(self) -> np.ndarray:
         return self._varx.predict(self._phi)
 
-    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool:
-        """The optional outlier guard on the normalized one-step innovation.
+    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:
+        """The outlier guard on the normalized one-step innovation.
 
         With ``outlier_threshold = c``, once warmed up a sample whose VARX
         innovation ``y - Xi phi`` exceeds ``c`` times its running RMS (per
         channel, memory 1 / (1 - varx_forgetting)) on any channel is
-        rejected (the base class counts it in ``n_outliers``); accepted
-        samples update the running RMS.
+        rejected, and those channels are replaced by their prediction (the
+        base class counts it in ``n_outliers``); accepted samples update the
+        running RMS.
         """
         if self.outlier_threshold is None or self._k < self.p:
             return True
         innovation_sq = (y - self._varx.predict(self._phi)) ** 2
         ms = self._innovation_ms
-        if ms is not None and self._k >= self.warmup and np.any(
-                innovation_sq > self.outlier_threshold**2 * ms):
-            return False
+        if ms is not None and self._k >= self.warmup:
+            inside = innovation_sq <= self.outlier_threshold**2 * ms
+            if not inside.all():
+                self._rejected_sq = innovation_sq
+                return inside
+        self._track_innovation(innovation_sq)
+        return True
+
+    def _track_innovation(self, innovation_sq: np.ndarray) -> None:
         lam = self.varx_forgetting
+        ms = self._innovation_ms
         self._innovation_ms = (innovation_sq if ms is None
                                else lam * ms + (1.0 - lam) * innovation_sq)
-        return True
+
+    def _accept_outlier_run(self, u: np.ndarray, y: np.ndarray) -> None:
+        # a run of rejections: the innovations' level has changed; follow it
+        self._track_innovation(self._rejected_sq)
 
 
 class SystemRLSIdentifier(RecursiveVARXIdentifier):

@@ -77,6 +77,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
     #: the state updated by the sign step alone.
     PAPER_SETTINGS: ClassVar[Mapping[str, Any]] = MappingProxyType({
         **SystemRLSIdentifier.PAPER_SETTINGS, "mu": 0.01, "nu": 1.0, "predict": False})
+    _SIGNAL_STATE: ClassVar[tuple[str, ...]] = ("_phi", "_future", "_tau")
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.9995, *, mu: float = 0.3,
                  nu: float = 1.0, state_forgetting: float | None = None, predict: bool = True,

@@ -52,6 +52,8 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
         :class:`~identifiers.base.RecursiveVARXIdentifier`.
     """
 
+    _SIGNAL_STATE = ("_phi", "_ext")
+
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.9995, *,
                  refit_every: int = 10, f: int | None = None, **kwargs: Any) -> None:
         if isinstance(refit_every, bool) or not isinstance(refit_every, (int, np.integer)) \

@@ -207,6 +207,11 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         Times the modes were found to have moved and the estimator rebuilt.
     """
 
+    # the filter bank and high-passes run on the signals (kept current by a rollback);
+    # the recorded samples are tuples of arrays that are never changed in place
+    _SIGNAL_STATE = ("_phi", "_bank", "_hp_x", "_hp_y")
+    _SHARED_ITEMS = ("_pending", "_buffer", "_history")
+
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
                  dt: float = 0.1, forgetting: float = 0.998, rigid_forgetting: float = 0.995,
                  rigid_floor: float = 1e-4, warmup: int = 500,
@@ -280,6 +285,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._noise_var: np.ndarray | None = None
         self._last_innovation: np.ndarray | None = None
         self._real = True
+        self._seen: np.ndarray | None = None
 
     def restart(self) -> None:
         """Begin a new record of the same plant family (a new episode), keeping what was learnt.
@@ -332,19 +338,35 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     def _process(self, u: np.ndarray, y: np.ndarray) -> None:
         # the base class replaces unusable samples by a stand-in and calls _step with
         # learn=False; remember whether this sample's y was real for the Kalman filter
-        self._real = bool(np.all(np.isfinite(y)))
+        self._seen = np.isfinite(y)
+        self._real = bool(self._seen.all())
         super()._process(u, y)
 
-    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool:
+    def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:
         kf = self._kf
         if self.outlier_threshold is None or kf is None or self._mats is None:
             return True
         c = self._mats[2]
         spread = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", c, kf.P, c) + self._r, 1e-30))
-        if np.any(np.abs(y - c @ kf.x) > self.outlier_threshold * spread):
-            self._real = False          # the base class counts it in n_outliers
-            return False
+        inside = np.abs(y - c @ kf.x) <= self.outlier_threshold * spread
+        if not inside.all():
+            # the base class counts it in n_outliers; the filter still uses the other outputs
+            self._real = False
+            self._seen = self._seen & inside
+            return inside
         return True
+
+    def _accept_outlier_run(self, u: np.ndarray, y: np.ndarray) -> None:
+        self._real = True           # learned from after all: the filter uses it too
+        self._seen = np.ones(self.n_outputs, dtype=bool)
+
+    def _state_vector(self) -> np.ndarray | None:
+        return None if self._kf is None else self._kf.x
+
+    def _after_rollback(self) -> None:
+        # the restored filter state is up to a check period old: let it re-converge
+        if self._kf is not None:
+            self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))) + 1e-3 * np.eye(self.n))
 
     def _fill_output(self) -> np.ndarray:
         if self._kf is None or self._mats is None:
@@ -358,7 +380,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             if len(self._buffer) >= self.warmup:
                 self._start()
             return
-        self._sample(u, y, learn, self._real)
+        self._sample(u, y, learn, self._real, seen=self._seen)
 
     def _start(self) -> None:
         """End of warm-up: find the modes, build the estimator, replay the buffer."""
@@ -379,11 +401,24 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             return []
         u = np.array([h[0] for h in self._history])
         y = np.array([h[1] for h in self._history])
-        keep = np.array([h[3] for h in self._history])      # samples whose y was real
+        real = np.array([h[3] for h in self._history])      # samples whose y was real
         cols = np.concatenate([self.layout.indices(g) for g in ("rate", "deflection")
                                if g in self.layout])
-        return _spend_rank(discover_resonators(u[keep], y[keep][:, cols], budget, self.dt),
-                           budget)
+        y = y[:, cols]
+        # a skipped sample's stand-in is the filter's prediction (kept: off by about the
+        # noise; dropping the sample would join the record across a jump), or zeros before
+        # there was a model: those are interpolated from their neighbours
+        filled = ~real & ~np.any(y, axis=1)
+        if filled.any():
+            if filled.all() or (~filled).sum() < 2:
+                return list(self.resonators)
+            k, seen = np.arange(len(real)), np.flatnonzero(~filled)
+            y = np.column_stack([np.interp(k, seen, col[seen]) for col in y.T])
+        try:
+            found = discover_resonators(u, y, budget, self.dt)
+        except (ValueError, np.linalg.LinAlgError):     # too short or degenerate a record
+            return list(self.resonators)
+        return _spend_rank(found, budget)
 
     def _rebuild(self, resonators: list[Resonator], replay: int) -> None:
         """Build the estimator on ``resonators`` and replay the last ``replay`` samples."""
@@ -457,7 +492,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
                 replay_k: int | None = None, filtering: bool = True,
-                regressor: np.ndarray | None = None) -> None:
+                regressor: np.ndarray | None = None, seen: np.ndarray | None = None) -> None:
         """One sample: Kalman filter on the current model (if ``filtering``), the
         gains' RLS, the change test (live samples only), the filter bank, and an
         export every ``refresh`` samples (if ``filtering``). A replay passes the
@@ -472,7 +507,9 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         y_f = self._hp_y(y)
         if filtering and self._mats is not None:
             a, b, c, _, _ = self._mats
-            self._kf.update(a, b, c, self._process_noise(), self._r, u, y if real else None)
+            # the outputs that were measured (all of them, or those a skipped sample kept)
+            y_kf = y if real else (None if seen is None else np.where(seen, y, np.nan))
+            self._kf.update(a, b, c, self._process_noise(), self._r, u, y_kf)
             innovation = self._kf.innovation
             if real and innovation is not None and np.all(np.isfinite(innovation)):
                 self._measurement_noise(innovation)

@@ -47,6 +47,7 @@ class WindowedPBSID(OnlineIdentifier):
     """
 
     consistent_basis = True
+    _SIGNAL_STATE = ("_phi", "_u", "_y")
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 1.0, *, window: int = 500,
                  refit_every: int = 1, f: int | None = None, dt: float = 0.1,
@@ -122,4 +123,7 @@ class WindowedPBSID(OnlineIdentifier):
         return m.A, m.B, m.C, m.D, m.K
 
     def _current_state(self):
+        return self._state
+
+    def _state_vector(self) -> np.ndarray | None:
         return self._state

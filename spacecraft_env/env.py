@@ -137,7 +137,11 @@ class FlexibleSpacecraftEnv(gym.Env):
         ``-v0`` ending the episode stopped the cost, so crashing paid: full
         torque until termination scored -2.0e5 against -2.5e5 for zero
         torque on the slew task). No policy that stays within the bound can
-        do worse than that penalty.
+        do worse than that penalty. Stepping after ``terminated`` follows
+        Gymnasium's convention (as ``CartPole``): a warning, once; the
+        simulation goes on, but every further step returns reward 0 and
+        ``terminated=True`` (the penalty is never charged twice). ``step``
+        before the first ``reset`` raises :class:`gymnasium.error.ResetNeeded`.
     Starting state
         ``task="regulation"``: reference 0 and initial attitude uniform in
         +-``initial_attitude_deg`` per axis; ``task="slew"``: initial attitude
@@ -424,6 +428,8 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._x[nd:nd + 3] = rate0
         self._set_reference(ref)
         self._k = 0
+        self._terminated = False
+        self._warned_after_end = False
         self._captures = self.model.capture_steps()
         self._torque = np.zeros(3)
         self._commands = deque([np.zeros(3)] * self.actuator_delay_steps)
@@ -435,6 +441,9 @@ class FlexibleSpacecraftEnv(gym.Env):
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if "_captures" not in self.__dict__:
+            raise gym.error.ResetNeeded("cannot call step() before reset(): call "
+                                        "env.reset(seed=...) first")
         a = np.asarray(action)
         if a.dtype.kind not in "fiu":
             raise TypeError(f"action must be a real numeric array of shape (3,), got dtype "
@@ -468,7 +477,18 @@ class FlexibleSpacecraftEnv(gym.Env):
         ad, bd = model._discrete_ab(self._k * model.dt)
         self._x = ad @ x + bd @ total
         self._k += 1
+        if self._terminated:
+            # Gymnasium's convention (as CartPole): stepping past the end is undefined;
+            # warn once, keep simulating, pay nothing, charge no penalty again
+            if not self._warned_after_end:
+                self._warned_after_end = True
+                gym.logger.warn("You are calling 'step()' even though this environment has "
+                                "already returned terminated = True. You should always call "
+                                "'reset()' once you receive 'terminated = True'; further "
+                                "steps return reward 0 and terminated = True.")
+            return self._observe(), 0.0, True, False, self._info()
         terminated = max(map(abs, self._x[:3].tolist())) > self.max_attitude
+        self._terminated = terminated
         if self.reward == "bounded":
             reward = 1.0 - min(float(cost) / self.reward_weights.saturation, 1.0)
         else:

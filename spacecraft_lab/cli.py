@@ -34,6 +34,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from controllers import LQRWeights
 from spacecraft_conventions import __version__
@@ -45,6 +46,7 @@ from spacecraft_lab.plots import plot_rl_comparison
 from spacecraft_lab.reporting import pooled_training_runs, rl_table
 from spacecraft_lab.sweeps import (
     BACKENDS,
+    MAX_TASKS,
     ResultStore,
     SweepLockedError,
     load_config,
@@ -139,16 +141,44 @@ def _output_directory(text: str) -> Path:
     return path
 
 
+def _prepare_outputs(args: argparse.Namespace) -> None:
+    """Create every output directory of the command and write a probe file in it, before
+    any work: a directory that cannot hold the results fails now, not after the run.
+
+    Raises
+    ------
+    ValueError
+        If a directory cannot be created or written.
+    """
+    for key in ("out", "tensorboard"):
+        path = getattr(args, key, None)
+        if path is None or (key == "out" and args.command in ("rl-table", "sweep-summary")):
+            continue
+        path = Path(path)
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            probe = path / f".write-probe-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError as exc:
+            raise ValueError(f"cannot write to --{key.replace('_', '-')} {path}: "
+                             f"{exc.strerror or exc}") from None
+
+
 # ----------------------------------------------------------------- the parser
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with one sub-parser per command."""
     fmt = argparse.ArgumentDefaultsHelpFormatter
     parser = argparse.ArgumentParser(prog="spacecraft", description=__doc__.splitlines()[0],
-                                     formatter_class=fmt)
+                                     formatter_class=fmt, allow_abbrev=False)
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    demo = sub.add_parser("demo", help="rendered rollout of a scenario", formatter_class=fmt)
+    def command(name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        # no abbreviations: `--p` must not silently mean `--preset`
+        return sub.add_parser(name, formatter_class=fmt, allow_abbrev=False, **kwargs)
+
+    demo = command("demo", help="rendered rollout of a scenario")
     demo.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking",
                       help="time-varying scenario")
     demo.add_argument("--out", type=_output_directory, default="results/demo",
@@ -157,8 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--steps", type=_integer(1), default=2500,
                       help="episode length, steps of 0.1 s")
 
-    ident = sub.add_parser("identify", help="the paper's identification experiment",
-                           formatter_class=fmt)
+    ident = command("identify", help="the paper's identification experiment")
     ident.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking",
                        help="truth-model scenario")
     ident.add_argument("--seeds", type=_integer(1), default=10,
@@ -179,8 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--convergence", type=_number(0.0), default=150.0,
                        help="start of the scored window, s")
 
-    ctl = sub.add_parser("control", help="closed-loop comparison of the controllers",
-                         formatter_class=fmt)
+    ctl = command("control", help="closed-loop comparison of the controllers")
     ctl.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="paddle_rotation",
                      help="registered scenario")
     ctl.add_argument("--seeds", type=_integer(1), default=10,
@@ -222,7 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--disturbance-torque", type=_number(-100.0, 100.0, unit=" N m"),
                      default=0.0, help="constant external torque on every axis, N m")
 
-    train = sub.add_parser("train", help="train SB3 agents (PPO/SAC)", formatter_class=fmt)
+    train = command("train", help="train SB3 agents (PPO/SAC)")
     train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
     train.add_argument("--features", choices=FEATURES, default="none",
                        help="observation features appended for the agent, or (residual-*) "
@@ -253,16 +281,14 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--tensorboard", type=_output_directory, default=None,
                        help="TensorBoard log directory (default: none)")
 
-    table = sub.add_parser("rl-table", help="comparison table of 'train' output directories",
-                           formatter_class=fmt)
+    table = command("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
                        help="output directories of 'spacecraft train'")
     table.add_argument("--plot", type=Path, default=None, metavar="PNG",
                        help="also draw the learning curves of all runs (median and range "
                             "over seeds) to this file")
 
-    sweep = sub.add_parser("sweep", help="Monte-Carlo grid of identify/control tasks",
-                           formatter_class=fmt)
+    sweep = command("sweep", help="Monte-Carlo grid of identify/control tasks")
     sweep.add_argument("--config", required=True, type=_existing_file,
                        help="sweep file (.toml, .yaml, .json); trusted input")
     sweep.add_argument("--backend", choices=sorted(BACKENDS), default="local",
@@ -282,12 +308,14 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run again the tasks recorded as failed")
     sweep.add_argument("--dry-run", action="store_true",
                        help="list the tasks (and how many are done) without running")
+    sweep.add_argument("--max-tasks", type=_integer(1), default=MAX_TASKS,
+                       help="refuse a sweep file that declares more tasks (a typo in a seed "
+                            "count fails at once)")
     sweep.add_argument("--allow-custom-tasks", action="store_true",
                        help="accept 'module:function' task kinds, which import and run "
                             "code named by the sweep file")
 
-    summ = sub.add_parser("sweep-summary", help="tables and plots of a sweep directory",
-                          formatter_class=fmt)
+    summ = command("sweep-summary", help="tables and plots of a sweep directory")
     summ.add_argument("dir", type=_sweep_directory, help="sweep output directory")
     return parser
 
@@ -351,7 +379,8 @@ def _rl_table(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    config = load_config(args.config, allow_custom_tasks=args.allow_custom_tasks)
+    config = load_config(args.config, allow_custom_tasks=args.allow_custom_tasks,
+                         max_tasks=args.max_tasks)
     if args.timeout is not None:
         config = dataclasses.replace(config, timeout_s=float(args.timeout))
     if args.dry_run:
@@ -389,15 +418,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``spacecraft`` console script.
 
     Errors of the user's making (a bad value that only the run can detect, a
-    locked sweep directory, a missing file) end with a one-line message and
-    exit status 2; anything else is a bug and keeps its traceback.
+    locked sweep directory, a missing file, an output directory that cannot
+    be written, checked before any work) end with a one-line message and
+    exit status 2; Ctrl-C ends with one line and status 130 (``control``
+    first writes the table of the seeds it completed); anything else is a
+    bug and keeps its traceback.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        _prepare_outputs(args)
         return COMMANDS[args.command](args)
     except (ValueError, FileNotFoundError, PermissionError, SweepLockedError) as exc:
         parser.exit(2, f"spacecraft {args.command}: error: {exc}\n")
+    except KeyboardInterrupt:
+        done = (f"; wrote what the completed seeds give to {args.out}"
+                if args.command == "control" and (Path(args.out) / "table.md").exists()
+                else "")
+        parser.exit(130, f"spacecraft {args.command}: interrupted{done}\n")
     return 2   # not reached: parser.exit raises SystemExit
 
 

@@ -25,6 +25,7 @@ import gymnasium as gym
 from controllers import (
     PD,
     AdaptiveLQG,
+    ComparisonInterrupted,
     FixedLQG,
     LQRWeights,
     OracleLQG,
@@ -154,6 +155,35 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
     return kwargs
 
 
+def _check_control(*, controller: str, seed: int | None = None,
+                   scenario: str = "paddle_rotation", task: str = "slew",
+                   module_mass: float | None = None, rotation_rate: float | None = None,
+                   paddle_angle: float | None = None, max_torque: float | None = None,
+                   snr_db: float | None = 40.0, torque_weight: float | None = None,
+                   max_steps: int | None = None) -> dict[str, Any]:
+    """:func:`control_task`'s values checked without running it; its ``gym.make``
+    keywords (a sweep file is checked with it before any task runs).
+
+    Raises
+    ------
+    ValueError
+        An unknown controller, scenario or task, a variant the scenario does not
+        have, a non-positive torque weight or episode length.
+    """
+    if controller not in CONTROLLER_KEYS:
+        raise ValueError(f"controller must be one of {sorted(CONTROLLER_KEYS)}, "
+                         f"got {controller!r}")
+    if task not in ("slew", "regulation"):
+        raise ValueError(f"task must be 'slew' or 'regulation', got {task!r}")
+    if torque_weight is not None and not float(torque_weight) > 0:
+        raise ValueError(f"torque_weight must be > 0, got {torque_weight!r}")
+    if max_steps is not None and int(max_steps) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps!r}")
+    return env_kwargs_for(scenario, task=task, module_mass=module_mass,
+                          rotation_rate=rotation_rate, paddle_angle=paddle_angle,
+                          snr_db=snr_db, max_torque=max_torque)
+
+
 @single_threaded_blas
 def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation",
                  task: str = "slew", module_mass: float | None = None,
@@ -186,12 +216,10 @@ def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation
         ``{"metrics": the episode metrics of :func:`episode_metrics`,
         "timings": {"episode_s": wall time of the episode}}``.
     """
-    if controller not in CONTROLLER_KEYS:
-        raise ValueError(f"controller must be one of {sorted(CONTROLLER_KEYS)}, "
-                         f"got {controller!r}")
-    kwargs = env_kwargs_for(scenario, task=task, module_mass=module_mass,
-                            rotation_rate=rotation_rate, paddle_angle=paddle_angle,
-                            snr_db=snr_db, max_torque=max_torque)
+    kwargs = _check_control(controller=controller, scenario=scenario, task=task,
+                            module_mass=module_mass, rotation_rate=rotation_rate,
+                            paddle_angle=paddle_angle, max_torque=max_torque, snr_db=snr_db,
+                            torque_weight=torque_weight, max_steps=max_steps)
     weights = LQRWeights() if torque_weight is None else LQRWeights(torque=float(torque_weight))
     env = gym.make(env_id(scenario), **kwargs)
     try:
@@ -204,6 +232,9 @@ def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation
     finally:
         env.close()
     return {"metrics": metrics, "timings": {"episode_s": elapsed}}
+
+
+control_task.check_params = _check_control      # type: ignore[attr-defined]
 
 
 def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
@@ -247,11 +278,29 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     def make_env() -> gym.Env:
         return gym.make(env_id(scenario), **kwargs)
 
-    table, runs = compare(factories, make_env, list(range(seeds)), progress=progress)
+    try:
+        table, runs = compare(factories, make_env, list(range(seeds)), progress=progress)
+    except ComparisonInterrupted as stop:
+        # Ctrl-C: write what the completed seeds say, then let the interrupt go on
+        if stop.completed:
+            _write_control(out, scenario, stop.completed, kwargs, weights, stop.table,
+                           stop.trajectories, steps, make_env, interrupted=stop.total)
+        raise
+    return _write_control(out, scenario, seeds, kwargs, weights, table, runs, steps, make_env)
+
+
+def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
+                   weights: LQRWeights, table: dict, runs: dict, steps: int | None,
+                   make_env: Any, interrupted: int | None = None) -> dict:
+    """``metrics.json``, ``table.md``, ``results.csv`` and ``comparison.png`` of a comparison
+    (``interrupted``: the number of seeds asked for, when fewer finished)."""
     env = make_env()
     model = env.unwrapped.model
     text = control_table(table, oracle=ORACLE if ORACLE in table else None)
-    metrics = {"scenario": scenario, "seeds": seeds,
+    if interrupted is not None:
+        text = (f"Interrupted: {seeds} of {interrupted} seeds completed; the table holds "
+                f"those.\n\n{text}")
+    metrics = {"scenario": scenario, "seeds": seeds, "seeds_requested": interrupted or seeds,
                "env_kwargs": {k: repr(v) for k, v in kwargs.items()},
                "weights": weights.__dict__, "controllers": table}
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))

@@ -69,7 +69,7 @@ from identifiers import (
     vaf,
 )
 from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
-from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
+from spacecraft_env import SCENARIOS, FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.paper import PAPER_TABLES
 from spacecraft_lab.plots import (
     plot_identification_modal,
@@ -442,6 +442,8 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
         raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
+    for name in methods:             # every value checked before any work
+        _task_setup(name, scenario, None, n_modes, preset, n_samples, convergence_s)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = _truth(scenario, n_modes)
@@ -516,6 +518,46 @@ def _scalar(metrics: dict[str, Any]) -> dict[str, Any]:
     return flat
 
 
+def _task_setup(method: str, scenario: str, order: int | None, n_modes: int, preset: str,
+                n_samples: int, convergence_s: float) -> tuple[FlexibleSpacecraftModel,
+                                                               OnlineIdentifier]:
+    """The truth model and the identifier of an identify task, with its values checked.
+
+    Raises
+    ------
+    ValueError
+        An unknown method, preset or scenario, an order that is not ``6 + 8 k``, or a
+        scored window that starts before the identifier's warm-up ends or after the
+        record does.
+    """
+    if order is not None:
+        k, rem = divmod(int(order) - 6, 8)
+        if rem or k < 1 or int(order) != order:
+            raise ValueError(f"order must be 6 + 8 k for k >= 1 (14, 22, 30, 38, 46, ...), "
+                             f"got {order!r}")
+        n_modes = k
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    truth = _truth(scenario, int(n_modes))
+    ident = make_identifier(method, truth, preset)
+    warmup_s = ident.warmup * truth.dt
+    end_s = int(n_samples) * truth.dt
+    if not warmup_s <= convergence_s < end_s:
+        raise ValueError(f"convergence_s = {convergence_s:g} s must lie between the end of "
+                         f"the {method!r} identifier's warm-up ({warmup_s:g} s) and the end of "
+                         f"the record ({end_s:g} s)")
+    return truth, ident
+
+
+def _check_identify(*, method: str, seed: int | None = None, scenario: str = "docking",
+                    order: int | None = None, n_modes: int = 2, preset: str = "default",
+                    snr_db: float | None = 40.0, n_samples: int = 2500,
+                    convergence_s: float = 150.0, baselines: bool = False) -> None:
+    """:func:`identify_task`'s values checked without running it (a sweep file is checked
+    with it before any task runs)."""
+    _task_setup(method, scenario, order, n_modes, preset, n_samples, convergence_s)
+
+
 @single_threaded_blas
 def identify_task(*, method: str, seed: int, scenario: str = "docking",
                   order: int | None = None, n_modes: int = 2, preset: str = "default",
@@ -550,14 +592,8 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
         ``gain_error_*``, ``modal_error_*``, ``test_error_*_pct``,
         ``unstable_share``, ``held_out_vaf_*``) plus ``order_n``.
     """
-    if order is not None:
-        k, rem = divmod(int(order) - 6, 8)
-        if rem or k < 1 or int(order) != order:
-            raise ValueError(f"order must be 6 + 8 k for k >= 1 (14, 22, 30, 38, 46, ...), "
-                             f"got {order!r}")
-        n_modes = k
-    truth = _truth(scenario, int(n_modes))
-    ident = make_identifier(method, truth, preset)
+    truth, ident = _task_setup(method, scenario, order, n_modes, preset, n_samples,
+                               convergence_s)
     record, test = _cached_records(scenario, int(n_modes), int(seed), int(n_samples),
                                    None if snr_db is None else float(snr_db))
     k_conv = round(convergence_s / truth.dt)
@@ -572,3 +608,6 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
                 if key.startswith("vaf_h"):
                     metrics[prefix + key] = v
     return {"metrics": metrics, "timings": {"time_s": score.time_s}}
+
+
+identify_task.check_params = _check_identify      # type: ignore[attr-defined]

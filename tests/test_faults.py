@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -52,25 +51,6 @@ def record() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ----------------------------------------------------------------- threads
-def _update_seconds(u: np.ndarray, y: np.ndarray, threads: int) -> float:
-    best = np.inf
-    with threadpool_limits(limits=threads, user_api="blas"):
-        for _ in range(3):
-            ident = default_identifier()
-            start = time.perf_counter()
-            for k in range(len(u)):
-                ident.update(u[k], y[k])
-            best = min(best, time.perf_counter() - start)
-    return best
-
-
-def test_update_is_as_fast_with_two_blas_threads_as_with_one(record):
-    u, y = record
-    one = _update_seconds(u[:800], y[:800], 1)
-    two = _update_seconds(u[:800], y[:800], 2)
-    assert two / one < 1.5, f"2 threads {two:.3f} s vs 1 thread {one:.3f} s"
-
-
 def test_the_users_thread_setting_is_restored():
     from threadpoolctl import threadpool_info
 
@@ -154,8 +134,12 @@ def test_outlier_guard_keeps_a_million_fold_outlier_out(record, name):
 
 def test_no_excitation_at_all_never_raises():
     ident = default_identifier()
-    for _ in range(800):
+    for _ in range(800):                    # exactly at rest: no information, no warm-up
         ident.update(np.zeros(3), np.zeros(10))
+    assert ident.model is None and ident.n_idle == 799
+    quiet = 1e-9 * np.random.default_rng(0).normal(size=(800, 10))
+    for q in quiet:                         # zero torque, outputs at the 1e-9 level
+        ident.update(np.zeros(3), q)
     assert ident.model is not None and np.all(np.isfinite(ident.model.A))
 
 
@@ -220,7 +204,8 @@ def test_adaptive_lqg_feeds_nan_samples_to_the_identifier():
 # ----------------------------------------------------------------- sweeps
 def test_a_second_driver_on_the_same_directory_stops_at_once(tmp_path):
     config = SweepConfig.from_dict({"task": "identify", "seeds": 1,
-                                    "params": {"method": "moment-refit", "n_samples": 300}})
+                                    "params": {"method": "moment-refit", "n_samples": 600,
+                                               "convergence_s": 55.0}})
     with FileLock(tmp_path / ".sweep.lock"):
         with pytest.raises(SweepLockedError, match="another sweep is running"):
             run_sweep(config, tmp_path, "serial", progress=False)

@@ -16,7 +16,14 @@ from spacecraft_lab.sweeps.backends import (
     SerialBackend,
     make_backend,
 )
-from spacecraft_lab.sweeps.config import Reference, SummarySpec, SweepConfig, Task, load_config
+from spacecraft_lab.sweeps.config import (
+    MAX_TASKS,
+    Reference,
+    SummarySpec,
+    SweepConfig,
+    Task,
+    load_config,
+)
 from spacecraft_lab.sweeps.runner import SweepLockedError, SweepReport, pending_tasks, run_sweep
 from spacecraft_lab.sweeps.store import ResultStore, parse_record
 from spacecraft_lab.sweeps.summary import group_statistics, summarize
@@ -24,6 +31,7 @@ from spacecraft_lab.sweeps.tasks import TASKS, execute, resolve_task
 
 __all__ = [
     "BACKENDS",
+    "MAX_TASKS",
     "TASKS",
     "LocalBackend",
     "RayBackend",

@@ -44,6 +44,7 @@ import hashlib
 import inspect
 import itertools
 import json
+import math
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -54,7 +55,13 @@ import yaml
 
 from spacecraft_lab.sweeps.tasks import resolve_task
 
-__all__ = ["Reference", "SummarySpec", "SweepConfig", "Task", "load_config"]
+__all__ = ["MAX_TASKS", "Reference", "SummarySpec", "SweepConfig", "Task", "load_config"]
+
+#: Largest number of tasks a sweep file may declare unless the caller raises the
+#: limit (``max_tasks=``, ``spacecraft sweep --max-tasks``): checked before the
+#: tasks are listed, so a typo in a seed count fails at once instead of
+#: exhausting memory.
+MAX_TASKS = 100_000
 
 _TOP_KEYS = {"name", "task", "seeds", "params", "grid", "cases", "summary", "description",
              "timeout_s"}
@@ -204,21 +211,24 @@ def _timeout(value: Any) -> float | None:
     return float(value)
 
 
-def _seeds(value: Any) -> tuple[int, ...]:
+def _seeds(value: Any) -> Sequence[int]:
+    """The seeds of a sweep file's ``seeds`` entry; a count or a table gives a
+    ``range`` (nothing materialized before the task count is checked)."""
     if isinstance(value, bool):
-        raise TypeError("seeds must be a count, a list of integers or {start, count}")
+        raise ValueError(f"seeds must be a count, a list of integers or {{start, count}}, "
+                         f"got {value!r}")
     if isinstance(value, int):
         if value < 1:
             raise ValueError(f"seeds must be a positive count, got {value}")
-        return tuple(range(value))
+        return range(value)
     if isinstance(value, Mapping):
-        try:
-            start, count = int(value["start"]), int(value["count"])
-        except (KeyError, TypeError, ValueError):
-            raise ValueError("seeds as a table needs integer start and count") from None
+        start, count = value.get("start"), value.get("count")
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in (start, count)):
+            raise ValueError("seeds as a table needs integer start and count, got "
+                             f"{dict(value)!r}")
         if start < 0 or count < 1:
             raise ValueError(f"seeds: start >= 0 and count >= 1, got {start}, {count}")
-        return tuple(range(start, start + count))
+        return range(start, start + count)
     if isinstance(value, Sequence) and not isinstance(value, str):
         if not value or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                 for s in value):
@@ -226,7 +236,8 @@ def _seeds(value: Any) -> tuple[int, ...]:
         if len(set(value)) != len(value):
             raise ValueError(f"seeds must be distinct, got {value!r}")
         return tuple(int(s) for s in value)
-    raise TypeError("seeds must be a count, a list of integers or {start, count}")
+    raise ValueError(f"seeds must be a count, a list of integers or {{start, count}}, "
+                     f"got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -238,7 +249,8 @@ class SweepConfig:
     name : str
     task : str
         Default task kind of every case.
-    seeds : tuple of int
+    seeds : sequence of int
+        A ``range`` or a tuple.
     params : dict
         Shared parameters.
     grid : dict
@@ -254,7 +266,7 @@ class SweepConfig:
 
     name: str
     task: str
-    seeds: tuple[int, ...]
+    seeds: Sequence[int]
     params: dict[str, Any] = field(default_factory=dict)
     grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     cases: tuple[dict[str, Any], ...] = ({},)
@@ -264,7 +276,8 @@ class SweepConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], name: str | None = None, *,
-                  allow_custom_tasks: bool = False, validate: bool = True) -> SweepConfig:
+                  allow_custom_tasks: bool = False, validate: bool = True,
+                  max_tasks: int = MAX_TASKS) -> SweepConfig:
         """Build and validate a configuration from a parsed file.
 
         Parameters
@@ -278,15 +291,21 @@ class SweepConfig:
             imported (and their top-level code run) to check the parameter
             names. A sweep file is trusted input.
         validate : bool
-            Check parameter names against the task functions (imports them);
-            False only re-reads a configuration this package wrote itself.
+            Check parameter names against the task functions (imports them)
+            and their values with the kind's own check where it has one
+            (``function.check_params``, e.g. an identification's scored
+            window must start after the warm-up); False only re-reads a
+            configuration this package wrote itself.
+        max_tasks : int
+            Refuse a sweep of more tasks (default :data:`MAX_TASKS`).
 
         Raises
         ------
         ValueError, TypeError
             Unknown keys, an unknown task kind, a custom kind without
-            permission, parameters the task function does not take, a
-            parameter set twice, empty grid axes, bad seeds.
+            permission, parameters the task function does not take or
+            values it rejects, a parameter set twice, empty grid axes, bad
+            seeds, more than ``max_tasks`` tasks.
         """
         if not isinstance(data, Mapping):
             raise TypeError("a sweep file must hold a table/mapping at the top level")
@@ -306,8 +325,15 @@ class SweepConfig:
         if isinstance(raw_cases, Mapping) or not isinstance(raw_cases, Sequence):
             raise TypeError("cases must be a list of tables ([[cases]])")
         cases = tuple(_canonical(dict(c), f"[[cases]] #{i}") for i, c in enumerate(raw_cases))
+        seeds = _seeds(data["seeds"])
+        n_tasks = len(seeds) * len(cases) * math.prod(len(v) for v in grid.values())
+        if n_tasks > max_tasks:
+            raise ValueError(f"the sweep declares {n_tasks:,} tasks ({len(seeds):,} seeds x "
+                             f"{len(cases)} cases x {math.prod(len(v) for v in grid.values())} "
+                             f"grid points), more than the limit of {max_tasks:,}; raise it "
+                             "with --max-tasks (max_tasks=) if you mean it")
         config = cls(name=str(data.get("name") or name or "sweep"), task=str(data["task"]),
-                     seeds=_seeds(data["seeds"]), params=params, grid=grid, cases=cases,
+                     seeds=seeds, params=params, grid=grid, cases=cases,
                      summary=SummarySpec.from_dict(data.get("summary")),
                      description=str(data.get("description", "")),
                      timeout_s=_timeout(data.get("timeout_s")))
@@ -342,6 +368,17 @@ class SweepConfig:
                                                               p.POSITIONAL_OR_KEYWORD)} - names
             if missing:
                 raise ValueError(f"{where}: task {kind!r} needs parameter(s) {sorted(missing)}")
+            check = getattr(fn, "check_params", None)
+            if callable(check):
+                axes = list(self.grid)
+                base = {k: v for k, v in case.items() if k not in ("label", "task")}
+                for point in itertools.product(*(self.grid[a] for a in axes)):
+                    values = {**self.params, **base, **dict(zip(axes, point, strict=True))}
+                    try:
+                        check(**values)
+                    except (ValueError, TypeError) as exc:
+                        shown = ", ".join(f"{k}={v!r}" for k, v in sorted(values.items()))
+                        raise ValueError(f"{where}: task {kind!r} with {shown}: {exc}") from None
         ids = [t.task_id for t in self.tasks()]
         if len(set(ids)) != len(ids):
             raise ValueError("two cases give identical tasks; make their parameters differ")
@@ -371,7 +408,8 @@ class SweepConfig:
                 "cases": list(self.cases), "summary": self.summary.to_dict()}
 
 
-def load_config(path: str | Path, *, allow_custom_tasks: bool = False) -> SweepConfig:
+def load_config(path: str | Path, *, allow_custom_tasks: bool = False,
+                max_tasks: int = MAX_TASKS) -> SweepConfig:
     """Read a sweep file (``.toml``, ``.yaml``/``.yml`` or ``.json``).
 
     A sweep file is trusted input: with ``allow_custom_tasks`` it may name
@@ -381,8 +419,9 @@ def load_config(path: str | Path, *, allow_custom_tasks: bool = False) -> SweepC
     ------
     FileNotFoundError
     ValueError
-        Unsupported extension, a parse error, an invalid sweep, or a custom
-        task kind without ``allow_custom_tasks``.
+        Unsupported extension, a parse error, an invalid sweep (of any kind:
+        a wrong type is reported as a ValueError too), a custom task kind
+        without ``allow_custom_tasks``, or more than ``max_tasks`` tasks.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -394,4 +433,8 @@ def load_config(path: str | Path, *, allow_custom_tasks: bool = False) -> SweepC
         data = parse(text)
     except Exception as exc:  # TOMLDecodeError, JSONDecodeError, yaml.YAMLError
         raise ValueError(f"{path}: cannot parse: {exc}") from exc
-    return SweepConfig.from_dict(data, name=path.stem, allow_custom_tasks=allow_custom_tasks)
+    try:
+        return SweepConfig.from_dict(data, name=path.stem, allow_custom_tasks=allow_custom_tasks,
+                                     max_tasks=max_tasks)
+    except TypeError as exc:
+        raise ValueError(f"{path}: {exc}") from None

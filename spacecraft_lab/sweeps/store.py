@@ -6,7 +6,8 @@ sweep runs, see :mod:`spacecraft_lab.sweeps.runner`), one whole line per
 file holds every task that finished and at most one truncated last line,
 which :meth:`ResultStore.load` skips (and the next append starts on a fresh
 line). Any line that is not a complete record (:func:`parse_record`: torn,
-bad bytes, missing fields) is treated the same way, and
+bad bytes, missing fields, or fields of the wrong type, :func:`record_problem`)
+is treated the same way, so its task runs again, and
 :meth:`ResultStore.repair`, called when a sweep starts, moves such lines to
 ``<name>.torn`` so the file is clean again. When a task appears more than
 once (retried after an error), the last record wins.
@@ -21,31 +22,84 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ResultStore", "parse_record"]
+from spacecraft_lab.sweeps.tasks import METRIC_TYPES
+
+__all__ = ["ResultStore", "parse_record", "record_problem"]
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_json_scalar(value: Any) -> bool:
+    return value is None or isinstance(value, (bool, int, float, str))
+
+
+_CHECKS = {
+    "number": lambda v: v is None or _is_number(v),
+    "string": lambda v: isinstance(v, str),
+    "bool": lambda v: isinstance(v, bool),
+    "list": lambda v: isinstance(v, list) and all(_is_json_scalar(x) for x in v),
+}
+
+
+def record_problem(record: Any) -> str | None:
+    """What makes ``record`` not a finished task's record, or None if it is one.
+
+    The schema: a ``task_id`` and a ``kind`` (strings), a ``params`` table
+    whose ``seed`` (if any) is an int, and a ``status`` of ``"error"`` (with
+    an ``error`` string) or ``"ok"`` with a non-empty ``metrics`` table and
+    an optional ``timings`` table of numbers. A built-in kind's metrics have
+    the types its task writes (numbers or null, except those of
+    :data:`~spacecraft_lab.sweeps.tasks.METRIC_TYPES`); a custom kind's are
+    JSON scalars or lists of them.
+    """
+    if not isinstance(record, dict):
+        return "not a JSON object"
+    for key in ("task_id", "kind"):
+        if not isinstance(record.get(key), str):
+            return f"{key} is not a string"
+    params = record.get("params")
+    if not isinstance(params, dict):
+        return "params is not a table"
+    seed = params.get("seed")
+    if "seed" in params and not (isinstance(seed, int) and not isinstance(seed, bool)):
+        return f"params.seed is {seed!r}, not an int"
+    status = record.get("status")
+    if status == "error":
+        return None if isinstance(record.get("error", ""), str) else "error is not a string"
+    if status != "ok":
+        return f"status is {status!r}, not 'ok' or 'error'"
+    metrics = record.get("metrics")
+    if not isinstance(metrics, dict) or not metrics:
+        return "metrics is not a non-empty table"
+    types = METRIC_TYPES.get(record["kind"])
+    for name, value in metrics.items():
+        if types is None:
+            ok = _is_json_scalar(value) or _CHECKS["list"](value)
+        else:
+            ok = _CHECKS[types.get(name, "number")](value)
+        if not ok:
+            return f"metric {name!r} has the wrong type ({value!r})"
+    timings = record.get("timings", {})
+    if not isinstance(timings, dict) or not all(_CHECKS["number"](v) for v in timings.values()):
+        return "timings is not a table of numbers"
+    return None
 
 
 def parse_record(line: bytes) -> dict[str, Any] | None:
     """The record on one line of ``results.jsonl``, or None if the line is not one.
 
-    A line counts as a record only if it is valid UTF-8 and JSON, and holds
-    a ``task_id``, a ``kind``, a ``params`` table and a ``status`` of
-    ``"ok"`` (with a ``metrics`` table) or ``"error"``. Anything else (a
-    line torn by an interrupted write, a bad byte, a hand-edited entry) is
-    not a finished task.
+    A line counts as a record only if it is valid UTF-8 and JSON and passes
+    :func:`record_problem`. Anything else (a line torn by an interrupted
+    write, a bad byte, a hand-edited or wrong-typed entry) is not a finished
+    task.
     """
     try:
         record = json.loads(line.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError):
         return None
-    if not (isinstance(record, dict) and isinstance(record.get("task_id"), str)
-            and isinstance(record.get("kind"), str) and isinstance(record.get("params"), dict)):
-        return None
-    status = record.get("status")
-    if status == "ok" and isinstance(record.get("metrics"), dict):
-        return record
-    if status == "error":
-        return record
-    return None
+    return record if record_problem(record) is None else None
 
 
 class ResultStore:
@@ -59,6 +113,8 @@ class ResultStore:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        #: Lines the last read skipped (not complete records).
+        self.n_skipped = 0
 
     def _lines(self) -> Iterator[tuple[int, bytes]]:
         if not self.path.exists():
@@ -71,14 +127,23 @@ class ResultStore:
     def __iter__(self) -> Iterator[dict[str, Any]]:
         """Every complete record in file order; anything else (see
         :func:`parse_record`) is skipped with a warning."""
+        self.n_skipped = 0
         for lineno, line in self._lines():
             record = parse_record(line)
             if record is None:
+                self.n_skipped += 1
                 warnings.warn(f"{self.path}:{lineno}: skipping an incomplete record "
-                              "(interrupted write or corrupt entry)", RuntimeWarning,
-                              stacklevel=2)
+                              f"({self._why(line)}); its task runs again on resume",
+                              RuntimeWarning, stacklevel=2)
                 continue
             yield record
+
+    @staticmethod
+    def _why(line: bytes) -> str:
+        try:
+            return record_problem(json.loads(line.decode("utf-8"))) or "?"
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            return "interrupted write or corrupt bytes"
 
     def load(self) -> dict[str, dict[str, Any]]:
         """Task id -> its last record."""

@@ -66,6 +66,13 @@ def _stats(values: list[float | None], errors: int, section: str = "metrics") ->
     return res
 
 
+def _seed_key(seed: Any) -> tuple[int, float, str]:
+    """Ints in order, anything else after them (a custom kind may have no seed)."""
+    if isinstance(seed, int) and not isinstance(seed, bool):
+        return (0, float(seed), "")
+    return (1, 0.0, repr(seed))
+
+
 def group_statistics(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Statistics over seeds for every group of records.
 
@@ -98,7 +105,7 @@ def group_statistics(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
             for item, v in _scalar_items(r).items():
                 values[item].append(v)
         out.append({"kind": head["kind"], "label": head["label"], "params": head["params"],
-                    "seeds": sorted(r["params"].get("seed") for r in recs),
+                    "seeds": sorted((r["params"].get("seed") for r in recs), key=_seed_key),
                     "errors": n_err,
                     "error_messages": sorted({r.get("error", "") for r in recs} - {""}),
                     "metrics": {m: _stats(v, n_err, section)
@@ -190,7 +197,8 @@ def summarize(out: str | Path, spec: SummarySpec | None = None) -> dict[str, Any
         The content of ``summary.json``.
     """
     out = Path(out)
-    records = ResultStore(out / "results.jsonl").load()
+    store = ResultStore(out / "results.jsonl")
+    records = store.load()
     grid_axes: list[str] = []
     name = out.name
     ignored = 0
@@ -227,6 +235,7 @@ def summarize(out: str | Path, spec: SummarySpec | None = None) -> dict[str, Any
                 table[m][r][c] = _stats([], g["errors"])
 
     summary = {"sweep": name, "records": len(records), "ignored_records": ignored,
+               "skipped_lines": store.n_skipped,
                "errors": sum(g["errors"] for g in groups), "rows": rows, "columns": columns,
                "row_names": row_names, "column_names": col_names, "metrics": metric_names,
                "table": table, "groups": groups, "spec": spec.to_dict()}
@@ -258,7 +267,10 @@ def _markdown(summary: dict[str, Any], spec: SummarySpec) -> str:
     lines = [f"# Sweep `{summary['sweep']}`: mean ± std over seeds", "",
              f"{summary['records']} task records, {summary['errors']} failed"
              + (f"; {summary['ignored_records']} records outside the current grid ignored"
-                if summary["ignored_records"] else "") + ".", ""]
+                if summary["ignored_records"] else "")
+             + (f"; {summary['skipped_lines']} lines that are not complete records skipped "
+                "(their tasks run again when the sweep resumes)"
+                if summary["skipped_lines"] else "") + ".", ""]
     for m in summary["metrics"]:
         refs = [r for r in spec.reference if r.metric == m]
         lines += [f"## {m}", "",

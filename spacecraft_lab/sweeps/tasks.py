@@ -41,12 +41,23 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-__all__ = ["TASKS", "THREAD_ENV", "execute", "identity", "jsonable", "resolve_task"]
+__all__ = ["METRIC_TYPES", "TASKS", "THREAD_ENV", "execute", "identity", "jsonable",
+           "resolve_task"]
 
 #: Built-in task kinds -> ``"module:function"``.
 TASKS: dict[str, str] = {
     "identify": "spacecraft_lab.identification:identify_task",
     "control": "spacecraft_lab.control:control_task",
+}
+
+#: Metrics of the built-in kinds whose value is not a number (or null): their
+#: JSON type. Every other metric of a built-in kind is a number or null (a
+#: diverged run); a record that says otherwise was not written by the task
+#: (see :func:`spacecraft_lab.sweeps.store.record_problem`).
+METRIC_TYPES: dict[str, dict[str, str]] = {
+    "identify": {},
+    "control": {"verdict": "string", "stable": "bool", "settling_s": "list",
+                "settled_before_event": "list"},
 }
 
 #: Environment of worker processes: one BLAS/OpenMP thread each, so that a

@@ -149,14 +149,19 @@ def test_restart_carries_the_model_into_a_new_record_of_the_same_plant(constant_
 
 
 def test_restart_before_the_warm_up_ends_keeps_collecting(constant_record):
-    _, u, _, y = constant_record
+    truth, u, _, y = constant_record
     ident = default_identifier()
     for k in range(300):
         ident.update(u[k], y[k])
     ident.restart()
-    for k in range(300, 500):
+    for k in range(300, 499):
         ident.update(u[k], y[k])
+    assert ident.model is None                    # 499 samples: still warming up
+    ident.update(u[499], y[499])
+    # the warm-up's 500 samples span both records: a model at the 500th, already good
     assert ident.model is not None
+    assert relative_gain_error(rigid_body_gain(ident.model, RATE),
+                               np.linalg.inv(truth.inertia(0.0))) < 0.1
 
 
 def test_the_default_restart_of_a_past_window_method_starts_afresh(constant_record):

@@ -138,7 +138,7 @@ def test_bad_files(tmp_path):
     broken.write_text("task = identify\n")  # unquoted string
     with pytest.raises(ValueError, match="cannot parse"):
         load_config(broken)
-    with pytest.raises(TypeError, match="seeds"):
+    with pytest.raises(ValueError, match="seeds"):
         SweepConfig.from_dict({"task": "identify", "seeds": "3"})
 
 
@@ -153,7 +153,7 @@ def test_store_survives_a_torn_last_line(tmp_path):
         fh.write('{"task_id": "c", "status": "o')  # killed mid-write
     with pytest.warns(RuntimeWarning, match="incomplete record"):
         assert set(store.load()) == {"a", "b"}
-    store.append({"task_id": "b", **head, "status": "ok", "metrics": {}})  # retried: last wins
+    store.append({"task_id": "b", **head, "status": "ok", "metrics": {"v": 2}})  # retried
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("ignore")
         loaded = store.load()
@@ -343,8 +343,11 @@ def test_summary_statistics_match_closed_form(tmp_path):
     assert "Ratio of means" in md.split("## time_s")[1]  # timings only
     assert "Ratio of means" not in md.split("## time_s")[0]
     rows = (tmp_path / "summary.csv").read_text().splitlines()
-    assert rows[0].startswith("label,fail_on,offset,slope,metric,count") or "metric" in rows[0]
+    assert rows[0] == "label,offset,slope,metric,count,finite,errors,mean,std,median,min,max"
     assert len(rows) == 1 + 2 * 3
+    value_row = next(r for r in rows[1:] if ",2.0,value," in r).split(",")
+    assert value_row[:6] == ["", "1.0", "2.0", "value", "4", "4"]
+    assert float(value_row[7]) == pytest.approx(values.mean())
     assert (tmp_path / "summary.png").stat().st_size > 10_000
 
 

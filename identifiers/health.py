@@ -1,0 +1,161 @@
+"""Health of a streaming identifier: detect a broken internal state, roll back, report.
+
+An online estimator that runs for hours meets what a test record never
+shows: an overflow in a state that drifts, a covariance that rounding has
+made indefinite, a stretch of data with no information at all. Each of
+these leaves the estimator *finite-looking but wrong*, and a model read
+from it goes stale without a word. :class:`~identifiers.base.OnlineIdentifier`
+therefore checks its own internal state (:func:`state_problem`) at a fixed
+period, keeps a copy of the last state that passed, and when a check fails
+rolls back to that copy, counts the fault and reports it in
+:class:`IdentifierHealth`. An identifier whose faults repeat, or that has no
+good copy to return to, restarts its estimator and says so: ``health.healthy``
+is False, and its ``model`` is None (with an :class:`IdentifierHealthWarning`)
+until a check passes again.
+
+What a check looks at (:func:`state_problem`): every recursive-least-squares
+estimate and Kalman-filter state (finite), every covariance (finite,
+positive definite by a Cholesky factorization for an RLS, positive
+semi-definite for a Kalman filter, whose covariance is singular along states
+a model leaves inert) and the exported model matrices and state (finite).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from identifiers.kalman import KalmanPredictor
+from identifiers.rls import RecursiveLeastSquares
+
+__all__ = ["HEALTH_EVERY", "MAX_ROLLBACKS", "IdentifierHealth", "IdentifierHealthWarning",
+           "state_problem"]
+
+#: Samples between full health checks (Cholesky of every covariance; 10 s at
+#: dt = 0.1 s). The rollback copy is taken at each passing check.
+HEALTH_EVERY = 100
+#: Faults within :data:`HEALTH_EVERY` x 10 samples after which the identifier stops
+#: rolling back (the fault comes back from the data) and restarts its estimator.
+MAX_ROLLBACKS = 3
+
+
+class IdentifierHealthWarning(UserWarning):
+    """A streaming identifier found its internal state broken and could not roll back."""
+
+
+@dataclass(frozen=True)
+class IdentifierHealth:
+    """What an identifier reports about itself (``identifier.health``).
+
+    Attributes
+    ----------
+    healthy : bool
+        False after the estimator had to be restarted (no good state to
+        return to, or repeated faults), until its next check passes; the
+        identifier's ``model`` is None meanwhile.
+    samples : int
+        Samples received.
+    skipped : int
+        Samples not learned from (non-finite, beyond ``max_abs``, outliers).
+    outliers : int
+        Of those, the ones the outlier guard rejected.
+    idle : int
+        Samples passed over as carrying no information (zero input, output
+        unchanged bit for bit).
+    rollbacks : int
+        Faults of the internal state repaired by returning to the last
+        good copy.
+    restarts : int
+        Faults that restarted the estimator.
+    last_fault : str or None
+        What the last failed check found (e.g. ``"covariance 2 not positive
+        definite"``), None if none has failed.
+    last_good_sample : int or None
+        Sample count at the last passing check (the copy a rollback returns
+        to), None before the first.
+    last_good_time_s : float or None
+        The same as a time, s (``last_good_sample * dt``).
+    """
+
+    healthy: bool
+    samples: int
+    skipped: int
+    outliers: int
+    idle: int
+    rollbacks: int
+    restarts: int
+    last_fault: str | None
+    last_good_sample: int | None
+    last_good_time_s: float | None
+
+
+def _estimators(obj: Any) -> Iterator[Any]:
+    """The RLS estimators and Kalman filters held by ``obj``'s attributes, directly or
+    in a list or tuple (one level down)."""
+    kinds = (RecursiveLeastSquares, KalmanPredictor)
+    for value in vars(obj).values():
+        if isinstance(value, kinds):
+            yield value
+        elif isinstance(value, (list, tuple)):
+            for item in value:
+                if isinstance(item, kinds):
+                    yield item
+                elif isinstance(item, tuple):
+                    yield from (v for v in item if isinstance(v, kinds))
+
+
+def _positive_definite(p: np.ndarray) -> bool:
+    """Finite, positive diagonal, and a Cholesky factor exists."""
+    if not np.all(np.isfinite(p)) or np.any(np.diag(p) <= 0):
+        return False
+    try:
+        np.linalg.cholesky(p)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def _positive_semidefinite(p: np.ndarray) -> bool:
+    """Finite, symmetric to rounding, no eigenvalue below -1e-9 of the largest diagonal
+    entry (a Kalman filter's covariance is singular along states the model leaves
+    inert)."""
+    if not np.all(np.isfinite(p)):
+        return False
+    scale = max(float(np.abs(np.diag(p)).max(initial=0.0)), 1e-300)
+    if np.abs(p - p.T).max(initial=0.0) > 1e-9 * scale:
+        return False
+    return bool(np.linalg.eigvalsh(0.5 * (p + p.T)).min(initial=0.0) >= -1e-9 * scale)
+
+
+def state_problem(identifier: Any, matrices: tuple | None, state: np.ndarray | None) -> str | None:
+    """What is wrong with an identifier's internal state, or None.
+
+    Parameters
+    ----------
+    identifier : OnlineIdentifier
+        Its RLS estimators and Kalman filters are found among its attributes.
+    matrices : tuple of ndarray or None
+        The model ``(A, B, C, D, K)`` it would export now.
+    state : ndarray or None
+        Its state estimate.
+    """
+    for i, est in enumerate(_estimators(identifier)):
+        if isinstance(est, RecursiveLeastSquares):
+            if not np.all(np.isfinite(est.theta)):
+                return f"estimate {i} not finite"
+            if not _positive_definite(est.P):
+                return f"covariance {i} not positive definite"
+        else:
+            if est.x is not None and not np.all(np.isfinite(est.x)):
+                return f"filter state {i} not finite"
+            if not _positive_semidefinite(est.P):
+                return f"filter covariance {i} not positive semi-definite"
+    if matrices is not None and not all(np.all(np.isfinite(m)) for m in matrices
+                                        if m is not None):
+        return "model not finite"
+    if state is not None and not np.all(np.isfinite(state)):
+        return "state not finite"
+    return None
