@@ -32,11 +32,9 @@ DEFAULT_SETTINGS: Mapping[str, Any] = MappingProxyType({
 #: loop that holds the spacecraft still (the adaptive LQG's): the Kalman
 #: filter assumes 0.05 N m of unmodelled torque instead of 10 (the open-loop
 #: value, 100 times the loop's torque after warm-up, made the filter follow
-#: the sensor noise into the modal states) and the rigid-body gains remember
-#: 100 s instead of 20 s (the loop's 0.1 N m of excitation carries little
-#: information per second). docs/results/control.md gives the measurements.
-CLOSED_LOOP_SETTINGS: Mapping[str, Any] = MappingProxyType({
-    "process_torque": 0.05, "rigid_forgetting": 0.999})
+#: the sensor noise into the modal states). docs/results/control.md gives the
+#: measurements.
+CLOSED_LOOP_SETTINGS: Mapping[str, Any] = MappingProxyType({"process_torque": 0.05})
 
 
 def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,

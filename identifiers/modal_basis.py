@@ -28,7 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ["HighPass", "ModalFilterBank", "Resonator", "mode_zoh"]
+from identifiers.modal_kernels import bank_step, oscillator_zoh_derivatives
+
+__all__ = ["MAX_DAMPING", "MIN_DAMPING", "HighPass", "ModalFilterBank", "Resonator", "mode_zoh"]
+
+#: Range a tracked resonator's damping ratio is kept in.
+MIN_DAMPING, MAX_DAMPING = 1e-4, 0.3
 
 
 @dataclass(frozen=True)
@@ -117,6 +122,11 @@ class ModalFilterBank:
     rate_to_attitude : float
         ``(rate level) / (attitude level)``: converts the normalized rate into
         normalized attitude increments (``psi_n += dt * ratio * omega_n``).
+    sensitivities : bool
+        Also run the derivative filters: every resonator state's derivative
+        with respect to the resonator's log-frequency and damping ratio
+        (:meth:`sensitivity`), which the modal tracker regresses on, and
+        which let :meth:`recenter` move a resonator without restarting it.
 
     Notes
     -----
@@ -132,17 +142,22 @@ class ModalFilterBank:
                                    the last restart
     ``step``, ``ramp``    2        1 and ``t - t_restart`` (s)
     ====================  =======  =====================================
+
+    One sample is one compiled pass (:func:`identifiers.modal_kernels.bank_step`).
     """
 
     def __init__(self, resonators: tuple[Resonator, ...] | list[Resonator], dt: float,
-                 rate_to_attitude: float = 1.0) -> None:
+                 rate_to_attitude: float = 1.0, sensitivities: bool = False) -> None:
         self.resonators = tuple(resonators)
         self.dt = float(dt)
         self.ratio = float(rate_to_attitude)
-        mats = [mode_zoh(r.frequency_hz, r.damping, self.dt) for r in self.resonators]
-        m = len(mats)
-        self._a = np.array([a for a, _ in mats]).reshape(m, 2, 2)
-        self._b = np.array([b for _, b in mats]).reshape(m, 2)
+        self.sensitivities = bool(sensitivities)
+        m = len(self.resonators)
+        self._a = np.zeros((m, 2, 2))
+        self._b = np.zeros((m, 2))
+        self._da = np.zeros((m, 2, 2, 2))
+        self._db = np.zeros((m, 2, 2))
+        self._set_matrices()
         self.n_flexible = 6 * m
         self.size = 6 + self.n_flexible + 2 * m + 2
         self.slices = {"attitude": slice(0, 3), "rate": slice(3, 6),
@@ -151,6 +166,11 @@ class ModalFilterBank:
                        "step": slice(self.size - 2, self.size - 1),
                        "ramp": slice(self.size - 1, self.size)}
         self.reset()
+
+    def _set_matrices(self) -> None:
+        for i, r in enumerate(self.resonators):
+            a, b, da, db = oscillator_zoh_derivatives(r.frequency_hz, r.damping, self.dt)
+            self._a[i], self._b[i], self._da[i], self._db[i] = a, b, da, db
 
     @property
     def mode_matrices(self) -> tuple[np.ndarray, np.ndarray]:
@@ -163,32 +183,73 @@ class ModalFilterBank:
         self._p = np.zeros(3)
         self._v = np.zeros(3)
         self._q = np.zeros((m, 3, 2))          # per resonator, per axis: [q, q']
+        self._dq = np.zeros((m, 2, 3, 2))      # per resonator, parameter, axis: d[q, q']
         self.restart()
 
     def restart(self) -> None:
         """Restart the initial-condition regressors (at the start, after a change)."""
-        m = len(self.resonators)
-        self._free = np.zeros((m, 2, 2))
-        self._free[:, 0, 0] = self._free[:, 1, 1] = 1.0
+        self.restart_free()
         self._since = 0
 
     def restart_free(self) -> None:
         """Restart only the resonators' free responses."""
-        self._free = np.zeros_like(self._free)
+        m = len(self.resonators)
+        self._free = np.zeros((m, 2, 2))
         self._free[:, 0, 0] = self._free[:, 1, 1] = 1.0
+        self._dfree = np.zeros((m, 2, 2, 2))
 
     def regressor(self) -> np.ndarray:
         """The regressor of the current sample (states before its torque acts)."""
-        return np.concatenate((self._p, self._v, self._q.ravel(),
-                               self._free[:, 0, :].ravel(),
-                               (1.0, self._since * self.dt)))
+        out = np.empty(self.size)
+        m6 = self.n_flexible
+        out[0:3] = self._p
+        out[3:6] = self._v
+        out[6:6 + m6] = self._q.ravel()
+        out[6 + m6:self.size - 2] = self._free[:, 0, :].ravel()
+        out[self.size - 2] = 1.0
+        out[self.size - 1] = self._since * self.dt
+        return out
+
+    def sensitivity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Derivatives of the flexible regressors by each resonator's parameters.
+
+        Returns
+        -------
+        dq : (M, 2, 3, 2) ndarray
+            ``dq[i, p, a]``: derivative of resonator i's ``[q, q']`` on torque axis a
+            by its parameter p (0: log-frequency, 1: damping ratio).
+        dfree : (M, 2, 2) ndarray
+            ``dfree[i, p]``: derivative of its two free-response regressors.
+        """
+        return self._dq, self._dfree[:, :, 0, :]
 
     def step(self, u: np.ndarray) -> None:
         """Advance every filter by one sample under torque ``u`` (normalized, (3,))."""
-        dt = self.dt
-        self._p = self._p + dt * self.ratio * self._v + 0.5 * dt * dt * self.ratio * u
-        self._v = self._v + dt * u
-        self._q = np.einsum("mij,maj->mai", self._a, self._q) + self._b[:, None, :] * u[None, :,
-                                                                                           None]
-        self._free = np.einsum("mij,mjk->mik", self._a, self._free)
+        bank_step(np.asarray(u, dtype=float), self.dt, self.ratio, self._p, self._v, self._q,
+                  self._free, self._a, self._b, self._dq, self._dfree, self._da, self._db,
+                  self.sensitivities)
         self._since += 1
+
+    def recenter(self, dlogf: np.ndarray, dzeta: np.ndarray) -> None:
+        """Move every resonator by ``(dlogf, dzeta)`` (log-frequency, damping ratio).
+
+        The filter states are corrected to first order with the derivative
+        filters (``s <- s + dlogf ds/dlogf + dzeta ds/dzeta``), so the bank's
+        regressors stay those of the new resonators driven by the past
+        torques, without a restart.
+
+        Raises
+        ------
+        RuntimeError
+            If the bank runs without sensitivities.
+        """
+        if not self.sensitivities:
+            raise RuntimeError("recenter needs a bank built with sensitivities=True")
+        d = np.stack([np.asarray(dlogf, float), np.asarray(dzeta, float)], axis=1)   # (M, 2)
+        self._q += np.einsum("mp,mpai->mai", d, self._dq)
+        self._free += np.einsum("mp,mpik->mik", d, self._dfree)
+        self.resonators = tuple(
+            Resonator(r.frequency_hz * float(np.exp(d[i, 0])),
+                      float(np.clip(r.damping + d[i, 1], MIN_DAMPING, MAX_DAMPING)), r.rank)
+            for i, r in enumerate(self.resonators))
+        self._set_matrices()

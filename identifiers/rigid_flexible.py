@@ -4,43 +4,48 @@ A recursive subspace identifier estimates everything, even what physics
 already fixes, and on this plant it scatters the three double integrators
 (a Jordan block at ``z = 1``) over ``1 +- 0.002``, which ruins every
 long-horizon prediction. :class:`RigidFlexibleIdentifier` uses what is
-known:
+known and is composed of separate parts, each in its own module:
 
-1. **Kinematics.** Attitude integrates rate, and rate integrates torque
-   through the inverse inertia: exact ZOH double integrators per axis with
-   an unknown gain ``G = J(t)^-1``.
-2. **Modal structure.** The flexible modes are resonators whose frequencies
-   are found from data (:mod:`identifiers.modal_discovery`) or given as a
-   prior. Given the frequencies, every output is *linear* in the unknown
-   gains (:mod:`identifiers.modal_basis`). A displacement sensor (attitude,
-   deflection) sees a mode through its coordinate and a velocity sensor
-   (rate) through its rate, and deflections see no rigid-body term
-   (:data:`spacecraft_conventions.MEASURES`), so each sensor group has its
-   own recursive least squares over the regressors physics allows it
-   (:class:`~identifiers.rls.RecursiveLeastSquares`, on high-passed signals
-   that remove the constants and ramps of unknown initial conditions). The
-   rigid gains forget faster than the modal couplings (vector forgetting).
-3. **Modes are resolved by long records.** Modes 2 % apart need hundreds of
-   seconds to separate. The warm-up's modes are a start; every 50 s the
-   search is run again on the record kept so far (up to 300 s), and when
-   the modes found have moved, the estimator is rebuilt on them and the
-   record replayed.
-4. **Changes are abrupt.** A docking shows in the rate regression's
-   errors. A generalized likelihood-ratio test
-   (:mod:`identifiers.change_detection`) flags it; the covariance of the
-   rigid gains is inflated and the initial-condition regressors restart.
-   Events are exposed in :attr:`~RigidFlexibleIdentifier.events`.
+1. **Kinematics and modal structure** (:mod:`identifiers.modal_basis`).
+   Attitude integrates rate, and rate integrates torque through the inverse
+   inertia ``G = J(t)^-1``; the flexible modes are resonators. Given their
+   frequencies every output is *linear* in the unknown gains. A
+   displacement sensor (attitude, deflection) sees a mode through its
+   coordinate, a velocity sensor (rate) through its rate, and deflections
+   see no rigid-body term (:data:`spacecraft_conventions.MEASURES`), so each
+   sensor group has its own regression over the regressors physics allows
+   it, on high-passed signals that remove the constants and ramps of
+   unknown initial conditions.
+2. **The gains** (:mod:`identifiers.rls`): per sensor group a Kalman filter
+   over parameters that drift as random walks (``drift``): the rigid gains
+   drift fast (a docking changes them at once, and they are well excited),
+   the modal couplings slowly. Unlike per-parameter forgetting (which
+   biased the rigid gain by 4-15 % on a constant plant, see
+   docs/design/identification.md) this is the exact conditional mean for
+   that parameter model, and its covariance, scaled by the measured residual
+   variance, is the calibrated uncertainty of the rigid-body gain
+   (:class:`~identifiers.rigid_gain.RigidGainEstimate`, :attr:`rigid_gain`).
+3. **The modes** are *found* by a batch search (:mod:`identifiers.modal_discovery`)
+   at the end of the warm-up and again, with a back-off, on the longer
+   record kept since (modes 2 % apart need hundreds of seconds to
+   separate), and *tracked* in between every ``refresh`` samples by variable
+   projection on a forgetting window (:class:`~identifiers.modal_tracker.ModalTracker`):
+   frequencies and damping move a little every second, the filter bank with
+   them (its states corrected to first order), without a rebuild.
+4. **Changes** (:mod:`identifiers.change_detection`): a generalized
+   likelihood-ratio test on the rate regression's errors flags an abrupt
+   change of the inertia; the rigid gains' covariance is inflated, the
+   initial-condition regressors restart and the modal tracker's window
+   restarts (only data after the change inform the modes).
+5. **The state** (:mod:`identifiers.kalman`): a time-varying Kalman filter
+   on the current model, with the sensor noise estimated from its
+   innovations; its predictor gain is the model's ``K``.
 
-Model exported at every sample (innovation form, order ``n``): the state is
-``[psi (3); omega (3); one complex mode per resonator rank as 2 real
-states]``; each resonator's couplings are factored into input and output
-vectors by a complex SVD (exact for a non-classically damped mode, whose
-residue is complex rank one), with input vectors of unit norm and their
-phase aligned from one export to the next so the state keeps its meaning
-(until the modes are rebuilt). The state estimate is a time-varying Kalman
-filter (:class:`~identifiers.kalman.KalmanPredictor`) on the current
-model, with the sensor noise estimated from its innovations; its predictor
-gain is the model's ``K``.
+Model exported every ``refresh`` samples (innovation form, order ``n``):
+the state is ``[psi (3); omega (3); one complex mode per resonator rank as 2
+real states]``; each resonator's couplings are factored into input and
+output vectors by a complex SVD, with input vectors of unit norm and their
+phase aligned from one export to the next so the state keeps its meaning.
 
 The design, the choices and their measured effect are in
 ``docs/design/identification.md``.
@@ -59,20 +64,31 @@ from identifiers.change_detection import ChangeEvent, RegressionGLR
 from identifiers.kalman import KalmanPredictor
 from identifiers.modal_basis import HighPass, ModalFilterBank, Resonator
 from identifiers.modal_discovery import discover_resonators, merge_resonators
+from identifiers.modal_tracker import ModalTracker, TrackerGroup
+from identifiers.rigid_gain import RigidGainEstimate
 from identifiers.rls import RecursiveLeastSquares
 from spacecraft_conventions import MEASURES, NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["ATTITUDE_STATES", "FILTER_TAIL", "FLEXIBLE_FLOOR", "RATE_STATES", "RESOLUTION",
-           "RigidFlexibleIdentifier"]
+__all__ = ["ATTITUDE_STATES", "FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "RATE_STATES",
+           "REBUILD_TOLERANCE", "REPLAY", "RESOLUTION", "RigidFlexibleIdentifier"]
 
 #: States of the exported model that are the attitude (its first three) and
 #: the body rate (the next three); the flexible modes follow.
 ATTITUDE_STATES = slice(0, 3)
 RATE_STATES = slice(3, 6)
 
-#: Tikhonov floor of the flexible couplings (unit-RMS regressors): the
-#: information a coupling keeps when the data stop exciting it.
+#: Initial covariance of every gain (unit-RMS regressors, units of the output
+#: noise variance): a vague prior.
+INITIAL_COVARIANCE = 1e4
+#: Information floor of the flexible couplings (unit-RMS regressors): the
+#: variance of a coupling the data do not excite settles at its inverse.
 FLEXIBLE_FLOOR = 1e-2
+#: A search's modes replace the tracked ones only if their number or ranks
+#: differ, or a frequency by more than this (relative): smaller moves are the
+#: tracker's.
+REBUILD_TOLERANCE = 0.02
+#: Samples replayed after a rebuild (the last 150 s of the kept record).
+REPLAY = 1500
 #: Samples at the end of a replay over which the Kalman filter runs (the gains
 #: learn from the whole replay): its state settles within a few hundred.
 FILTER_TAIL = 300
@@ -130,18 +146,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         mode is exported as inert states (zero rows and columns).
     dt : float
         Sample time, s.
-    forgetting : float
-        Forgetting of the gain estimates (memory ``1 / (1 - forgetting)``
-        samples; default 0.998: 50 s).
-    rigid_forgetting : float
-        Forgetting of the rigid-body gains ``G`` (default 0.99: a 10 s
-        memory): they change at once at a docking, and three well-excited
-        gains per axis need little data. See
-        :class:`~identifiers.rls.RecursiveLeastSquares` (vector forgetting).
-    rigid_floor : float
-        Information floor of the rigid gains (unit-RMS regressors): it bounds
-        their covariance when the data stop exciting them (in regulation)
-        without pulling them toward 0.
+    rigid_drift, coupling_drift, initial_drift : float
+        Random-walk variance per sample of the rigid-body gains, the modal
+        couplings and the initial-condition terms, in units of the output
+        noise variance (unit-RMS regressors): how fast each may change (see
+        :class:`~identifiers.rls.RecursiveLeastSquares`, ``drift``). The rigid
+        gains change at once at a docking and through the paddles' geometry;
+        the couplings change slowly with the mode shapes.
     warmup : int
         Samples collected before the modes are found and a model is given
         (default 500: 50 s at dt = 0.1 s).
@@ -169,26 +180,24 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         raised the one-step rate VAF from 98.2 to 99.8 % (persistence: 99.9)
         and the 10 s deflection VAF from 81 to 91 %.
     refresh : int
-        Samples between exports of the minimal model (the Kalman filter
-        runs every sample).
+        Samples between exports of the minimal model and between refinements
+        of the modes (the Kalman filter runs every sample).
+    track_modes : bool
+        Track the modal frequencies and damping every ``refresh`` samples
+        (:class:`~identifiers.modal_tracker.ModalTracker`).
+    tracking_memory : float
+        Forgetting of the tracker's window (default 0.998: 50 s).
     rediscover : int or None
-        Samples between searches for the modes in the longer record kept
-        since warm-up or the last detected change (default 500: 50 s). Close
-        modes that 50 s cannot separate are resolved as data accumulate; when
-        the modes found differ (frequency by more than 0.5 %, or their
-        number), the estimator is rebuilt on them and the kept record is
-        replayed (a cost of about a millisecond per kept sample, paid once).
-        None keeps the warm-up's modes.
+        Samples from the end of the warm-up to the next search for the modes
+        in the longer record kept since; every later search waits twice as
+        long (back-off: 50, 100, 200 s, ...), the record being longer each
+        time. Close modes that 50 s cannot separate are resolved as data
+        accumulate; when the number of modes found or their ranks differ, or
+        a frequency by more than 2 % from the tracked one, the estimator is
+        rebuilt on them and the kept record is replayed. None keeps the
+        warm-up's modes.
     history : int
         Most recent samples kept for the searches (default 3000: 300 s).
-    gate : float or None
-        Excitation-gated forgetting of the gains (see
-        :class:`~identifiers.rls.RecursiveLeastSquares`): a sample forgets
-        only in proportion to how informative it is, relative to ``gate``
-        times the typical sample that set the estimate (default 0.25). In a
-        closed loop that holds the spacecraft still the estimates then keep
-        what they learnt instead of drifting with the sensor noise. None:
-        plain forgetting.
     outlier_threshold : float, optional
         Reject samples whose normalized innovation exceeds this on any
         channel (default 100).
@@ -204,22 +213,22 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     events : list of ChangeEvent
         Changes detected so far.
     n_rediscoveries : int
-        Times the modes were found to have moved and the estimator rebuilt.
+        Times a search found other modes and the estimator was rebuilt.
     """
 
     # the filter bank and high-passes run on the signals (kept current by a rollback);
     # the recorded samples are tuples of arrays that are never changed in place
-    _SIGNAL_STATE = ("_phi", "_bank", "_hp_x", "_hp_y")
+    _SIGNAL_STATE = ("_phi", "_bank", "_hp_x", "_hp_y", "_hp_dq", "_hp_dfree")
     _SHARED_ITEMS = ("_pending", "_buffer", "_history")
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
-                 dt: float = 0.1, forgetting: float = 0.998, rigid_forgetting: float = 0.995,
-                 rigid_floor: float = 1e-4, warmup: int = 500,
+                 dt: float = 0.1, rigid_drift: float = 3e-5, coupling_drift: float = 1e-7,
+                 initial_drift: float = 1e-5, warmup: int = 500,
                  prior: Sequence[Resonator] | None = None, highpass: float = 0.97,
                  detect_changes: bool = True, change_threshold: float = 6.0,
                  discount: float = 10.0, process_torque: float = 10.0, refresh: int = 10,
+                 track_modes: bool = True, tracking_memory: float = 0.998,
                  rediscover: int | None = 500, history: int = 3000,
-                 gate: float | None = 0.25,
                  outlier_threshold: float | None = 100.0,
                  input_scale: ArrayLike | None = None, output_scale: ArrayLike | None = None,
                  max_abs: float = 1e6) -> None:
@@ -244,23 +253,25 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self.discount = _positive_float("discount", discount)
         self.process_torque = _positive_float("process_torque", process_torque)
         self.refresh = _positive_int("refresh", refresh)
-        if not 0 < rigid_forgetting <= 1:
-            raise ValueError(f"rigid_forgetting must be in (0, 1], got {rigid_forgetting}")
-        self.rigid_forgetting = float(rigid_forgetting)
-        if not (np.isfinite(rigid_floor) and rigid_floor >= 0):
-            raise ValueError(f"rigid_floor must be >= 0, got {rigid_floor}")
-        self.rigid_floor = float(rigid_floor)
+        for name, value in (("rigid_drift", rigid_drift), ("coupling_drift", coupling_drift),
+                            ("initial_drift", initial_drift)):
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be >= 0, got {value}")
+        self.rigid_drift = float(rigid_drift)
+        self.coupling_drift = float(coupling_drift)
+        self.initial_drift = float(initial_drift)
+        self.track_modes = bool(track_modes)
+        if not 0 < tracking_memory < 1:
+            raise ValueError(f"tracking_memory must be in (0, 1), got {tracking_memory}")
+        self.tracking_memory = float(tracking_memory)
         self.rediscover = None if rediscover is None else _positive_int("rediscover", rediscover)
         self.history = _positive_int("history", history)
-        if gate is not None and not (np.isfinite(gate) and gate > 0):
-            raise ValueError(f"gate must be a positive fraction or None, got {gate}")
-        self.gate = None if gate is None else float(gate)
         self.outlier_threshold = (None if outlier_threshold is None
                                   else _positive_float("outlier_threshold", outlier_threshold))
         scales = (np.full(3, NOMINAL_TORQUE) if input_scale is None else input_scale,
                   self.layout.scales() if output_scale is None else output_scale)
         warmup = _positive_int("warmup", warmup)
-        super().__init__(n, 2, forgetting, dt=dt, warmup=max(warmup, 100),
+        super().__init__(n, 2, 1.0, dt=dt, warmup=max(warmup, 100),
                          input_scale=scales[0], output_scale=scales[1], max_abs=max_abs)
         self._noise_gain = _highpass_noise_gain(self.highpass)
 
@@ -276,6 +287,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._history: deque[tuple[np.ndarray, np.ndarray, bool, bool]] = deque(
             maxlen=self.history)
         self._next_discovery = 0
+        self._search_interval = self.rediscover or 0
+        self._tracker: ModalTracker | None = None
         self.n_rediscoveries = 0
         self._mats = None
         self._torque_noise: tuple = (None, None)
@@ -318,9 +331,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     def _new_signal_state(self) -> None:
         """Fresh filter bank (on the current resonators), high-passes and Kalman
         filter: everything that describes the signals of one record."""
-        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio)
+        self._bank = ModalFilterBank(self.resonators, self.dt, self._ratio,
+                                     sensitivities=self.track_modes)
         self._hp_x = HighPass(self._bank.size, self.highpass)
         self._hp_y = HighPass(self.n_outputs, self.highpass)
+        n_res = len(self.resonators)
+        self._hp_dq = HighPass(12 * n_res, self.highpass)
+        self._hp_dfree = HighPass(4 * n_res, self.highpass)
         self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
 
     def _check_sizes(self, r: int, m: int) -> None:
@@ -393,6 +410,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         else:
             start = self._find_resonators()
         self._rebuild(start, len(buffer))
+        self._search_interval = self.rediscover or 0
+        self._next_discovery = self._k + 1 + self._search_interval
 
     def _find_resonators(self) -> list[Resonator]:
         """The flexible modes the kept history shows."""
@@ -414,6 +433,10 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                 return list(self.resonators)
             k, seen = np.arange(len(real)), np.flatnonzero(~filled)
             y = np.column_stack([np.interp(k, seen, col[seen]) for col in y.T])
+        # every channel at unit RMS: a tip sensor's own appendage modes (weak in the
+        # torque-to-rate response) weigh as much as the hub's
+        rms = np.sqrt(np.mean(y**2, axis=0))
+        y = y / np.where(rms > 0, rms, 1.0)
         try:
             found = discover_resonators(u, y, budget, self.dt)
         except (ValueError, np.linalg.LinAlgError):     # too short or degenerate a record
@@ -424,41 +447,47 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         """Build the estimator on ``resonators`` and replay the last ``replay`` samples."""
         self.resonators = tuple(resonators)
         self._new_signal_state()
-        size = self._bank.size
+        bank = self._bank
+        size = bank.size
         m = self.n_outputs
+        n_res = len(self.resonators)
         samples = list(self._history)[-replay:]
-        # the high-passed regressors of the replayed samples, computed once: they set
-        # the regressor scales (unit-RMS columns) and are then replayed as they are,
-        # leaving the bank and its high-pass where the replay ends
-        rows = []
+        # the high-passed regressors (and their derivatives by the modal parameters) of
+        # the replayed samples, computed once: they set the regressor scales (unit-RMS
+        # columns) and are then replayed as they are, leaving the bank and its
+        # high-passes where the replay ends
+        rows, sens = [], []
         for uk, *_ in samples:
-            rows.append(self._hp_x(self._bank.regressor()))
-            self._bank.step(uk)
+            rows.append(self._hp_x(bank.regressor()).copy())
+            sens.append(self._sensitivity_row())
+            bank.step(uk)
         scale = np.sqrt(np.mean(np.array(rows) ** 2, axis=0))
-        scale[self._bank.slices["free"]] = 1.0
-        scale[self._bank.slices["step"]] = 1.0
-        scale[self._bank.slices["ramp"]] = self.dt
+        scale[bank.slices["free"]] = 1.0
+        scale[bank.slices["step"]] = 1.0
+        scale[bank.slices["ramp"]] = self.dt
         self._scale = np.where(scale > 0, scale, 1.0)
-        # Tikhonov floors: the flexible couplings are many and weakly excited (noise
-        # would be fitted there); the rigid gains and the initial-condition terms
-        # are few, well excited, and a floor would bias them through their
-        # collinearity during transients
-        floor = np.full(size, 1e-4)
-        floor[self._bank.slices["flexible"]] = FLEXIBLE_FLOOR
-        lam = np.full(size, self.forgetting)
+        # random-walk drift per sample, and an information floor: the flexible couplings
+        # are many and weakly excited (noise would be fitted there); the rigid gains
+        # are never 0, so their floor bounds the covariance without pulling them
+        drift = np.full(size, self.initial_drift)
+        floor = np.full(size, 1.0 / INITIAL_COVARIANCE)
         hold = np.zeros(size, dtype=bool)
-        for block in ("attitude", "rate"):          # the rigid gains
-            rigid = self._bank.slices[block]
-            floor[rigid] = self.rigid_floor
-            # they forget faster than the rest: a docking changes them at once, and
-            # three well-excited gains per axis need little memory
-            lam[rigid] = self.rigid_forgetting
-            # they are never 0: their floor bounds P but does not pull them
-            hold[rigid] = True
-        self._fits = [(rows, cols, RecursiveLeastSquares(rows.size, cols.size, lam[cols],
-                                                         1e4, regularization=floor[cols],
-                                                         hold=hold[cols], gate=self.gate))
-                      for rows, cols in self._regression_groups()]
+        drift[bank.slices["flexible"]] = self.coupling_drift
+        floor[bank.slices["flexible"]] = FLEXIBLE_FLOOR
+        for block in ("attitude", "rate"):                   # the rigid gains
+            drift[bank.slices[block]] = self.rigid_drift
+            hold[bank.slices[block]] = True
+        self._fits = []
+        for rows_g, cols in self._regression_groups():
+            rls = RecursiveLeastSquares(rows_g.size, cols.size, 1.0, INITIAL_COVARIANCE,
+                                        regularization=floor[cols], hold=hold[cols],
+                                        drift=drift[cols])
+            # the prior is the floor: a coupling the data have not excited yet has the
+            # variance it settles at when they stop exciting it
+            rls.set_covariance(np.diag(np.minimum(INITIAL_COVARIANCE, 1.0 / floor[cols])))
+            self._fits.append((rows_g, cols, rls))
+        self._tracker = (ModalTracker(self._tracker_groups(), n_res, self.tracking_memory)
+                         if self.track_modes and n_res else None)
         if self._detector is None:
             self._detector = RegressionGLR(threshold=self.change_threshold, dt=self.dt)
         else:
@@ -467,41 +496,71 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             self._r = np.full(m, 1e-4)
         self._mats = None
         self._phases = {}
-        # replay: the gains learn from every sample; the Kalman filter (and the
-        # exports it needs) only over the last FILTER_TAIL, enough for its state
-        # to settle on the new model
+        # replay: the gains and the modal tracker learn from every sample; the Kalman
+        # filter (and the exports it needs) only over the last FILTER_TAIL, enough for
+        # its state to settle on the new model
         start_k = self._k - len(samples) + 1
         tail = len(samples) - min(len(samples), FILTER_TAIL)
         for j, (uk, yk, learn, real) in enumerate(samples):
             self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail,
-                         regressor=rows[j])
-        self._next_discovery = self._k + 1 + (self.rediscover or 0)
+                         regressor=rows[j], sensitivity=sens[j])
+
+    def _sensitivity_row(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """High-passed derivatives of the flexible and free-response regressors by the
+        modal parameters at the current sample (advances their high-passes)."""
+        if not self.track_modes or not self.resonators:
+            return None
+        n_res = len(self.resonators)
+        dq, dfree = self._bank.sensitivity()
+        return (self._hp_dq(dq.ravel()).reshape(n_res, 2, 3, 2).copy(),
+                self._hp_dfree(dfree.ravel()).reshape(n_res, 2, 2).copy())
+
+    def _tracker_groups(self) -> list[TrackerGroup]:
+        """The sensor groups as the modal tracker sees them."""
+        bank = self._bank
+        n_res = len(self.resonators)
+        idx = np.arange(bank.size)
+        flexible = idx[bank.slices["flexible"]].reshape(n_res, 3, 2)
+        free = idx[bank.slices["free"]].reshape(n_res, 2)
+        groups = []
+        for (rows, cols, _), (name, _r) in zip(self._fits, self.layout, strict=True):
+            component = int(MEASURES[name] == "velocity")
+            where = {c: j for j, c in enumerate(cols)}
+            flex_pos = np.array([[where[flexible[i, a, component]] for a in range(3)]
+                                 for i in range(n_res)], dtype=int).reshape(n_res, 3)
+            free_pos = np.array([[where[free[i, c]] for c in range(2)] for i in range(n_res)],
+                                dtype=int).reshape(n_res, 2)
+            groups.append(TrackerGroup(rows, cols, flex_pos, free_pos, component))
+        return groups
 
     def _maybe_rediscover(self) -> None:
-        """Look for the modes again in the longer history; rebuild if they moved."""
+        """Look for the modes again in the longer history; rebuild if they differ."""
         if (not self.rediscover or self._k + 1 < self._next_discovery
                 or len(self._history) < self.warmup):
             return
-        self._next_discovery = self._k + 1 + self.rediscover
+        self._search_interval *= 2
+        self._next_discovery = self._k + 1 + self._search_interval
         found = self._find_resonators()
-        if _same_modes(found, self.resonators):
+        if _same_modes(found, self.resonators, REBUILD_TOLERANCE):
             return
         self.n_rediscoveries += 1
-        # replay three memories of the couplings: older samples would carry no weight
-        self._rebuild(found, min(len(self._history), round(3.0 / (1.0 - self.forgetting))))
+        self._rebuild(found, min(len(self._history), REPLAY))
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
                 replay_k: int | None = None, filtering: bool = True,
-                regressor: np.ndarray | None = None, seen: np.ndarray | None = None) -> None:
+                regressor: np.ndarray | None = None, seen: np.ndarray | None = None,
+                sensitivity: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """One sample: Kalman filter on the current model (if ``filtering``), the
-        gains' RLS, the change test (live samples only), the filter bank, and an
-        export every ``refresh`` samples (if ``filtering``). A replay passes the
-        sample's high-passed ``regressor``, computed when the bank was rebuilt
-        (the bank has then already run past it)."""
+        gains' regressions, the change test (live samples only), the modal tracker,
+        the filter bank, and an export and a modal refinement every ``refresh``
+        samples (if ``filtering``). A replay passes the sample's high-passed
+        ``regressor`` and ``sensitivity``, computed when the bank was rebuilt (the
+        bank has then already run past it)."""
         k = self._k if replay_k is None else replay_k
         bank = self._bank
         if regressor is None:
             phi = self._hp_x(bank.regressor()) / self._scale
+            sensitivity = self._sensitivity_row()
         else:
             phi = regressor / self._scale
         y_f = self._hp_y(y)
@@ -534,13 +593,61 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                     self._sigvar = 0.995 * self._sigvar + 0.005 * s2
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
+            if self._tracker is not None and sensitivity is not None:
+                flex, free = self._modal_scales
+                self._tracker.update(phi, sensitivity[0] / flex, sensitivity[1] / free, y_f)
         if regressor is None:
             bank.step(u)
+        if replay_k is None and (k + 1) % self.refresh == 0:
+            self._refine_modes()
         if filtering and ((k + 1) % self.refresh == 0 or self._mats is None):
             self._export()
         if replay_k is None:
             self._history.append((u, y, learn, real))
             self._maybe_rediscover()
+
+    @property
+    def _modal_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """Column scales of the flexible (M, 1, 3, 2) and free-response (M, 1, 2)
+        regressors, shaped to divide their derivatives."""
+        cached = self.__dict__.get("_modal_scale_cache")
+        if cached is not None and cached[0] is self._scale:
+            return cached[1]
+        bank = self._bank
+        n_res = len(self.resonators)
+        idx = np.arange(bank.size)
+        flex = self._scale[idx[bank.slices["flexible"]]].reshape(n_res, 1, 3, 2)
+        free = self._scale[idx[bank.slices["free"]]].reshape(n_res, 1, 2)
+        self.__dict__["_modal_scale_cache"] = (self._scale, (flex, free))
+        return flex, free
+
+    def _refine_modes(self) -> None:
+        """One variable-projection step on the tracker's window; move the resonators,
+        the filter bank (states corrected to first order), the high-passes of its
+        regressors and the tracker's linearization point by the step."""
+        tracker = self._tracker
+        if tracker is None:
+            return
+        delta = tracker.refine()
+        if delta is None:
+            return
+        bank = self._bank
+        n_res = len(self.resonators)
+        idx = np.arange(bank.size)
+        flex = idx[bank.slices["flexible"]].reshape(n_res, 3, 2)
+        free = idx[bank.slices["free"]].reshape(n_res, 2)
+        # the high-pass is linear: its state for (regressor + delta * derivative) is its
+        # state for the regressor plus delta times its state for the derivative
+        for hp_d, columns, shape, spec in ((self._hp_dq, flex, (n_res, 2, 3, 2), "mp,mpai->mai"),
+                                           (self._hp_dfree, free, (n_res, 2, 2), "mp,mpc->mc")):
+            for j in range(2):
+                self._hp_x._last[j, columns] += np.einsum(spec, delta,
+                                                          hp_d._last[j].reshape(shape))
+                self._hp_x._out[j, columns] += np.einsum(spec, delta,
+                                                         hp_d._out[j].reshape(shape))
+        bank.recenter(delta[:, 0], delta[:, 1])
+        self.resonators = bank.resonators
+        tracker.recenter(delta)
 
     def _regression_groups(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Rows of ``y`` and the regressor columns physics allows them, per sensor group.
@@ -618,6 +725,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._discount_rigid()
         self._bank.restart()
         self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))))
+        if self._tracker is not None:
+            self._tracker.reset()
 
     def _discount_rigid(self) -> None:
         """Multiply the covariance of the rigid gains and initial-condition terms by
@@ -719,11 +828,43 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         return ATTITUDE_STATES, RATE_STATES
 
     @property
+    def rigid_gain(self) -> RigidGainEstimate | None:
+        """The rigid-body gain ``G = J^-1`` (rad/s^2 per N m) with its calibrated
+        covariance (:class:`~identifiers.rigid_gain.RigidGainEstimate`), from the rate
+        regression; None before warm-up."""
+        if not self._fits or self._resvar is None:
+            return None
+        bank = self._bank
+        rate = self.layout.slice("rate")
+        rate_cols = np.arange(bank.size)[bank.slices["rate"]]
+        for rows, cols, rls in self._fits:
+            if rows[0] != rate.start:
+                continue
+            where = np.searchsorted(cols, rate_cols) if np.all(np.diff(cols) > 0) else \
+                np.array([int(np.flatnonzero(cols == c)[0]) for c in rate_cols])
+            theta = rls.theta[:, where]
+            p = rls.P[np.ix_(where, where)]
+            return RigidGainEstimate.from_regression(
+                theta, p, self._resvar[rate], self._sy[rate],
+                self._scale[rate_cols] * self._su)
+        return None
+
+    @property
+    def mode_estimates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The tracked resonators: frequencies (Hz), damping ratios and the covariance
+        of ``[log f_1, zeta_1, ..., log f_M, zeta_M]`` from the last refinement (None
+        before one or without tracking)."""
+        freq = np.array([r.frequency_hz for r in self.resonators])
+        zeta = np.array([r.damping for r in self.resonators])
+        cov = None if self._tracker is None else self._tracker.covariance
+        return freq, zeta, cov
+
+    @property
     def events(self) -> list[ChangeEvent]:
         """Changes detected so far (empty before warm-up)."""
         return [] if self._detector is None else list(self._detector.events)
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}(n={self.n}, forgetting={self.forgetting}, "
+        return (f"{type(self).__name__}(n={self.n}, "
                 f"modes={[round(r.frequency_hz, 4) for r in self.resonators]}, "
                 f"samples={self.n_samples}, skipped={self.n_skipped}, events={len(self.events)})")

@@ -101,6 +101,16 @@ class RecursiveLeastSquares:
         so the estimate neither drifts with the noise nor loses what it knew;
         as informative data come back, the nominal memory returns. None
         (default): plain forgetting, exactly weighted least squares.
+    drift : float or (d,) array_like, optional
+        Random-walk variance of each parameter per sample, added to the
+        diagonal of ``P`` after every update: with ``forgetting=1`` the
+        recursion is then the Kalman filter of parameters that drift as a
+        random walk (``Theta_k = Theta_{k-1} + w_k``, ``cov(w_k) =
+        noise_variance * diag(drift)``), which tracks change in the
+        parameters that are expected to change and keeps a long memory for
+        the others, without the bias vector forgetting has when regressors
+        are correlated. ``P`` is in units of the measurement noise variance:
+        the estimate's covariance is ``noise_variance * P``. Default 0.
     hold : (d,) array_like of bool, optional
         Coordinates whose floor bounds ``P`` without pulling the estimate:
         the floor is Tikhonov regularization toward 0, right for couplings
@@ -118,7 +128,8 @@ class RecursiveLeastSquares:
 
     def __init__(self, n_outputs: int, n_regressors: int, forgetting: float | ArrayLike = 1.0,
                  initial_covariance: float = 1.0, regularization: float | None = None,
-                 hold: ArrayLike | None = None, gate: float | None = None) -> None:
+                 hold: ArrayLike | None = None, gate: float | None = None,
+                 drift: float | ArrayLike = 0.0) -> None:
         if n_outputs < 1 or n_regressors < 1:
             raise ValueError("n_outputs and n_regressors must be >= 1")
         lam = np.asarray(forgetting, dtype=float)
@@ -145,7 +156,15 @@ class RecursiveLeastSquares:
         if hold_mask.shape != (n_regressors,) or hold_mask.dtype != bool:
             raise ValueError(f"hold must be a boolean array of shape ({n_regressors},)")
         self.hold = hold_mask.copy()
-        self._pseudo_weights = np.sqrt(n_regressors * (1.0 - self._lam) * delta)
+        drift_arr = np.broadcast_to(np.asarray(drift, dtype=float), (n_regressors,))
+        if not (np.all(np.isfinite(drift_arr)) and np.all(drift_arr >= 0)):
+            raise ValueError(f"drift must be >= 0 (a scalar or ({n_regressors},)), got {drift}")
+        self.drift = drift_arr.copy()
+        # the floor's pseudo-rows: w^2 = d (1 - lambda) delta replaces what forgetting
+        # removes; under a random walk of variance q it is w^2 = d q delta^2, for which
+        # the variance of an unexcited coordinate settles at 1 / delta
+        self._pseudo_weights = np.sqrt(n_regressors * ((1.0 - self._lam) * delta
+                                                       + self.drift * delta**2))
         if gate is not None and not (np.isfinite(gate) and gate > 0):
             raise ValueError(f"gate must be a positive fraction or None, got {gate}")
         self.gate = None if gate is None else float(gate)
@@ -192,7 +211,7 @@ class RecursiveLeastSquares:
         accepted, self._scale, self._cycle = rls_step(
             self.theta, self._q, phi, y, self._lam, self.forgetting is None,
             -1.0 if self._gate_level is None else self._gate_level, self._pseudo_weights,
-            self.hold, self._scale, self._cycle, _OVERFLOW_GUARD, err)
+            self.hold, self._scale, self._cycle, _OVERFLOW_GUARD, err, self.drift)
         if not accepted:
             self.n_rejected += 1
             return None

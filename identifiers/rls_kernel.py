@@ -72,7 +72,7 @@ def _rescale_upper(q: np.ndarray, r: np.ndarray, inverse: bool) -> None:
 def rls_step(theta: np.ndarray, q: np.ndarray, phi: np.ndarray, y: np.ndarray,
              lam: np.ndarray, vector: bool, gate_level: float, pseudo_weights: np.ndarray,
              hold: np.ndarray, scale: float, cycle: int, guard: float,
-             err: np.ndarray) -> tuple[bool, float, int]:
+             err: np.ndarray, drift: np.ndarray) -> tuple[bool, float, int]:
     """One RLS update in place (see :meth:`RecursiveLeastSquares.update`).
 
     Parameters
@@ -104,6 +104,9 @@ def rls_step(theta: np.ndarray, q: np.ndarray, phi: np.ndarray, y: np.ndarray,
         Products above this are refused (overflow).
     err : (q,) ndarray
         Receives the a-priori error ``y - Theta phi``.
+    drift : (d,) ndarray
+        Random-walk variance added to the diagonal of ``P`` after the update
+        (the Kalman filter of a drifting parameter); all zeros for none.
 
     Returns
     -------
@@ -149,26 +152,29 @@ def rls_step(theta: np.ndarray, q: np.ndarray, phi: np.ndarray, y: np.ndarray,
     _syr_upper(q, p_phi, -1.0 / (scale * denom))
     if lam_max < 1.0:
         scale /= lam_max
-        i = cycle
-        cycle = (i + 1) % d
-        w = pseudo_weights[i] * np.sqrt(share)
-        if pseudo_weights[i] > 0.0:
-            # pseudo-observation 0 = Theta (w e_i): P (w e_i) is column i of P times w
-            for k in range(i):
-                p_phi[k] = q[k, i] * (scale * w)
-            for k in range(i, d):
-                p_phi[k] = q[i, k] * (scale * w)
-            denom_i = 1.0 + w * p_phi[i]
-            if not hold[i]:                 # pull toward 0; a held coordinate keeps its value
-                pull = -w * theta[:, i]                     # the pseudo-row's error (a copy)
-                for j in range(d):
-                    g = p_phi[j] / denom_i
-                    for a in range(theta.shape[0]):
-                        theta[a, j] += pull[a] * g
-            _syr_upper(q, p_phi, -1.0 / (scale * denom_i))
-        if scale > 1e8:
+    i = cycle
+    cycle = (i + 1) % d
+    w = pseudo_weights[i] * np.sqrt(share)
+    if pseudo_weights[i] > 0.0:
+        # pseudo-observation 0 = Theta (w e_i): P (w e_i) is column i of P times w
+        for k in range(i):
+            p_phi[k] = q[k, i] * (scale * w)
+        for k in range(i, d):
+            p_phi[k] = q[i, k] * (scale * w)
+        denom_i = 1.0 + w * p_phi[i]
+        if not hold[i]:                 # pull toward 0; a held coordinate keeps its value
+            pull = -w * theta[:, i]                     # the pseudo-row's error (a copy)
             for j in range(d):
-                for k in range(j + 1):
-                    q[k, j] *= scale
-            scale = 1.0
+                g = p_phi[j] / denom_i
+                for a in range(theta.shape[0]):
+                    theta[a, j] += pull[a] * g
+        _syr_upper(q, p_phi, -1.0 / (scale * denom_i))
+    if scale > 1e8:
+        for j in range(d):
+            for k in range(j + 1):
+                q[k, j] *= scale
+        scale = 1.0
+    for j in range(d):
+        if drift[j] > 0.0:
+            q[j, j] += drift[j] / scale
     return True, scale, cycle

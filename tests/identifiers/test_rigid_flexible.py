@@ -179,7 +179,8 @@ def test_the_default_restart_of_a_past_window_method_starts_afresh(constant_reco
     ({"layout": OutputLayout.of(("attitude",), n_sensors=0)}, ValueError, "rate"),
     ({"layout": "standard"}, TypeError, "OutputLayout"),
     ({"prior": [0.1]}, TypeError, "Resonator"),
-    ({"rigid_forgetting": 1.5}, ValueError, "rigid_forgetting"),
+    ({"rigid_drift": -1.0}, ValueError, "rigid_drift"),
+    ({"tracking_memory": 1.0}, ValueError, "tracking_memory"),
     ({"highpass": 1.0}, ValueError, "highpass"),
     ({"rediscover": 0}, ValueError, "rediscover"),
 ])

@@ -1,0 +1,316 @@
+"""Tracking a structure's modal frequencies and damping from streaming data.
+
+Given the resonators' frequencies and damping ratios ``rho``, every output
+of the rigid-flexible model is linear in its gains ``Theta``
+(:mod:`identifiers.modal_basis`): ``y = Theta^T phi(rho) + e``. The
+frequencies enter nonlinearly. :class:`ModalTracker` estimates their
+correction ``delta`` by *variable projection* on a forgetting window: the
+gains are projected out (the least-squares ``Theta`` of the window for
+given ``rho``), and ``delta`` minimizes what is left,
+
+    V(delta) = sum_k lambda^(N-k) || y_k - Theta(delta)^T phi_k(rho + delta) ||^2 .
+
+Two facts make this cheap enough to run every second:
+
+* **Taylor regressors.** ``phi(rho + delta) = phi(rho) + sum_j delta_j dphi/drho_j``
+  to first order, and the derivative filters of
+  :class:`~identifiers.modal_basis.ModalFilterBank` give ``dphi/drho`` at
+  every sample. So the window is summarized by the exponentially weighted
+  second moments of the extended regressor ``[phi; dphi]`` and the outputs,
+  updated by one rank-1 step per sample, and ``V`` and its derivatives
+  follow from these moments for any ``delta``.
+* **Re-centring.** After each step the bank moves to ``rho + delta`` (its
+  states corrected to first order) and the moments are transformed to the
+  new linearization point (``phi <- phi + E(delta) dphi``), so ``delta``
+  stays small and the Taylor model accurate.
+
+Each refinement is one Gauss-Newton step on ``V`` (Kaufman's
+approximation of the variable-projection Jacobian) with a
+Levenberg-Marquardt damping, bounded per step, accepted only if it lowers
+``V``. Parameters the window does not inform (a mode the inputs hardly
+excite) do not move. The inverse Gauss-Newton Hessian scaled by the
+window's residual variance is the reported covariance of ``rho``.
+
+The couplings change with the modes, so the projection (gains re-fitted on
+the window) is what lets the frequencies move after a change: a recursive
+estimator that updated the frequencies with the gains held at their old
+values moved them the wrong way on the docking spacecraft (measured while
+designing this, docs/design/identification.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from identifiers.modal_basis import MAX_DAMPING, MIN_DAMPING
+
+__all__ = ["ModalTracker", "TrackerGroup"]
+
+#: Largest log-frequency step per refinement (0.5 %) and damping-ratio step.
+MAX_STEP = (0.005, 0.005)
+#: Smallest relative residual taken as evidence (a 60 dB signal-to-error ratio):
+#: on noise-free data the residual left is the model's structural error.
+RESOLUTION = 1e-3
+
+
+@njit(cache=True, nogil=True)
+def _moments_update(s: np.ndarray, z: np.ndarray, x: np.ndarray, y: np.ndarray,
+                    scale: float, lam: float) -> float:
+    """Exponentially weighted moments ``S += x x^T``, ``Z += x y^T`` after forgetting by
+    ``lam``; stored divided by ``scale`` (forgetting is a rescale). Upper triangle of
+    ``S`` only. Returns the new scale."""
+    scale *= lam
+    inv = 1.0 / scale
+    n = x.shape[0]
+    for j in range(n):
+        xj = x[j] * inv
+        for i in range(j + 1):
+            s[i, j] += x[i] * xj
+        for c in range(y.shape[0]):
+            z[j, c] += xj * y[c]
+    return scale
+
+
+@dataclass
+class TrackerGroup:
+    """One sensor group's part of the tracking problem.
+
+    Attributes
+    ----------
+    rows : (r,) ndarray of int
+        Outputs of the group.
+    columns : (d,) ndarray of int
+        Regressor columns the group's outputs depend on.
+    flexible : (M, 3) ndarray of int
+        Position, within ``columns``, of resonator i's column for torque axis a
+        (its ``q`` for a displacement sensor, ``q'`` for a velocity sensor).
+    free : (M, 2) ndarray of int
+        Position, within ``columns``, of resonator i's two free-response columns.
+    component : int
+        0 (``q``, displacement sensors) or 1 (``q'``, velocity sensors).
+    """
+
+    rows: np.ndarray
+    columns: np.ndarray
+    flexible: np.ndarray
+    free: np.ndarray
+    component: int
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(M, 5): the columns a resonator's parameters move: three axes, two free
+        responses."""
+        return np.concatenate((self.flexible, self.free), axis=1)
+
+
+class ModalTracker:
+    """Variable-projection tracking of resonator frequencies and damping ratios.
+
+    Parameters
+    ----------
+    groups : sequence of TrackerGroup
+    n_resonators : int
+        M.
+    forgetting : float
+        Forgetting of the window moments (memory ``1 / (1 - forgetting)`` samples).
+    damping : bool
+        Track the damping ratios too (default True).
+
+    Attributes
+    ----------
+    covariance : (2 M, 2 M) ndarray or None
+        Covariance of ``[log f_1, zeta_1, ..., log f_M, zeta_M]`` from the last
+        refinement (None before one).
+    n_steps, n_rejected : int
+        Refinements that moved the resonators, and steps refused because they
+        did not lower the window's residual.
+    """
+
+    def __init__(self, groups: list[TrackerGroup], n_resonators: int,
+                 forgetting: float = 0.998, damping: bool = True,
+                 step_std: tuple[float, float] = (0.002, 0.002),
+                 min_samples: float = 400.0) -> None:
+        if not 0.0 < forgetting < 1.0:
+            raise ValueError(f"forgetting must be in (0, 1), got {forgetting}")
+        self.groups = list(groups)
+        self.m = int(n_resonators)
+        self.forgetting = float(forgetting)
+        self.damping = bool(damping)
+        self.step_std = tuple(float(v) for v in step_std)
+        self.min_samples = float(min_samples)
+        self.covariance: np.ndarray | None = None
+        self.n_steps = 0
+        self.n_rejected = 0
+        self._derivs = 10 * self.m           # per group: (resonator, parameter, column)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the window (after a detected change: only data after it inform)."""
+        self._s = [np.zeros((g.columns.size + self._derivs,) * 2, order="F")
+                   for g in self.groups]
+        self._z = [np.zeros((g.columns.size + self._derivs, g.rows.size)) for g in self.groups]
+        self._yy = [0.0 for _ in self.groups]
+        self._scale = 1.0
+        self._count = 0.0                     # effective number of samples in the window
+
+    def update(self, phi: np.ndarray, dphi: np.ndarray, dfree: np.ndarray,
+               y: np.ndarray) -> None:
+        """Add one sample to the window.
+
+        Parameters
+        ----------
+        phi : (size,) ndarray
+            The (high-passed, scaled) regressor.
+        dphi : (M, 2, 3, 2) ndarray
+            Its flexible columns' derivatives by each resonator's log-frequency
+            and damping ratio (high-passed and scaled like ``phi``).
+        dfree : (M, 2, 2) ndarray
+            The derivatives of its free-response columns.
+        y : (m,) ndarray
+            The (high-passed) outputs.
+        """
+        lam = self.forgetting
+        scale = self._scale
+        new = scale * lam
+        for gi, g in enumerate(self.groups):
+            x = np.concatenate((phi[g.columns],
+                                np.concatenate((dphi[:, :, :, g.component], dfree),
+                                               axis=2).ravel()))
+            yg = y[g.rows]
+            _moments_update(self._s[gi], self._z[gi], x, yg, scale, lam)
+            self._yy[gi] += float(yg @ yg) / new
+        self._scale = new
+        self._count = lam * self._count + 1.0
+        if self._scale < 1e-8:
+            for gi in range(len(self.groups)):
+                self._s[gi] *= self._scale
+                self._z[gi] *= self._scale
+                self._yy[gi] *= self._scale
+            self._scale = 1.0
+
+    @property
+    def samples(self) -> float:
+        """Effective number of samples in the window."""
+        return self._count
+
+    def _blocks(self, gi: int) -> tuple[np.ndarray, ...]:
+        g = self.groups[gi]
+        d = g.columns.size
+        upper = np.triu(self._s[gi])
+        s = (upper + np.triu(upper, 1).T) * self._scale
+        z = self._z[gi] * self._scale
+        return s[:d, :d], s[:d, d:], s[d:, d:], z[:d], z[d:], self._yy[gi] * self._scale
+
+    def _projected(self, gi: int, delta: np.ndarray | None = None
+                   ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Window residual ``V`` at ``delta`` (first order), the gains, the residual's
+        moments with the derivative regressors, and the factor of the gains' Gram."""
+        sff, sfd, sdd, zf, zd, yy = self._blocks(gi)
+        if delta is not None and np.any(delta):
+            t = self._taylor(gi, delta)                       # phi_delta = phi + t dphi
+            sff = sff + t @ sfd.T + sfd @ t.T + t @ sdd @ t.T
+            zf = zf + t @ zd
+        ridge = 1e-9 * np.trace(sff) / max(sff.shape[0], 1) + 1e-12
+        chol = np.linalg.cholesky(sff + ridge * np.eye(sff.shape[0]))
+        theta = np.linalg.solve(chol.T, np.linalg.solve(chol, zf))
+        v = yy - float(np.sum(zf * theta))
+        return v, theta, zd - sfd.T @ theta, chol
+
+    def _taylor(self, gi: int, delta: np.ndarray) -> np.ndarray:
+        """``T`` with ``phi_delta = phi + T dphi`` for the step ``delta`` (M, 2)."""
+        g = self.groups[gi]
+        t = np.zeros((g.columns.size, self._derivs))
+        pos = g.positions
+        for i in range(self.m):
+            for p in range(2):
+                for c in range(5):
+                    t[pos[i, c], (i * 2 + p) * 5 + c] = delta[i, p]
+        return t
+
+    def refine(self) -> np.ndarray | None:
+        """One Gauss-Newton step on the window; the correction ``delta`` (M, 2) to apply
+        to ``[log f, zeta]`` of each resonator, or None (window too short, or the step
+        did not lower the residual). Updates :attr:`covariance`."""
+        if self._count < self.min_samples or self.m == 0:
+            return None
+        npar = 2 * self.m
+        grad = np.zeros(npar)
+        hess = np.zeros((npar, npar))
+        v0 = 0.0
+        try:
+            for gi, g in enumerate(self.groups):
+                v, theta, resid, chol = self._projected(gi)
+                v0 += v
+                _, sfd, sdd, *_ = self._blocks(gi)
+                # derivative Gram with the gains' columns projected out (Kaufman)
+                w = np.linalg.solve(chol, sfd)
+                sp = sdd - w.T @ w
+                pos = g.positions
+                for o in range(g.rows.size):
+                    # k[(i, p, c), (i, p)] = Theta[column c of resonator i, o]
+                    k = np.zeros((self._derivs, npar))
+                    coef = theta[pos, o]                        # (M, 5)
+                    for i in range(self.m):
+                        for p in range(2):
+                            base = (i * 2 + p) * 5
+                            k[base:base + 5, i * 2 + p] = coef[i]
+                    grad += -2.0 * (k.T @ resid[:, o])
+                    hess += 2.0 * (k.T @ sp @ k)
+        except np.linalg.LinAlgError:
+            return None
+        if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))):
+            return None
+        n_out = sum(g.rows.size for g in self.groups)
+        yy = sum(self._blocks(gi)[5] for gi in range(len(self.groups)))
+        # residual variance, floored at RESOLUTION^2 of the signal: below that the
+        # residual is the model's own structural error, not evidence about rho
+        sigma2 = max(v0, RESOLUTION**2 * yy) / max(self._count * n_out, 1.0)
+        # maximum a posteriori step: the window's evidence against a prior on how far
+        # the resonators move in one refinement (random walk)
+        prior = np.tile(np.array(self.step_std) ** -2, self.m)
+        if not self.damping:
+            prior[1::2] = 1e12
+        h = hess / sigma2 + 2.0 * np.diag(prior)
+        gf = grad / sigma2
+        try:
+            step = -np.linalg.solve(h, gf)
+            self.covariance = 2.0 * np.linalg.inv(h)
+        except np.linalg.LinAlgError:
+            return None
+        delta = step.reshape(self.m, 2)
+        limit = np.array(MAX_STEP)
+        biggest = np.max(np.abs(delta) / limit) if delta.size else 0.0
+        if biggest > 1.0:
+            delta = delta / biggest
+        if not np.any(delta):
+            return None
+        v1 = sum(self._projected(gi, delta)[0] for gi in range(len(self.groups)))
+        if not v1 / sigma2 + float(np.sum(delta.ravel() ** 2 * prior)) < v0 / sigma2:
+            self.n_rejected += 1
+            return None
+        self.n_steps += 1
+        return delta
+
+    def recenter(self, delta: np.ndarray) -> None:
+        """Move the window's linearization point by ``delta`` (the bank moved too):
+        ``phi <- phi + T(delta) dphi`` in every moment (first order)."""
+        for gi, g in enumerate(self.groups):
+            d = g.columns.size
+            t = self._taylor(gi, delta)
+            full = np.eye(d + self._derivs)
+            full[:d, d:] = t
+            upper = np.triu(self._s[gi])
+            s = upper + np.triu(upper, 1).T
+            s = full @ s @ full.T
+            self._s[gi] = np.asfortranarray(np.triu(s))
+            self._z[gi] = full @ self._z[gi]
+
+    @staticmethod
+    def clip(frequency_hz: float, damping: float, dlogf: float, dzeta: float
+             ) -> tuple[float, float]:
+        """A resonator moved by ``(dlogf, dzeta)``, damping kept in range."""
+        return (frequency_hz * float(np.exp(dlogf)),
+                float(np.clip(damping + dzeta, MIN_DAMPING, MAX_DAMPING)))

@@ -1,0 +1,114 @@
+"""The rigid-body gain and how well it is known.
+
+The rigid body of a spacecraft is three double integrators driven by the
+torques through the inverse inertia ``G = J(t)^-1``. The rigid-flexible
+identifier regresses the body rates on the integrated torques (and the
+modal terms), so ``G`` is a block of a linear regression's estimate, and
+its uncertainty the matching block of the regression's covariance.
+:class:`RigidGainEstimate` carries both, in physical units, and answers
+the questions a controller asks: how large is the uncertainty, does an
+interval contain a given gain, how far may the true gain be from the
+estimate.
+
+Calibration: the regression is a Kalman filter over parameters that drift
+as random walks, and its covariance is in units of the output noise
+variance, so ``covariance = sigma^2 P`` with ``sigma^2`` the variance of
+the regression's a-priori errors (measured, so model error and coloured
+noise count too).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["RigidGainEstimate"]
+
+
+@dataclass(frozen=True)
+class RigidGainEstimate:
+    """An estimate of the rigid-body gain ``G = J^-1`` and its covariance.
+
+    Attributes
+    ----------
+    gain : (3, 3) ndarray
+        ``G``, rad/s^2 per N m.
+    covariance : (9, 9) ndarray
+        Covariance of ``gain.ravel()`` (row-major), (rad/s^2 per N m)^2.
+    """
+
+    gain: np.ndarray
+    covariance: np.ndarray
+
+    def __post_init__(self) -> None:
+        gain = np.asarray(self.gain, dtype=float)
+        cov = np.asarray(self.covariance, dtype=float)
+        if gain.shape != (3, 3) or cov.shape != (9, 9):
+            raise ValueError(f"gain must be (3, 3) and covariance (9, 9), got {gain.shape} "
+                             f"and {cov.shape}")
+        object.__setattr__(self, "gain", gain)
+        object.__setattr__(self, "covariance", 0.5 * (cov + cov.T))
+
+    @classmethod
+    def from_regression(cls, theta: ArrayLike, p: ArrayLike, noise_variance: ArrayLike,
+                        row_scale: ArrayLike, column_scale: ArrayLike) -> RigidGainEstimate:
+        """From the rate rows of a regression with a covariance shared by its rows.
+
+        Parameters
+        ----------
+        theta : (3, 3) array_like
+            Estimate of the rate outputs' coefficients on the three
+            integrated-torque regressors, in the regression's units.
+        p : (3, 3) array_like
+            The block of the regression's covariance for those regressors, in
+            units of the noise variance.
+        noise_variance : (3,) array_like
+            Noise variance of each rate output, in the regression's units.
+        row_scale : (3,) array_like
+            Physical units of one regression unit of each output, times any
+            factor converting the coefficient to ``G`` (rad/s^2 per N m).
+        column_scale : (3,) array_like
+            Physical units of one regression unit of each regressor.
+        """
+        theta = np.asarray(theta, dtype=float)
+        p = np.asarray(p, dtype=float)
+        rows = np.asarray(row_scale, dtype=float)
+        cols = np.asarray(column_scale, dtype=float)
+        var = np.asarray(noise_variance, dtype=float)
+        gain = rows[:, None] * theta / cols[None, :]
+        block = p / np.outer(cols, cols)
+        cov = np.zeros((9, 9))
+        for r in range(3):
+            cov[3 * r:3 * r + 3, 3 * r:3 * r + 3] = rows[r] ** 2 * var[r] * block
+        return cls(gain, cov)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviation of each entry of ``gain``, (3, 3)."""
+        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0)).reshape(3, 3)
+
+    def relative_std(self) -> float:
+        """``sqrt(trace(covariance)) / ||gain||_F``: the gain's relative uncertainty."""
+        norm = float(np.linalg.norm(self.gain))
+        return float(np.sqrt(max(np.trace(self.covariance), 0.0)) / norm) if norm > 0 \
+            else float("inf")
+
+    def mahalanobis(self, gain: ArrayLike) -> float:
+        """The distance of ``gain`` from the estimate in standard deviations: the
+        square root of ``d^T C^-1 d`` over the entries with a positive variance."""
+        d = (np.asarray(gain, dtype=float) - self.gain).ravel()
+        cov = self.covariance
+        keep = np.diag(cov) > 0
+        if not keep.any():
+            return float("inf") if np.any(d) else 0.0
+        sub = cov[np.ix_(keep, keep)]
+        return float(np.sqrt(max(d[keep] @ np.linalg.lstsq(sub, d[keep], rcond=None)[0], 0.0)))
+
+    def covers(self, gain: ArrayLike, sigmas: float = 2.0) -> bool:
+        """Whether ``gain`` lies within ``sigmas`` standard deviations of the estimate
+        in the relative-error sense used for gains: ``||gain - G||_F <= sigmas
+        sqrt(trace(C))``."""
+        d = np.asarray(gain, dtype=float) - self.gain
+        return bool(np.linalg.norm(d) <= sigmas * np.sqrt(max(np.trace(self.covariance), 0.0)))
