@@ -35,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 __all__ = ["CALM", "ChangeEvent", "InnovationCUSUM", "RegressionGLR"]
 
@@ -44,6 +45,32 @@ __all__ = ["CALM", "ChangeEvent", "InnovationCUSUM", "RegressionGLR"]
 #: change cannot raise it much. Updating only in calm periods (values below
 #: the level) would drift it down to its lower tail and raise false alarms.
 CALM = 3.0
+
+
+@njit(cache=True, nogil=True)
+def _glr_level(c: np.ndarray, r: np.ndarray, phi: np.ndarray, error: np.ndarray,
+               variance: np.ndarray, lam: float) -> float:
+    """Update ``c = lam c + phi e^T``, ``r = lam r + phi phi^T`` in place and return
+    ``sum_j c_j^T r^-1 c_j / sigma_j^2 / (d q)`` (NaN if ``r`` cannot be solved)."""
+    d, q = c.shape
+    for i in range(d):
+        for j in range(q):
+            c[i, j] = lam * c[i, j] + phi[i] * error[j]
+        for j in range(d):
+            r[i, j] = lam * r[i, j] + phi[i] * phi[j]
+    tr = 0.0
+    for i in range(d):
+        tr += r[i, i]
+    reg = r + 1e-9 * tr * np.eye(d)
+    try:
+        proj = np.linalg.solve(reg, c)
+    except Exception:                                      # noqa: BLE001 (numba)
+        return np.nan
+    total = 0.0
+    for i in range(d):
+        for j in range(q):
+            total += c[i, j] * proj[i, j] / variance[j]
+    return total / (d * q)
 
 
 @dataclass(frozen=True)
@@ -208,19 +235,15 @@ class RegressionGLR:
         self.k += 1
         sample = k if sample is None else int(sample)
         lam = self.window
-        outer = np.outer(phi, error)
+        phi = np.asarray(phi, dtype=float)
+        error = np.asarray(error, dtype=float)
         if self._c is None:
-            self._c, self._r = outer, np.outer(phi, phi)
-        else:
-            self._c = lam * self._c + outer
-            self._r = lam * self._r + np.outer(phi, phi)
-        try:
-            proj = np.linalg.solve(self._r + 1e-9 * np.trace(self._r) * np.eye(phi.size),
-                                   self._c)
-        except np.linalg.LinAlgError:
+            self._c = np.zeros((phi.size, error.size))
+            self._r = np.zeros((phi.size, phi.size))
+        level = _glr_level(self._c, self._r, phi, error,
+                           np.maximum(np.asarray(variance, dtype=float), 1e-30), lam)
+        if not np.isfinite(level):
             return None
-        dof = self._c.size
-        level = float(np.sum(self._c * proj / np.maximum(variance, 1e-30)[None, :])) / dof
         if k < self.holdoff:                       # initial calibration, settled half only
             if k >= self.holdoff // 2:
                 self._calibrated += 1

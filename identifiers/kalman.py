@@ -16,6 +16,7 @@ fixed model (the fixed LQG of the controllers).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
@@ -48,6 +49,31 @@ def steady_state_gain(a: ArrayLike, c: ArrayLike, q: ArrayLike,
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(f"no stabilizing filter Riccati solution: {exc}") from None
     return p @ c.T @ np.linalg.inv(c @ p @ c.T + r), p
+
+
+@njit(cache=True, nogil=True)
+def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                 q: np.ndarray, r: np.ndarray, u: np.ndarray, y: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Measurement update with every output of ``y`` and the time update, compiled.
+
+    Returns ``x_{k+1|k}``, ``P_{k+1|k}``, the predictor gain ``A L``, the innovation,
+    its covariance and whether the innovation covariance could be factored."""
+    pct = p @ c.T
+    s = c @ pct
+    for i in range(s.shape[0]):
+        s[i, i] += r[i]
+    e = y - c @ x
+    try:
+        gain_t = np.linalg.solve(s, pct.T)                 # L^T
+    except Exception:                                      # noqa: BLE001 (numba)
+        return x, p, np.zeros((x.shape[0], y.shape[0])), e, s, False
+    gain = gain_t.T
+    xf = x + gain @ e
+    pf = p - gain @ pct.T
+    pn = a @ pf @ a.T + q
+    pn = 0.5 * (pn + pn.T)
+    return a @ xf + b @ u, pn, a @ gain, e, s, True
 
 
 class KalmanPredictor:
@@ -107,6 +133,13 @@ class KalmanPredictor:
         (n,) ndarray
             ``x_{k+1|k}``.
         """
+        if y is not None and y.shape[0] == c.shape[0] and np.all(np.isfinite(y)):
+            x, p, gain, e, s, ok = _full_update(self.x, self.P, a, b, c, q,
+                                                np.asarray(r, dtype=float), u, y)
+            if ok:
+                self.x, self.P, self.gain = x, p, gain
+                self.innovation, self.innovation_covariance = e, s
+                return self.x
         self.correct(c, r, y, a=a)
         return self.predict(a, b, q, u)
 

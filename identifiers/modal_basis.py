@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from identifiers.modal_kernels import bank_step, oscillator_zoh_derivatives
+from identifiers.modal_kernels import bank_step, highpass_step, oscillator_zoh_derivatives
 
 __all__ = ["MAX_DAMPING", "MIN_DAMPING", "HighPass", "ModalFilterBank", "Resonator", "mode_zoh"]
 
@@ -102,13 +102,8 @@ class HighPass:
         self._out[:, columns] = 0.0
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        v = x - self._last[0] + self.rho * self._out[0]
-        self._last[0] = x
-        self._out[0] = v
-        w = v - self._last[1] + self.rho * self._out[1]
-        self._last[1] = v
-        self._out[1] = w
-        return w
+        """Filter one sample of every signal (the filter advances)."""
+        return highpass_step(self._last, self._out, np.asarray(x, dtype=float), self.rho)
 
 
 class ModalFilterBank:

@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["bank_step", "oscillator_zoh", "oscillator_zoh_derivatives"]
+__all__ = ["bank_step", "highpass_step", "oscillator_zoh", "oscillator_zoh_derivatives"]
 
 #: Relative step of the central differences for the sensitivities.
 _STEP = 1e-5
@@ -156,3 +156,21 @@ def bank_step(u: np.ndarray, dt: float, ratio: float, pos: np.ndarray, vel: np.n
             f0, f1 = free[i, 0, c], free[i, 1, c]
             free[i, 0, c] = a00 * f0 + a01 * f1
             free[i, 1, c] = a10 * f0 + a11 * f1
+
+
+@njit(cache=True, nogil=True)
+def highpass_step(last: np.ndarray, out: np.ndarray, x: np.ndarray, rho: float) -> np.ndarray:
+    """One sample of ``((1 - z^-1) / (1 - rho z^-1))^2`` on every entry of ``x``.
+
+    ``last`` and ``out`` (2, size) hold each stage's previous input and output and
+    are updated in place; returns the filtered sample (a new array)."""
+    n = x.shape[0]
+    w = np.empty(n)
+    for i in range(n):
+        v = x[i] - last[0, i] + rho * out[0, i]
+        last[0, i] = x[i]
+        out[0, i] = v
+        w[i] = v - last[1, i] + rho * out[1, i]
+        last[1, i] = v
+        out[1, i] = w[i]
+    return w

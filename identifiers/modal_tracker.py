@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.linalg import solve_triangular
 
 from identifiers.modal_basis import MAX_DAMPING, MIN_DAMPING
 
@@ -57,21 +58,29 @@ RESOLUTION = 1e-3
 
 
 @njit(cache=True, nogil=True)
-def _moments_update(s: np.ndarray, z: np.ndarray, x: np.ndarray, y: np.ndarray,
-                    scale: float, lam: float) -> float:
-    """Exponentially weighted moments ``S += x x^T``, ``Z += x y^T`` after forgetting by
-    ``lam``; stored divided by ``scale`` (forgetting is a rescale). Upper triangle of
-    ``S`` only. Returns the new scale."""
-    scale *= lam
-    inv = 1.0 / scale
-    n = x.shape[0]
+def _moments_update(s: np.ndarray, z: np.ndarray, phi: np.ndarray, columns: np.ndarray,
+                    deriv: np.ndarray, y: np.ndarray, rows: np.ndarray, inv: float) -> float:
+    """Add ``x x^T`` and ``x y^T`` times ``inv`` to the moments (upper triangle of ``S``),
+    with ``x = [phi[columns]; deriv]`` and ``y = y[rows]``; returns ``y^T y`` times
+    ``inv``."""
+    d = columns.shape[0]
+    n = d + deriv.shape[0]
+    x = np.empty(n)
+    for j in range(d):
+        x[j] = phi[columns[j]]
+    for j in range(deriv.shape[0]):
+        x[d + j] = deriv[j]
+    q = rows.shape[0]
+    yy = 0.0
+    for c in range(q):
+        yy += y[rows[c]] * y[rows[c]]
     for j in range(n):
         xj = x[j] * inv
         for i in range(j + 1):
             s[i, j] += x[i] * xj
-        for c in range(y.shape[0]):
-            z[j, c] += xj * y[c]
-    return scale
+        for c in range(q):
+            z[j, c] += xj * y[rows[c]]
+    return yy * inv
 
 
 @dataclass
@@ -173,15 +182,13 @@ class ModalTracker:
             The (high-passed) outputs.
         """
         lam = self.forgetting
-        scale = self._scale
-        new = scale * lam
+        new = self._scale * lam
+        inv = 1.0 / new
+        derivs = [np.concatenate((dphi[:, :, :, component], dfree), axis=2).ravel()
+                  for component in (0, 1)]
         for gi, g in enumerate(self.groups):
-            x = np.concatenate((phi[g.columns],
-                                np.concatenate((dphi[:, :, :, g.component], dfree),
-                                               axis=2).ravel()))
-            yg = y[g.rows]
-            _moments_update(self._s[gi], self._z[gi], x, yg, scale, lam)
-            self._yy[gi] += float(yg @ yg) / new
+            self._yy[gi] += _moments_update(self._s[gi], self._z[gi], phi, g.columns,
+                                            derivs[g.component], y, g.rows, inv)
         self._scale = new
         self._count = lam * self._count + 1.0
         if self._scale < 1e-8:
@@ -204,31 +211,40 @@ class ModalTracker:
         z = self._z[gi] * self._scale
         return s[:d, :d], s[:d, d:], s[d:, d:], z[:d], z[d:], self._yy[gi] * self._scale
 
-    def _projected(self, gi: int, delta: np.ndarray | None = None
+    def _projected(self, gi: int, delta: np.ndarray | None = None,
+                   blocks: tuple | None = None
                    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """Window residual ``V`` at ``delta`` (first order), the gains, the residual's
         moments with the derivative regressors, and the factor of the gains' Gram."""
-        sff, sfd, sdd, zf, zd, yy = self._blocks(gi)
+        sff, sfd, sdd, zf, zd, yy = blocks if blocks is not None else self._blocks(gi)
         if delta is not None and np.any(delta):
-            t = self._taylor(gi, delta)                       # phi_delta = phi + t dphi
-            sff = sff + t @ sfd.T + sfd @ t.T + t @ sdd @ t.T
-            zf = zf + t @ zd
+            # phi_delta = phi + T dphi:  S_ff <- S_ff + T S_df + S_fd T^T + T S_dd T^T
+            t_sdf = self._apply_t(gi, delta, sfd.T)
+            t_sdd = self._apply_t(gi, delta, sdd)
+            sff = sff + t_sdf + t_sdf.T + self._apply_t(gi, delta, t_sdd.T)
+            zf = zf + self._apply_t(gi, delta, zd)
+        return self._solve(sff, sfd, zf, zd, yy)
+
+    def _apply_t(self, gi: int, delta: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``T(delta) @ x`` for ``x`` with one row per derivative regressor: row
+        ``positions[i, c]`` gets ``sum_p delta[i, p] x[(i, p, c)]``."""
+        g = self.groups[gi]
+        rows = x.reshape(self.m, 2, 5, -1)
+        moved = np.einsum("ip,ipcn->icn", delta, rows)
+        out = np.zeros((g.columns.size, x.shape[1]))
+        np.add.at(out, g.positions.ravel(), moved.reshape(self.m * 5, -1))
+        return out
+
+    @staticmethod
+    def _solve(sff: np.ndarray, sfd: np.ndarray, zf: np.ndarray, zd: np.ndarray,
+               yy: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         ridge = 1e-9 * np.trace(sff) / max(sff.shape[0], 1) + 1e-12
         chol = np.linalg.cholesky(sff + ridge * np.eye(sff.shape[0]))
-        theta = np.linalg.solve(chol.T, np.linalg.solve(chol, zf))
+        theta = solve_triangular(chol, solve_triangular(chol, zf, lower=True,
+                                                        check_finite=False),
+                                 lower=True, trans="T", check_finite=False)
         v = yy - float(np.sum(zf * theta))
         return v, theta, zd - sfd.T @ theta, chol
-
-    def _taylor(self, gi: int, delta: np.ndarray) -> np.ndarray:
-        """``T`` with ``phi_delta = phi + T dphi`` for the step ``delta`` (M, 2)."""
-        g = self.groups[gi]
-        t = np.zeros((g.columns.size, self._derivs))
-        pos = g.positions
-        for i in range(self.m):
-            for p in range(2):
-                for c in range(5):
-                    t[pos[i, c], (i * 2 + p) * 5 + c] = delta[i, p]
-        return t
 
     def refine(self) -> np.ndarray | None:
         """One Gauss-Newton step on the window; the correction ``delta`` (M, 2) to apply
@@ -240,31 +256,29 @@ class ModalTracker:
         grad = np.zeros(npar)
         hess = np.zeros((npar, npar))
         v0 = 0.0
+        m = self.m
+        yy = 0.0
+        all_blocks = [self._blocks(gi) for gi in range(len(self.groups))]
         try:
             for gi, g in enumerate(self.groups):
-                v, theta, resid, chol = self._projected(gi)
+                sff, sfd, sdd, zf, zd, yy_g = all_blocks[gi]
+                v, theta, resid, chol = self._solve(sff, sfd, zf, zd, yy_g)
                 v0 += v
-                _, sfd, sdd, *_ = self._blocks(gi)
+                yy += yy_g
                 # derivative Gram with the gains' columns projected out (Kaufman)
-                w = np.linalg.solve(chol, sfd)
-                sp = sdd - w.T @ w
-                pos = g.positions
-                for o in range(g.rows.size):
-                    # k[(i, p, c), (i, p)] = Theta[column c of resonator i, o]
-                    k = np.zeros((self._derivs, npar))
-                    coef = theta[pos, o]                        # (M, 5)
-                    for i in range(self.m):
-                        for p in range(2):
-                            base = (i * 2 + p) * 5
-                            k[base:base + 5, i * 2 + p] = coef[i]
-                    grad += -2.0 * (k.T @ resid[:, o])
-                    hess += 2.0 * (k.T @ sp @ k)
+                w = solve_triangular(chol, sfd, lower=True, check_finite=False)
+                sp = (sdd - w.T @ w).reshape(m, 2, 5, m, 2, 5)
+                coef = theta[g.positions]                        # (M, 5, r)
+                # d V / d delta_(i,p) = -2 sum_(c, o) Theta[(i, c), o] resid[(i, p, c), o]
+                grad += -2.0 * np.einsum("ico,ipco->ip", coef,
+                                         resid.reshape(m, 2, 5, -1)).ravel()
+                hess += 2.0 * np.einsum("ico,ipcjqd,jdo->ipjq", coef, sp,
+                                        coef).reshape(npar, npar)
         except np.linalg.LinAlgError:
             return None
         if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))):
             return None
         n_out = sum(g.rows.size for g in self.groups)
-        yy = sum(self._blocks(gi)[5] for gi in range(len(self.groups)))
         # residual variance, floored at RESOLUTION^2 of the signal: below that the
         # residual is the model's own structural error, not evidence about rho
         sigma2 = max(v0, RESOLUTION**2 * yy) / max(self._count * n_out, 1.0)
@@ -287,7 +301,11 @@ class ModalTracker:
             delta = delta / biggest
         if not np.any(delta):
             return None
-        v1 = sum(self._projected(gi, delta)[0] for gi in range(len(self.groups)))
+        try:
+            v1 = sum(self._projected(gi, delta, all_blocks[gi])[0]
+                     for gi in range(len(self.groups)))
+        except np.linalg.LinAlgError:
+            return None
         if not v1 / sigma2 + float(np.sum(delta.ravel() ** 2 * prior)) < v0 / sigma2:
             self.n_rejected += 1
             return None
@@ -299,14 +317,15 @@ class ModalTracker:
         ``phi <- phi + T(delta) dphi`` in every moment (first order)."""
         for gi, g in enumerate(self.groups):
             d = g.columns.size
-            t = self._taylor(gi, delta)
-            full = np.eye(d + self._derivs)
-            full[:d, d:] = t
             upper = np.triu(self._s[gi])
             s = upper + np.triu(upper, 1).T
-            s = full @ s @ full.T
+            sfd, sdd = s[:d, d:], s[d:, d:]
+            t_sdf = self._apply_t(gi, delta, sfd.T)
+            t_sdd = self._apply_t(gi, delta, sdd)
+            s[:d, :d] += t_sdf + t_sdf.T + self._apply_t(gi, delta, t_sdd.T)
+            s[:d, d:] += t_sdd
             self._s[gi] = np.asfortranarray(np.triu(s))
-            self._z[gi] = full @ self._z[gi]
+            self._z[gi][:d] += self._apply_t(gi, delta, self._z[gi][d:])
 
     @staticmethod
     def clip(frequency_hz: float, damping: float, dlogf: float, dzeta: float

@@ -364,7 +364,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         if self.outlier_threshold is None or kf is None or self._mats is None:
             return True
         c = self._mats[2]
-        spread = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", c, kf.P, c) + self._r, 1e-30))
+        spread = np.sqrt(np.maximum(np.sum((c @ kf.P) * c, axis=1) + self._r, 1e-30))
         inside = np.abs(y - c @ kf.x) <= self.outlier_threshold * spread
         if not inside.all():
             # the base class counts it in n_outliers; the filter still uses the other outputs
@@ -761,15 +761,23 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         c[att, psi] = np.eye(3)
         c[rate, omega] = np.eye(3)
         modes_a, modes_b = bank.mode_matrices
-        flexible = theta[:, bank.slices["flexible"]].reshape(m, len(self.resonators), 3, 2)
+        n_res = len(self.resonators)
+        flexible = theta[:, bank.slices["flexible"]].reshape(m, n_res, 3, 2)
         j = 6
+        if n_res:
+            # every resonator at once: its complex mode, the input's share of it, and the
+            # SVD of its couplings factored through that mode
+            vals, vecs = np.linalg.eig(modes_a)                               # (M, 2)
+            top = np.argmax(vals.imag, axis=1)
+            mus = vals[np.arange(n_res), top]
+            shares = np.linalg.solve(vecs, modes_b[:, :, None])[:, :, 0]       # (M, 2)
+            to_complex = vecs[np.arange(n_res), :, top] * \
+                shares[np.arange(n_res), top][:, None]                          # (M, 2)
+            chats = 2.0 * np.einsum("imas,is->ima", flexible.transpose(1, 0, 2, 3),
+                                    to_complex)                                 # (M, m, 3)
+            lefts, svs, rights = np.linalg.svd(chats, full_matrices=False)
         for i, res in enumerate(self.resonators):
-            vals, vecs = np.linalg.eig(modes_a[i])
-            top = int(np.argmax(vals.imag))
-            mu = vals[top]
-            to_complex = vecs[:, top] * np.linalg.solve(vecs, modes_b[i])[top]
-            chat = 2.0 * flexible[:, i] @ to_complex                   # (m, 3) complex
-            left, sv, right = np.linalg.svd(chat, full_matrices=False)
+            mu, left, sv, right = mus[i], lefts[i], svs[i], rights[i]
             for rank in range(res.rank):
                 c_vec, b_vec = left[:, rank] * sv[rank], right[rank].copy()
                 ref = self._phases.get((i, rank))
