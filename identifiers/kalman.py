@@ -66,7 +66,7 @@ def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     e = y - c @ x
     try:
         gain_t = np.linalg.solve(s, pct.T)                 # L^T
-    except Exception:                                      # noqa: BLE001 (numba)
+    except Exception:                  # numba raises a plain exception on a singular matrix
         return x, p, np.zeros((x.shape[0], y.shape[0])), e, s, False
     gain = gain_t.T
     xf = x + gain @ e
