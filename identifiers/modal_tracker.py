@@ -140,7 +140,7 @@ class ModalTracker:
 
     def __init__(self, groups: list[TrackerGroup], n_resonators: int,
                  forgetting: float = 0.998, damping: bool = True,
-                 step_std: tuple[float, float] = (0.002, 0.002),
+                 step_std: tuple[float, float] = (0.0005, 0.001),
                  min_samples: float = 400.0) -> None:
         if not 0.0 < forgetting < 1.0:
             raise ValueError(f"forgetting must be in (0, 1), got {forgetting}")
@@ -306,7 +306,11 @@ class ModalTracker:
                      for gi in range(len(self.groups)))
         except np.linalg.LinAlgError:
             return None
-        if not v1 / sigma2 + float(np.sum(delta.ravel() ** 2 * prior)) < v0 / sigma2:
+        # the step must explain more of the window than a model with that many more
+        # parameters would by chance (an information criterion: one unit per parameter)
+        moved = int(np.count_nonzero(delta))
+        gain = (v0 - v1) / sigma2 - float(np.sum(delta.ravel() ** 2 * prior))
+        if not gain > moved:
             self.n_rejected += 1
             return None
         self.n_steps += 1
