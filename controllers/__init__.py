@@ -27,6 +27,7 @@ from controllers.baselines import (
     OracleLQR,
     RobustLQG,
     ScheduledLQG,
+    TrueModelIdentifier,
     nominal_model,
 )
 from controllers.excitation import BinaryExcitation
@@ -38,6 +39,7 @@ from controllers.harness import (
     controller_shares,
     episode_metrics,
     run_episode,
+    stage_costs,
 )
 from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
 from controllers.residual import ResidualControl
@@ -64,6 +66,7 @@ __all__ = [
     "RobustLQG",
     "ScheduledLQG",
     "Trajectory",
+    "TrueModelIdentifier",
     "__version__",
     "check_weights",
     "compare",
@@ -77,4 +80,5 @@ __all__ = [
     "output_weight",
     "run_episode",
     "spectral_radius",
+    "stage_costs",
 ]

@@ -22,11 +22,14 @@ so :class:`GainAcceptance` checks, for a candidate gain on a model:
    rigid model about 0.55, and identified models whose gains fly better
    than the robust design's about 1.1-1.3 (docs/results/control.md): a
    threshold below 1 rejected every identified gain.
-4. **Margins at the plant input** (:meth:`GainAcceptance.check_margin`):
-   the disk margin :func:`input_disk_margin` of the output-feedback loop
-   (the gain on the model's Kalman predictor, with the integral) must be at
-   least ``min_disk_margin``. LQR's state-feedback margins do not survive
-   a state estimator (Doyle 1978); this is the check that they did.
+4. **Margins at the plant input, against the model's uncertainty**
+   (:meth:`GainAcceptance.check_margin`): the disk margin
+   :func:`input_disk_margin` of the output-feedback loop (the gain on the
+   model's Kalman predictor, with the integral) must be at least
+   ``min_disk_margin`` and must cover the identifier's calibrated 2-sigma
+   uncertainty of the rigid-body gain. LQR's state-feedback margins do not
+   survive a state estimator (Doyle 1978); this is the check that they did,
+   for every plant the identified model does not rule out.
 
 A rejected gain is not flown; the caller falls back to the reference design.
 """
@@ -274,10 +277,20 @@ class GainAcceptance:
             return "unstable"
         return None
 
-    def check_margin(self, disk_margin: float) -> str | None:
-        """None if the loop's disk margin (:func:`input_disk_margin`) passes, else "margin"."""
+    def check_margin(self, disk_margin: float, gain_uncertainty: float = 0.0) -> str | None:
+        """None if the loop's disk margin (:func:`input_disk_margin`) passes, else the reason.
+
+        The margin must be at least ``min_disk_margin`` ("margin") and must cover
+        the model's torque-gain uncertainty: a disk margin ``alpha`` tolerates
+        any gain within ``[1 / (1 + alpha), 1 / (1 - alpha)]`` at the input, so a
+        relative 2-sigma uncertainty ``e = 2 gain_uncertainty`` of the rigid-body
+        gain needs ``alpha >= e / (1 - e)`` ("uncertain"; any ``e >= 1`` fails).
+        """
         if not np.isfinite(disk_margin) or disk_margin < self.min_disk_margin:
             return "margin"
+        spread = 2.0 * float(gain_uncertainty)
+        if not np.isfinite(spread) or spread >= 1.0 or disk_margin < spread / (1.0 - spread):
+            return "uncertain"
         return None
 
     @staticmethod

@@ -23,10 +23,14 @@ Every control step k (docs/design/control.md):
    (:class:`~controllers.baselines.RobustLQG`), which runs alongside all
    the time, acts instead;
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
-   is added: a larger budget during the identifier's warm-up, a small one
-   afterwards, steered toward the torque directions the identifier knows
-   least; after each change the identifier detects (its events) the
-   fallback flies for ``bridge_s``;
+   is added only when information is needed (dual control): the warm-up's
+   budget while the identifier warms up, and afterwards an amplitude that
+   grows from 0 with the identifier's calibrated uncertainty of the
+   rigid-body gain beyond what the design tolerates
+   (``uncertainty_tolerance``), up to ``excitation_budget``, steered toward
+   the torque directions the identifier knows least. At steady state, with
+   the gain known, there is none; after a change the identifier's covariance
+   grows and the excitation returns;
 5. the measurement and the torque actually applied after it (the env's
    ``info["torque"]``, which includes whatever a wrapper added to this
    controller's action) go to the identifier, at the start of the next step.
@@ -62,6 +66,9 @@ log = logging.getLogger(__name__)
 AGREEMENT_MEMORY = 100
 #: Horizon (samples) of the prediction-agreement measure: 1 s.
 AGREEMENT_HORIZON = 10
+#: Excitation amplitude per axis (N m) after the warm-up for an identifier that
+#: reports no uncertainty of its rigid-body gain.
+PERMANENT_EXCITATION = 0.1
 #: Samples between evaluations of the loop's disk margin (it costs about a
 #: re-design's worth; the gain moves little in 1 s).
 MARGIN_EVERY = 10
@@ -80,19 +87,29 @@ class AdaptiveLQG(_LQGController):
         :data:`identifiers.CLOSED_LOOP_SETTINGS`.
     weights : LQRWeights
     excitation : BinaryExcitation, optional
-        Default: 1 N m per axis until the identifier is warmed up and 20 s
-        beyond, 0.1 N m afterwards (10 % and 1 % of the default 10 N m
-        actuator). A detected change does not raise the budget again: in
-        closed loop the identifier's change test also answers to the drop of
-        the excitation itself (15 alarms in 400 s on a constant plant), and
-        raising the budget at each alarm kept the large excitation on for
-        good (0.78 N m RMS).
+        The signal: default 1 N m per axis during the identifier's warm-up,
+        then driven by the uncertainty (see step 4).
+    uncertainty_tolerance : float
+        Relative standard deviation of the identified rigid-body gain the
+        design tolerates without excitation (default 0.1: a 2-sigma band of
+        20 %, which the disk-margin test covers with margin 0.25).
+    excitation_budget : float
+        Largest excitation amplitude per axis after the warm-up, N m
+        (default 0.1, 1 % of the actuator), reached at twice the tolerated
+        uncertainty.
     acceptance : GainAcceptance, optional
     fallback : Controller, optional
         Flies when no accepted gain exists (default :class:`RobustLQG`).
     bridge_s : float
-        Seconds after a detected change during which the fallback flies and
-        the excitation budget is the warm-up's (0: none).
+        Seconds after a detected change during which the fallback flies
+        (default 0: the acceptance test, which reads the identifier's
+        uncertainty, decides).
+    dwell_s : float
+        Shortest time, s, between changes from the identified design to the
+        fallback or back (default 10): in between, the last accepted gain (or
+        the fallback) keeps flying. Without it a loop near the acceptance
+        threshold switched every few samples and its two integrators left a
+        limit cycle.
     iterations : int
         Riccati iterations per re-design.
     rigid_state : {"measured", "filter"}
@@ -107,8 +124,9 @@ class AdaptiveLQG(_LQGController):
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,
                  weights: LQRWeights | None = None, excitation: BinaryExcitation | None = None,
                  acceptance: GainAcceptance | None = None, fallback: Controller | None = None,
-                 bridge_s: float = 20.0, iterations: int = 4,
-                 rigid_state: str = "measured") -> None:
+                 bridge_s: float = 0.0, iterations: int = 4,
+                 rigid_state: str = "measured", uncertainty_tolerance: float = 0.1,
+                 excitation_budget: float = 0.1, dwell_s: float = 10.0) -> None:
         super().__init__(env, weights)
         model = self.env.model
         if identifier is None:
@@ -118,13 +136,22 @@ class AdaptiveLQG(_LQGController):
             raise ValueError(f"rigid_state must be 'measured' or 'filter', got {rigid_state!r}")
         self.rigid_state = rigid_state
         self.identifier = identifier
-        warm = int(getattr(identifier, "warmup", 500)) + round(20.0 / self.dt)
-        self.excitation = excitation or BinaryExcitation(warmup_steps=warm)
+        warm = int(getattr(identifier, "warmup", 500))
+        self.excitation = excitation or BinaryExcitation(warmup_steps=warm, amplitude=0.0)
+        for name, value in (("uncertainty_tolerance", uncertainty_tolerance),
+                            ("excitation_budget", excitation_budget)):
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        self.uncertainty_tolerance = float(uncertainty_tolerance)
+        self.excitation_budget = float(excitation_budget)
         self.acceptance = acceptance or GainAcceptance()
         self.fallback = fallback or RobustLQG(env, self.weights)
         if not (np.isfinite(bridge_s) and bridge_s >= 0):
             raise ValueError(f"bridge_s must be >= 0, got {bridge_s}")
         self.bridge_steps = round(bridge_s / self.dt)
+        if not (np.isfinite(dwell_s) and dwell_s >= 0):
+            raise ValueError(f"dwell_s must be >= 0, got {dwell_s}")
+        self.dwell_steps = round(dwell_s / self.dt)
         self.law.iterations = int(iterations)
         layout = self.measured_layout
         self._att_rows = layout.indices("attitude")
@@ -155,9 +182,15 @@ class AdaptiveLQG(_LQGController):
         self._rigid_maps: tuple | None = None
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
         self._sample: tuple[np.ndarray | None, np.ndarray] | None = None
+        self._uncertainty = float("inf")
+        self._flying = False
+        self._flying_gain: np.ndarray | None = None
+        self._switched = -self.dwell_steps
+        self.last_excitation = np.zeros(3)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
-                                      "nonfinite_observations": 0, "excitation_rms_Nm": 0.0}
+                                      "nonfinite_observations": 0, "excitation_rms_Nm": 0.0,
+                                      "excited_steps": 0, "switches": 0}
 
     # ------------------------------------------------------------ pieces
     def _agreement(self, y: np.ndarray, model: Any, x: np.ndarray | None) -> float:
@@ -255,13 +288,49 @@ class AdaptiveLQG(_LQGController):
                 self._margin = input_disk_margin(a, b, c, model.K, gain, self._att_rows,
                                                  self.dt)
                 self._margin_due = self._k + MARGIN_EVERY
-            reason = self.acceptance.check_margin(self._margin)
+            reason = self.acceptance.check_margin(self._margin, self._uncertainty)
         if reason is not None:
             self.stats["rejected"] += 1
             self.stats["rejected_by"][reason] = self.stats["rejected_by"].get(reason, 0) + 1
             return None
         self.stats["redesigns"] += 1
         return gain
+
+    def _transfer_integral(self, to_identified: bool) -> None:
+        """Bumpless transfer: give the design taking over the integral torque the other
+        was applying (``G_z z`` equal), so the disturbance it compensated stays
+        compensated."""
+        fb = self.fallback
+        if not isinstance(fb, _LQGController) or self._flying_gain is None \
+                or getattr(fb, "gain", None) is None:
+            return
+        own, other = self._flying_gain, fb.gain
+        gz_own, gz_other = own[:, own.shape[1] - 3:], other[:, other.shape[1] - 3:]
+        try:
+            if to_identified:
+                self.law.z = np.linalg.solve(gz_own, gz_other @ fb.law.z)
+            else:
+                fb.law.z = np.linalg.solve(gz_other, gz_own @ self.law.z)
+        except np.linalg.LinAlgError:
+            pass
+
+    def _update_excitation(self) -> None:
+        """The identifier's calibrated uncertainty of the rigid-body gain, and the
+        excitation amplitude it calls for (0 when the design tolerates it)."""
+        if not hasattr(self.identifier, "rigid_gain"):
+            # an identifier that reports no uncertainty: a permanent small excitation
+            self._uncertainty = 0.0
+            self.excitation.amplitude = PERMANENT_EXCITATION
+            return
+        estimate = self.identifier.rigid_gain
+        self._uncertainty = (float("inf") if estimate is None
+                             else float(estimate.relative_std()))
+        tol = self.uncertainty_tolerance
+        excess = (self._uncertainty - tol) / tol if tol > 0 else float("inf")
+        self.excitation.amplitude = self.excitation_budget * float(np.clip(excess, 0.0, 1.0))
+        shape = getattr(self.identifier, "input_uncertainty", None)
+        if callable(shape) and self._k % 50 == 0:
+            self.excitation.shape(shape())
 
     def _watch_events(self) -> None:
         events = getattr(self.identifier, "events", ())
@@ -290,21 +359,35 @@ class AdaptiveLQG(_LQGController):
             self.gain = self._design(model, agreement)
         bridging = self._k < self._bridge_until
         ref = self._reference(info)
-        if self.gain is None or x is None or bridging or not np.all(np.isfinite(x)):
+        usable = x is not None and np.all(np.isfinite(x))
+        wanted = self.gain is not None and usable and not bridging
+        if wanted:
+            self._flying_gain = self.gain
+        # dwell time: the loop changes between the identified design and the fallback at
+        # most once per dwell, so two integrators never take turns at every sample
+        if wanted != self._flying and self._k - self._switched >= self.dwell_steps:
+            self._transfer_integral(to_identified=wanted)
+            self._flying, self._switched = wanted, self._k
+            self.stats["switches"] += 1
+        fly = self._flying and usable and self._flying_gain is not None
+        if not fly:
             self.stats["fallback_steps"] += 1
             torque = fallback_action.astype(float) * self.max_torque
             if np.all(np.isfinite(obs[self._att])):
                 self.law.integrate(obs[self._att] - ref, saturated=True)   # hold the integral
         else:
             x_ref = equilibrium_state(model.A, model.C[self._att_rows], ref)
-            torque = self.law.torque(self.gain, x, x_ref)
+            torque = self.law.torque(self._flying_gain, x, x_ref)
             if np.all(np.isfinite(obs[self._att])):
                 self.law.integrate(obs[self._att] - ref,
                                    bool(np.any(np.abs(torque) > self.max_torque)))
-        shape = getattr(self.identifier, "input_uncertainty", None)
-        if callable(shape) and self._k % 50 == 0:
-            self.excitation.shape(shape())
-        torque = torque + self.excitation()
+        if self._k % 10 == 0:
+            self._update_excitation()
+        excitation = self.excitation()
+        self.last_excitation = excitation
+        if np.any(excitation):
+            self.stats["excited_steps"] += 1
+        torque = torque + excitation
         action = self._to_action(torque)
         if isinstance(self.fallback, _LQGController):
             self.fallback.applied_action = action

@@ -35,11 +35,11 @@ from scipy.signal import iirnotch
 from controllers.base import Controller
 from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
 from controllers.riccati import RiccatiTracker
-from identifiers import KalmanPredictor
+from identifiers import KalmanPredictor, RigidGainEstimate, StateSpaceModel, steady_state_gain
 from spacecraft_conventions import match_groups, single_threaded_blas
 
 __all__ = ["PD", "FixedLQG", "OracleLQG", "OracleLQR", "RobustLQG", "ScheduledLQG",
-           "nominal_model"]
+           "TrueModelIdentifier", "nominal_model"]
 
 #: Torque-noise standard deviation (N m) the Kalman filters of the baselines assume.
 PROCESS_NOISE = 0.05
@@ -207,6 +207,41 @@ class _LQGController(_EnvController):
         sent = self.applied_action if self.applied_action is not None else self._last
         return sent.astype(float) * self.max_torque
 
+    def _loop_radius(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
+                     qn: np.ndarray, noise_var: np.ndarray, truth: Any, t: float
+                     ) -> float | None:
+        """Spectral radius of this design's closed loop with the true plant frozen at ``t``.
+
+        The loop: plant ``x+ = A_t x + B_t u``; the design's steady-state Kalman
+        filter ``xf = xhat + L (y - C xhat)``, ``xhat+ = A xf + B u``, with
+        ``y = C_t x`` (the measured rows); ``u = -G_x xf - G_z z`` and the
+        integral ``z+ = z + dt C_att,t x`` (integrating, as near the reference).
+        None when the design has no steady-state filter (noise-free sensors).
+        """
+        key = (id(a), id(c))
+        cached = self.__dict__.get("_filter_gains", {})
+        if key not in cached:
+            try:
+                cached[key] = steady_state_gain(a, c, qn, np.diag(noise_var))[0]
+            except ValueError:        # e.g. noise-free sensors: no steady-state filter
+                cached[key] = None
+            self.__dict__["_filter_gains"] = cached
+        filt = cached[key]
+        if filt is None:
+            return None
+        true = truth.discrete(t)
+        c_t = truth.C[self._meas_rows] if c.shape[0] == len(self._meas_rows) else \
+            truth.C[self._meas_rows][self._rows]
+        c_att = truth.C[truth.output_layout.slice("attitude")]
+        nt, n = true.A.shape[0], a.shape[0]
+        gx, gz = gain[:, :n], gain[:, n:]
+        to_u = np.hstack([-gx @ filt @ c_t, -gx @ (np.eye(n) - filt @ c), -gz])
+        top = np.hstack([true.A, np.zeros((nt, n + 3))]) + true.B @ to_u
+        mid = np.hstack([a @ filt @ c_t, a @ (np.eye(n) - filt @ c), np.zeros((n, 3))]) \
+            + b @ to_u
+        bottom = np.hstack([self.dt * c_att, np.zeros((3, n)), np.eye(3)])
+        return float(np.abs(np.linalg.eigvals(np.vstack([top, mid, bottom]))).max())
+
     def _apply(self, gain: np.ndarray, x: np.ndarray, a: np.ndarray, obs: np.ndarray,
                info: dict[str, Any] | None) -> np.ndarray:
         """Torque from the law for state ``x`` (model ``a``), integral advanced; the action."""
@@ -250,6 +285,13 @@ class FixedLQG(_LQGController):
         action = (self._apply(self.gain, x, self.a, obs, info)
                   if np.all(np.isfinite(obs[self._att])) else self._last)
         return action
+
+    @single_threaded_blas
+    def closed_loop_radius(self, truth: Any, t: float) -> float | None:
+        """Spectral radius of the fixed design's loop with the true plant frozen at ``t``
+        (> 1: the loop grows there, however slowly)."""
+        return self._loop_radius(self.a, self.b, self._c, self.gain, self.qn, self._noise_var,
+                                 truth, t)
 
 
 class ScheduledLQG(_LQGController):
@@ -301,6 +343,13 @@ class ScheduledLQG(_LQGController):
         action = (self._apply(gain, x, a, obs, info)
                   if np.all(np.isfinite(obs[self._att])) else self._last)
         return action
+
+    @single_threaded_blas
+    def closed_loop_radius(self, truth: Any, t: float) -> float | None:
+        """Spectral radius of the design in use at ``t`` (the true paddle angle's) with
+        the true plant frozen at ``t``."""
+        a, b, gain, qn = self._design({"paddle_angle": truth.scenario.paddle_angle(t)})
+        return self._loop_radius(a, b, self._c, gain, qn, self._noise_var, truth, t)
 
 
 class _Notch:
@@ -447,3 +496,70 @@ class OracleLQR(_EnvController):
         x_ref = equilibrium_state(sys_.A, model.C[model.output_layout.slice("attitude")],
                                   self._reference(info))
         return self._to_action(-gain @ (np.asarray(info["state"]) - x_ref))
+
+
+class TrueModelIdentifier:
+    """An identifier that knows the truth: the same-law oracle's "identifier".
+
+    It answers the adaptive LQG's questions (:class:`~controllers.adaptive.AdaptiveLQG`)
+    with the environment's true model at the current time (``model``, its
+    Kalman filter state, an exactly known rigid-body gain), so the adaptive
+    loop's own law flown on it separates what identification costs from what
+    the law costs. It reads the env's truth and time: an oracle, not an
+    identifier.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        self.env = getattr(env, "unwrapped", env)
+        model = self.env.model
+        self._rows = match_groups(self.env.observation_layout, model.output_layout)[1]
+        self.dt = float(model.dt)
+        self.warmup = 1
+        self.events: tuple = ()
+        self._noise_var = np.maximum(self.env.noise_std[self._rows], 1e-9) ** 2
+        self.reset()
+
+    def reset(self) -> None:
+        """Start of an episode."""
+        self._k = 0
+        self.kf = KalmanPredictor(self.env.model.n, initial_covariance=1e-3)
+
+    def restart(self) -> None:
+        self.reset()
+
+    @property
+    def rigid_states(self) -> tuple[slice, slice]:
+        nd = self.env.model.n_dof
+        return slice(0, 3), slice(nd, nd + 3)
+
+    def _system(self) -> Any:
+        return self.env.model.discrete(self._k * self.dt)
+
+    @property
+    def model(self) -> StateSpaceModel:
+        true = self._system()
+        c = self.env.model.C[self._rows]
+        gain = self.kf.gain if self.kf.gain is not None else np.zeros((c.shape[1], c.shape[0]))
+        return StateSpaceModel(true.A, true.B, c, np.zeros((c.shape[0], 3)), gain, dt=self.dt)
+
+    @property
+    def rigid_gain(self) -> RigidGainEstimate:
+        gain = np.linalg.inv(self.env.model.inertia(self._k * self.dt))
+        return RigidGainEstimate(gain, np.zeros((9, 9)))
+
+    def filtered_state(self, y: ArrayLike) -> np.ndarray:
+        c = self.env.model.C[self._rows]
+        y = np.asarray(y, dtype=float)
+        return self.kf.filtered(c, self._noise_var, np.where(np.isfinite(y), y, np.nan))
+
+    def update(self, u: ArrayLike, y: ArrayLike) -> None:
+        true = self._system()
+        qn = PROCESS_NOISE**2 * true.B @ true.B.T + 1e-14 * np.eye(true.A.shape[0])
+        y = np.asarray(y, dtype=float)
+        self.kf.update(true.A, true.B, self.env.model.C[self._rows], qn, self._noise_var,
+                       np.asarray(u, dtype=float), np.where(np.isfinite(y), y, np.nan))
+        self._k += 1

@@ -8,8 +8,10 @@ results are the application layer's (``spacecraft_lab``).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -17,11 +19,19 @@ import numpy as np
 from tqdm import tqdm
 
 from controllers.base import Controller
+from controllers.lqg import LQRWeights
 from identifiers import relative_gain_error, rigid_body_gain
 from spacecraft_conventions import DEG_PER_RAD, NOMINAL_SCALE, single_threaded_blas
 
-__all__ = ["AGGREGATED", "SCORED_FROM_S", "ComparisonInterrupted", "Trajectory", "compare",
-           "controller_shares", "episode_metrics", "run_episode"]
+__all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "SCORED_FROM_S", "ComparisonInterrupted",
+           "Trajectory", "compare", "controller_shares", "episode_metrics", "run_episode",
+           "stage_costs"]
+
+#: The weights of the common quadratic cost every LQG here minimizes, by which every
+#: controller is scored: the LQG designs' defaults (:class:`~controllers.lqg.LQRWeights`).
+COST_WEIGHTS = LQRWeights()
+#: The parts of the common cost, in the order :func:`stage_costs` returns them.
+COST_PARTS = ("attitude", "rate", "deflection", "torque", "excitation")
 
 
 @dataclass
@@ -55,6 +65,13 @@ class Trajectory:
         ``J(t)^-1`` (:func:`identifiers.relative_gain_error`) at
         ``frequency_time``, NaN before warm-up.
     controller_stats : dict
+    excitation : (N, 3) ndarray or None
+        The controller's excitation torque of each step (N m), for controllers
+        that add one (``last_excitation``).
+    radius_time, true_radius : (K,) ndarray or None
+        Spectral radius of the closed loop of the controller's current design
+        with the *true* plant frozen at ``radius_time`` (controllers with a
+        ``closed_loop_radius``).
     """
 
     time: np.ndarray
@@ -71,6 +88,48 @@ class Trajectory:
     frequency_time: np.ndarray | None = None
     gain_error: np.ndarray | None = None
     controller_stats: dict = field(default_factory=dict)
+    excitation: np.ndarray | None = None
+    radius_time: np.ndarray | None = None
+    true_radius: np.ndarray | None = None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the trajectory to ``path`` (NumPy ``.npz``, the suffix added if
+        missing); :meth:`load` reads it back. Returns the path written."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_suffix(path.suffix + ".npz")
+        arrays: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "controller_stats":
+                arrays[f.name] = np.array(json.dumps(value, default=float))
+            elif f.name == "terminated":
+                arrays[f.name] = np.array(bool(value))
+            elif f.name == "events":
+                arrays[f.name] = np.asarray(value, dtype=float)
+            elif value is not None:
+                arrays[f.name] = np.asarray(value)
+        np.savez_compressed(path, **arrays)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Trajectory:
+        """A trajectory written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as data:
+            kwargs: dict[str, Any] = {}
+            for f in fields(cls):
+                if f.name not in data:
+                    continue
+                value = data[f.name]
+                if f.name == "controller_stats":
+                    kwargs[f.name] = json.loads(str(value))
+                elif f.name == "terminated":
+                    kwargs[f.name] = bool(value)
+                elif f.name == "events":
+                    kwargs[f.name] = tuple(float(v) for v in value)
+                else:
+                    kwargs[f.name] = np.array(value)
+        return cls(**kwargs)
 
 
 def _first(freqs: np.ndarray, count: int) -> np.ndarray:
@@ -82,7 +141,7 @@ def _first(freqs: np.ndarray, count: int) -> np.ndarray:
 
 def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 options: dict[str, Any] | None = None, max_steps: int | None = None,
-                freq_every: int = 25, n_freq: int = 4) -> Trajectory:
+                freq_every: int = 25, n_freq: int = 4, radius_every: int = 100) -> Trajectory:
     """Roll one episode of ``controller`` on ``env``.
 
     Parameters
@@ -101,6 +160,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         unwrapped env (no time limit) still ends.
     freq_every, n_freq : int
         Sampling of identified/true modal frequencies.
+    radius_every : int
+        Steps between evaluations of the true closed loop's spectral radius
+        (controllers with a ``closed_loop_radius(model, t)``).
     """
     base = env.unwrapped
     if max_steps is None:
@@ -118,9 +180,20 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                  else None)
     terminated = truncated = False
     k = 0
+    radius_of = getattr(controller, "closed_loop_radius", None)
+    radius_t, radius = [], []
+    excitation = [] if hasattr(controller, "last_excitation") else None
     with single_threaded_blas:
         while not (terminated or truncated) and k < max_steps:
             action = controller.act(obs, info)
+            if excitation is not None:
+                excitation.append(np.asarray(controller.last_excitation, dtype=float))
+            if callable(radius_of) and k % radius_every == 0:
+                t = float(info["time"])
+                value = radius_of(base.model, t)
+                if value is not None:
+                    radius_t.append(t)
+                    radius.append(value)
             obs, reward, terminated, truncated, info = env.step(action)
             observations.append(obs)
             actions.append(action)
@@ -151,6 +224,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         frequency_time=np.array(freq_t) if freq_t else None,
         gain_error=np.array(gain_err) if gain_err else None,
         controller_stats=dict(getattr(controller, "stats", {})),
+        excitation=np.array(excitation).reshape(-1, 3) if excitation is not None else None,
+        radius_time=np.array(radius_t) if radius_t else None,
+        true_radius=np.array(radius) if radius else None,
     )
 
 
@@ -160,6 +236,14 @@ SCORED_FROM_S = 100.0
 ENVELOPE_WINDOW_S = 10.0
 #: Envelope growth over 100 s above which a loop is judged unstable.
 GROWTH_LIMIT = 2.0
+#: Length of the sliding window (the last part of the episode) whose envelope growth is
+#: judged too, s: a fit over a long run averages early decay and late divergence.
+GROWTH_WINDOW_S = 300.0
+#: A true closed loop whose spectral radius exceeds 1 by this at every sample of
+#: :data:`RADIUS_STRETCH_S` seconds is growing, however slowly (1.00023 per 0.1 s is
+#: 1.25x per 100 s: too slow for a 250 s run's envelope to show).
+RADIUS_MARGIN = 1e-5
+RADIUS_STRETCH_S = 50.0
 #: Envelope level (in nominal sensor scales: 1 deg, 1 cm) below which growth is not judged:
 #: sensor noise and a decaying transient wander there.
 ENVELOPE_FLOOR = 0.05
@@ -198,6 +282,51 @@ def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tup
     return float(np.exp(100.0 * slope)), float(peaks[-1])
 
 
+def stage_costs(traj: Trajectory, model: Any,
+                weights: LQRWeights = COST_WEIGHTS) -> np.ndarray:
+    """The common quadratic cost of every step, split into its parts, (N, 5).
+
+    Columns (:data:`COST_PARTS`): ``attitude * |e / 1 deg|^2``, ``rate *
+    |omega / 0.1 deg/s|^2``, ``deflection * |d / 1 cm|^2`` (true states after the
+    step: attitude error against the reference, body rates, tip deflections),
+    ``torque * |u / 1 N m|^2`` of the applied torque, and the part of that
+    torque term due to the controller's excitation (``torque * |u_exc|^2``,
+    0 without one; it is included in the torque column, not added to it).
+    The weights are those every LQG design here minimizes.
+    """
+    layout = model.output_layout
+    states = traj.states[1:]
+    att = (states @ model.C[layout.slice("attitude")].T - traj.reference[1:]) \
+        / NOMINAL_SCALE["attitude"]
+    rate = states @ model.C[layout.slice("rate")].T / NOMINAL_SCALE["rate"]
+    defl = states @ model.C[layout.slice("deflection")].T / NOMINAL_SCALE["deflection"]
+    torque = traj.torque
+    exc = traj.excitation if traj.excitation is not None else np.zeros_like(torque)
+    return np.column_stack([weights.attitude * np.sum(att**2, axis=1),
+                            weights.rate * np.sum(rate**2, axis=1),
+                            weights.deflection * np.sum(defl**2, axis=1),
+                            weights.torque * np.sum(torque**2, axis=1),
+                            weights.torque * np.sum(exc**2, axis=1)])
+
+
+def _sustained_radius(traj: Trajectory, start_s: float) -> bool:
+    """Whether the true closed loop's radius exceeds 1 at every sample of some
+    :data:`RADIUS_STRETCH_S` stretch from ``start_s`` on."""
+    if traj.true_radius is None or traj.radius_time is None:
+        return False
+    keep = traj.radius_time >= start_s
+    t, r = traj.radius_time[keep], traj.true_radius[keep]
+    run_start = None
+    for ti, ri in zip(t, r, strict=True):
+        if ri > 1.0 + RADIUS_MARGIN:
+            run_start = ti if run_start is None else run_start
+            if ti - run_start >= RADIUS_STRETCH_S:
+                return True
+        else:
+            run_start = None
+    return False
+
+
 def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
                     stable_bound_deg: float = 1.0) -> dict[str, Any]:
     """Scores of one episode.
@@ -215,6 +344,14 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     Returns
     -------
     dict
+        ``cost_after_100s`` (the common quadratic cost, :func:`stage_costs`,
+        averaged from :data:`SCORED_FROM_S` on: the headline, the quantity
+        every LQG here minimizes) and its parts ``cost_attitude_after_100s``,
+        ``cost_rate_after_100s``, ``cost_deflection_after_100s``,
+        ``cost_torque_after_100s`` and ``cost_excitation_after_100s`` (the
+        share of the torque term due to an excitation); ``true_radius_max``
+        (largest spectral radius of the true closed loop sampled from 100 s,
+        None when the controller does not expose one);
         ``attitude_rms_deg`` and ``attitude_peak_deg`` (true attitude error,
         all axes, after the first step); ``attitude_rms_after_100s_deg`` and
         ``vibration_rms_after_100s_mm`` (from :data:`SCORED_FROM_S` on, once
@@ -237,7 +374,10 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     The verdict is the first that applies of ``"diverged"`` (non-finite
     state), ``"terminated"`` (attitude bound left), ``"growing"`` (envelope
     growth above :data:`GROWTH_LIMIT` per 100 s with the last peak above
-    :data:`ENVELOPE_FLOOR`: an unstable loop, however slowly it grows),
+    :data:`ENVELOPE_FLOOR`, fitted from t = 100 s and over the last
+    :data:`GROWTH_WINDOW_S`; or, where the controller exposes its design, the
+    true closed loop's spectral radius above 1 for :data:`RADIUS_STRETCH_S`:
+    an unstable loop, however slowly it grows),
     ``"saturated"`` (a limit cycle: an actuator at its limit for more than
     :data:`SATURATION_LIMIT` of the last 10 %), ``"offset"`` (the last 10 %
     of the error above ``stable_bound_deg``), else ``"stable"``. A final
@@ -278,6 +418,10 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         else (0.5 * time[-1] if time.size else 0.0)
     growth, last_peak = (_envelope_growth(time, level, scored_from) if finite
                          else (float("nan"), float("nan")))
+    window_start = max(scored_from, float(time[-1]) - GROWTH_WINDOW_S) if time.size else 0.0
+    late_growth, _ = (_envelope_growth(time, level, window_start) if finite
+                      else (float("nan"), float("nan")))
+    radius_growing = _sustained_radius(traj, scored_from)
     tail_n = max(1, len(err_norm) // 10)
     saturated = (float(np.mean(np.any(np.abs(traj.actions[-tail_n:]) >= 0.999, axis=1)))
                  if traj.actions.size else 0.0)
@@ -285,7 +429,8 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         verdict = "diverged"
     elif traj.terminated:
         verdict = "terminated"
-    elif growth > GROWTH_LIMIT and last_peak > ENVELOPE_FLOOR:
+    elif ((max((g for g in (growth, late_growth) if np.isfinite(g)), default=0.0)
+           > GROWTH_LIMIT and last_peak > ENVELOPE_FLOOR) or radius_growing):
         verdict = "growing"
     elif saturated > SATURATION_LIMIT:
         verdict = "saturated"
@@ -294,7 +439,17 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     else:
         verdict = "stable"
     late = time >= SCORED_FROM_S
+    costs = stage_costs(traj, model)
+    cost = costs[late].mean(axis=0) if late.any() else np.full(len(COST_PARTS), np.nan)
+    radius_max = None
+    if traj.true_radius is not None and traj.radius_time is not None:
+        scored = traj.true_radius[traj.radius_time >= scored_from]
+        radius_max = float(scored.max()) if scored.size else None
     return {
+        "cost_after_100s": float(np.sum(cost[:4])),
+        **{f"cost_{part}_after_100s": float(value)
+           for part, value in zip(COST_PARTS, cost, strict=True)},
+        "true_radius_max": radius_max,
         "attitude_rms_deg": float(np.sqrt(np.mean(err**2))),
         "attitude_rms_after_100s_deg": (float(np.sqrt(np.mean(err[late] ** 2))) if late.any()
                                         else float("nan")),
@@ -316,7 +471,10 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
 
 
 #: Scalar metrics aggregated by :func:`compare` (median and spread over seeds).
-AGGREGATED = ("attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_deg",
+AGGREGATED = ("cost_after_100s", "cost_attitude_after_100s", "cost_rate_after_100s",
+              "cost_deflection_after_100s", "cost_torque_after_100s",
+              "cost_excitation_after_100s",
+              "attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_deg",
               "vibration_rms_mm", "vibration_rms_after_100s_mm", "torque_rms_Nm",
               "effort_N2m2s", "return", "envelope_growth_per_100s", "excitation_rms_Nm",
               "rejected_share", "fallback_share")

@@ -54,6 +54,7 @@ from identifiers.model import ModelSequence, StateSpaceModel, observability_basi
 from identifiers.moment_refit import MomentRefitRPBSID
 from identifiers.predictor import PredictorRPBSID
 from identifiers.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.rigid_gain import RigidGainEstimate
 from identifiers.rls import RecursiveLeastSquares
 from identifiers.windowed import WindowedPBSID
 from spacecraft_conventions import __version__
@@ -81,6 +82,7 @@ __all__ = [
     "RegressionGLR",
     "Resonator",
     "RigidFlexibleIdentifier",
+    "RigidGainEstimate",
     "StateSpaceModel",
     "SystemRLSIdentifier",
     "WindowedPBSID",

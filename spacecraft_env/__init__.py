@@ -7,7 +7,10 @@ Importing the package registers four environments (250 s episodes,
 * ``FlexibleSpacecraftDocking-v1``: two modules dock at t = 100 s and 180 s,
 * ``FlexibleSpacecraftSolarRotation-v1``: paddles turn at 0.2 deg/s from 0 deg,
 * ``FlexibleSpacecraftPaddleRotation-v1``: paddles turn from 90 to 180 deg,
-  where a design made at 0 deg goes unstable.
+  where a design made at 0 deg goes unstable;
+* ``FlexibleSpacecraftFamily-v1``: the adaptation task, a new plant every
+  episode (inertia, modal stiffness, actuator efficiency, docking, paddle
+  angle and rate: :mod:`spacecraft_env.family`).
 
 ``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v1")`` works
 without a prior import.
@@ -18,6 +21,7 @@ from __future__ import annotations
 from spacecraft_conventions import __version__
 from spacecraft_env.dynamics import FlexibleSpacecraftModel, StateSpaceMatrices
 from spacecraft_env.env import REWARDS, FlexibleSpacecraftEnv, RewardWeights
+from spacecraft_env.family import PlantDraw, TaskFamily
 from spacecraft_env.parameters import (
     ANTENNA_FREQUENCIES_HZ,
     PADDLE_FREQUENCIES_HZ,
@@ -57,11 +61,13 @@ __all__ = [
     "FlexibleSpacecraftEnv",
     "FlexibleSpacecraftModel",
     "PaddleRotationScenario",
+    "PlantDraw",
     "RewardWeights",
     "Scenario",
     "SolarRotationScenario",
     "SpacecraftParameters",
     "StateSpaceMatrices",
+    "TaskFamily",
     "__version__",
     "env_id",
     "ets8_parameters",

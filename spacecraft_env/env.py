@@ -26,6 +26,7 @@ from spacecraft_conventions import (
     OutputLayout,
 )
 from spacecraft_env.dynamics import FlexibleSpacecraftModel
+from spacecraft_env.family import PlantDraw, TaskFamily
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
@@ -163,7 +164,17 @@ class FlexibleSpacecraftEnv(gym.Env):
     ----------
     scenario : str or Scenario
         ``"constant"``, ``"docking"``, ``"solar_rotation"``,
-        ``"paddle_rotation"`` or ``"docking_solar_rotation"``.
+        ``"paddle_rotation"``, ``"docking_solar_rotation"`` or ``"family"``
+        (the adaptation task: a new plant of :class:`~spacecraft_env.family.TaskFamily`
+        every episode, see ``family``).
+    family : TaskFamily, optional
+        Draw the plant of every episode from this family (hub inertia, modal
+        stiffness, actuator efficiency, docking, paddle angle and rate;
+        :mod:`spacecraft_env.family`); the draw is in ``reset``'s
+        ``info["plant"]`` and ``reset(options={"plant": {...}})`` sets it. The
+        actuator efficiency scales the torque the plant receives;
+        ``info["torque"]`` stays the commanded torque (what the spacecraft
+        knows). ``scenario="family"`` selects :class:`TaskFamily`'s defaults.
     randomize : bool
         Draw a random scenario variant (docking times, masses and off-axis
         offsets; rotation rate) from ``self.np_random`` at every reset.
@@ -210,6 +221,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, scenario: str | Scenario = "constant", *, randomize: bool = False,
+                 family: TaskFamily | None = None,
                  n_modes: int = 2, params: SpacecraftParameters | None = None,
                  outputs: Sequence[str] | None = None, snr_db: float | None = 40.0,
                  max_torque: float = 10.0, dt: float = 0.1, task: str = "regulation",
@@ -222,6 +234,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         super().__init__()
         if params is None:
             params = ets8_parameters(n_modes)
+        if isinstance(scenario, str) and scenario == "family":
+            family = family or TaskFamily()
+            scenario = "docking_solar_rotation"
+        if family is not None and not isinstance(family, TaskFamily):
+            raise TypeError(f"family must be a TaskFamily or None, got {type(family).__name__}")
+        self.family = family
+        self._base_params = params
+        self.plant = PlantDraw() if family is not None else None
         self._base_scenario = make_scenario(scenario)
         if not isinstance(randomize, bool | np.bool_):
             raise TypeError(f"randomize must be True or False, got {randomize!r}")
@@ -398,10 +418,12 @@ class FlexibleSpacecraftEnv(gym.Env):
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         options = dict(options or {})
-        unknown = set(options) - {"initial_attitude", "initial_rate", "reference_attitude"}
+        allowed = {"initial_attitude", "initial_rate", "reference_attitude"} | (
+            {"plant"} if self.family is not None else set())
+        unknown = set(options) - allowed
         if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected "
-                             "'initial_attitude', 'initial_rate', 'reference_attitude'")
+            raise ValueError(f"unknown reset options {sorted(unknown)}; expected one of "
+                             f"{sorted(allowed)}")
         rng = self.np_random
         if self.task == "regulation":
             psi0 = rng.uniform(-self.initial_attitude, self.initial_attitude, 3)
@@ -420,7 +442,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         if np.any(np.abs(psi0) >= self.max_attitude) or np.any(np.abs(ref) >= self.max_attitude):
             raise ValueError("initial and reference attitudes must stay within "
                              f"+-{np.rad2deg(self.max_attitude)} deg")
-        if self.randomize:
+        if self.family is not None:
+            plant = options.get("plant")
+            self.plant = (self.family.draw(rng) if plant is None else
+                          plant if isinstance(plant, PlantDraw) else PlantDraw.from_dict(plant))
+            self.model = FlexibleSpacecraftModel(self.plant.parameters(self._base_params),
+                                                 self.plant.scenario(), OUTPUT_GROUPS,
+                                                 self.model.dt)
+        elif self.randomize:
             self.model = self.model.with_scenario(self._base_scenario.randomized(rng))
         nd = self.model.n_dof
         self._x = np.zeros(self.model.n)
@@ -438,6 +467,8 @@ class FlexibleSpacecraftEnv(gym.Env):
             self.render()
         info = self._info()
         info["scenario"] = self.model.scenario.parameters()
+        if self.plant is not None:
+            info["plant"] = self.plant.as_dict()
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -463,7 +494,8 @@ class FlexibleSpacecraftEnv(gym.Env):
             move = self.torque_rate_limit * self.model.dt
             torque = self._torque + np.clip(torque - self._torque, -move, move)
         self._torque = torque
-        total = torque + self.disturbance_torque
+        total = (torque if self.plant is None else self.plant.actuator_gain * torque) \
+            + self.disturbance_torque
         if self.disturbance_std > 0:
             total = total + self.disturbance_std * self.np_random.standard_normal(3)
         x = self._x

@@ -20,6 +20,7 @@ ENV_IDS: Mapping[str, str] = MappingProxyType({
     "FlexibleSpacecraftDocking-v1": "docking",
     "FlexibleSpacecraftSolarRotation-v1": "solar_rotation",
     "FlexibleSpacecraftPaddleRotation-v1": "paddle_rotation",
+    "FlexibleSpacecraftFamily-v1": "family",
 })
 
 #: Episode length of every registered id: 250 s at dt = 0.1 s.

@@ -186,6 +186,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=_integer(0), default=0, help="environment seed")
     demo.add_argument("--steps", type=_integer(1), default=2500,
                       help="episode length, steps of 0.1 s")
+    demo.add_argument("--save-trajectories", action="store_true",
+                      help="also write the rollout as trajectory.npz")
 
     ident = command("identify", help="the paper's identification experiment")
     ident.add_argument("--scenario", choices=sorted(SCENARIOS), default="docking",
@@ -249,6 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
                      default=None, help="actuator slew-rate limit, N m/s (default: none)")
     ctl.add_argument("--disturbance-torque", type=_number(-100.0, 100.0, unit=" N m"),
                      default=0.0, help="constant external torque on every axis, N m")
+    ctl.add_argument("--save-trajectories", action="store_true",
+                     help="also write every episode to OUT/trajectories/ (npz)")
 
     train = command("train", help="train SB3 agents (PPO/SAC)")
     train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
@@ -322,7 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ----------------------------------------------------------------- commands
 def _demo(args: argparse.Namespace) -> int:
-    summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps)
+    summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps,
+                       save_trajectory=args.save_trajectories)
     print(json.dumps(summary, indent=2))
     print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
     return 0
@@ -349,7 +354,8 @@ def _control(args: argparse.Namespace) -> int:
                                 disturbance_torque=args.disturbance_torque)
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
     run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs, weights=weights,
-                controllers=args.controllers, steps=args.steps)
+                controllers=args.controllers, steps=args.steps,
+                save_trajectories=args.save_trajectories)
     print((Path(args.out) / "table.md").read_text())
     print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
     return 0

@@ -25,6 +25,7 @@ import gymnasium as gym
 from controllers import (
     PD,
     AdaptiveLQG,
+    BinaryExcitation,
     ComparisonInterrupted,
     FixedLQG,
     LQRWeights,
@@ -32,6 +33,7 @@ from controllers import (
     OracleLQR,
     RobustLQG,
     ScheduledLQG,
+    TrueModelIdentifier,
     compare,
     episode_metrics,
     run_episode,
@@ -49,13 +51,16 @@ from spacecraft_env import (
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
 
-__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "ORACLE", "SCENARIO_NAMES", "control_task",
+__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "ORACLE", "SAME_LAW", "SCENARIO_NAMES",
+           "control_task",
            "env_kwargs_for", "run_control"]
 
 #: Scenarios with a registered environment id.
 SCENARIO_NAMES = tuple(ENV_IDS.values())
 #: The reference every ratio is taken against: the output-feedback oracle.
 ORACLE = "oracle LQG"
+#: The adaptive loop's own law flown on the true model: what identification costs.
+SAME_LAW = "same-law oracle"
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
@@ -66,6 +71,9 @@ def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
         "scheduled LQG": lambda env: ScheduledLQG(env, weights),
         "PD": lambda env: PD(env),
         "adaptive LQG": lambda env: AdaptiveLQG(env, weights=weights),
+        SAME_LAW: lambda env: AdaptiveLQG(env, weights=weights,
+                                          identifier=TrueModelIdentifier(env),
+                                          excitation=BinaryExcitation(0.0, 0.0)),
         ORACLE: lambda env: OracleLQG(env, weights),
         "full-state oracle": lambda env: OracleLQR(env, weights),
     }
@@ -74,6 +82,7 @@ def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
 CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
+                   "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle"}
 
 
@@ -240,7 +249,8 @@ control_task.check_params = _check_control      # type: ignore[attr-defined]
 def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
                 out: str | Path = "results/control", *, env_kwargs: dict[str, Any] | None = None,
                 weights: LQRWeights | None = None, controllers: Sequence[str] | None = None,
-                steps: int | None = None, progress: bool = True) -> dict:
+                steps: int | None = None, progress: bool = True,
+                save_trajectories: bool = False) -> dict:
     """Compare the controllers and write the artefacts.
 
     Parameters
@@ -259,6 +269,9 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         Keys of :data:`CONTROLLER_KEYS` (default: all).
     steps : int, optional
         Episode length, steps of 0.1 s (default: the registered 2500).
+    save_trajectories : bool
+        Also write every episode as ``trajectories/<controller>-seed<k>.npz``
+        (:meth:`controllers.Trajectory.save`).
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
@@ -286,6 +299,12 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
             _write_control(out, scenario, stop.completed, kwargs, weights, stop.table,
                            stop.trajectories, steps, make_env, interrupted=stop.total)
         raise
+    if save_trajectories:
+        folder = out / "trajectories"
+        folder.mkdir(exist_ok=True)
+        for name, trajs in runs.items():
+            for seed, traj in enumerate(trajs):
+                traj.save(folder / f"{name.replace(' ', '-')}-seed{seed}.npz")
     return _write_control(out, scenario, seeds, kwargs, weights, table, runs, steps, make_env)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
-from controllers import PD
+from controllers import PD, Trajectory
 from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftEnv
 from spacecraft_lab.plots import plot_demo_response
@@ -28,7 +28,7 @@ __all__ = ["run_demo"]
 
 
 def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: int = 0,
-             steps: int = 2500, gif_every: int = 10) -> dict:
+             steps: int = 2500, gif_every: int = 10, save_trajectory: bool = False) -> dict:
     """Run the demo rollout and write its artefacts to ``out``.
 
     Parameters
@@ -43,6 +43,8 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
         Episode length in steps (dt = 0.1 s).
     gif_every : int
         Keep every ``gif_every``-th frame in the GIF.
+    save_trajectory : bool
+        Also write the rollout as ``trajectory.npz`` (:class:`controllers.Trajectory`).
 
     Returns
     -------
@@ -60,11 +62,18 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
     c_defl = env.model.C[layout.slice("deflection")]
     initial_attitude = c_att @ info["state"]
     times, att, defl, torque, inertia, freqs, frames = [], [], [], [], [], [], []
+    observations, actions, states, refs, rewards = [obs], [], [info["state"]], \
+        [info["reference"]], []
     total_reward = 0.0
     for k in tqdm(range(steps), desc=f"{scenario} rollout", unit="step"):
         action = pd.act(obs, info)
         obs, reward, terminated, truncated, info = env.step(action)
         total_reward += reward
+        observations.append(obs)
+        actions.append(action)
+        states.append(info["state"])
+        refs.append(info["reference"])
+        rewards.append(reward)
         times.append(info["time"])
         att.append(c_att @ info["state"] * DEG_PER_RAD)
         defl.append(c_defl @ info["state"])
@@ -108,4 +117,9 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
         "first_frequencies_hz_end": freq_arr[-1].tolist(),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    if save_trajectory:
+        Trajectory(time=t, observations=np.array(observations), actions=np.array(actions),
+                   torque=torque, states=np.array(states), reference=np.array(refs),
+                   rewards=np.array(rewards), terminated=bool(terminated),
+                   events=tuple(events)).save(out / "trajectory.npz")
     return summary
