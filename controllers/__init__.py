@@ -13,7 +13,11 @@
   closed-loop harness.
 * :class:`IdentifiedModelFeatures`: the identifier as a model-learning
   component for RL agents; :class:`OracleModelFeatures`: the same features
-  from the true plant (the ceiling, privileged); :class:`ResidualControl`: an
+  from the true plant (the ceiling, privileged); :class:`PhysicalFeatures`:
+  the identifier's physical estimates (rigid-body gain, slowest modes, their
+  uncertainties, a change flag) in a fixed normalized frame, and
+  :class:`PrivilegedFeatures` the same vector from the truth;
+  :class:`ResidualControl`: an
   agent's action added to a controller's (residual RL on the adaptive LQG).
 """
 
@@ -31,7 +35,12 @@ from controllers.baselines import (
     nominal_model,
 )
 from controllers.excitation import BinaryExcitation
-from controllers.features import IdentifiedModelFeatures, OracleModelFeatures
+from controllers.features import (
+    IdentifiedModelFeatures,
+    OracleModelFeatures,
+    PhysicalFeatures,
+    PrivilegedFeatures,
+)
 from controllers.harness import (
     ComparisonInterrupted,
     Trajectory,
@@ -60,7 +69,9 @@ __all__ = [
     "OracleLQG",
     "OracleLQR",
     "OracleModelFeatures",
+    "PhysicalFeatures",
     "PolicyController",
+    "PrivilegedFeatures",
     "ResidualControl",
     "RiccatiTracker",
     "RobustLQG",

@@ -49,7 +49,8 @@ from numpy.typing import ArrayLike
 from identifiers import OnlineIdentifier, default_identifier, rigid_body_gain
 from spacecraft_conventions import match_groups, single_threaded_blas
 
-__all__ = ["IdentifiedModelFeatures", "OracleModelFeatures"]
+__all__ = ["PHYSICAL_FEATURE_NAMES", "IdentifiedModelFeatures", "OracleModelFeatures",
+           "PhysicalFeatures", "PrivilegedFeatures"]
 
 _CLIP = 10.0
 #: Entries of a symmetric 3x3 matrix that the features carry (upper triangle).
@@ -267,4 +268,268 @@ class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArg
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         feats = np.clip(self._truth(), -_CLIP, _CLIP)
+        return np.concatenate([np.asarray(observation, dtype=float), feats]).astype(np.float32)
+
+
+# --------------------------------------------------------------------------
+# Physical parameters: what the identifier knows, in a fixed, normalized frame
+# --------------------------------------------------------------------------
+
+#: Window of the change flag, s: 1 while the plant changed (or a change was
+#: detected) within this long.
+CHANGE_WINDOW_S = 20.0
+#: A truth feature that moved by more than this (relative, over the window)
+#: counts as a change for the privileged flag.
+_CHANGE_TOLERANCE = 0.01
+
+
+def physical_feature_names(n_modes: int) -> tuple[str, ...]:
+    """Names of :class:`PhysicalFeatures`' channels, in order."""
+    modes = range(1, n_modes + 1)
+    return ("log_gain_xx", "log_gain_yy", "log_gain_zz", "gain_xy", "gain_xz", "gain_yz",
+            "gain_rel_std", *(f"log_freq_{i}" for i in modes), *(f"damping_{i}" for i in modes),
+            *(f"log_freq_std_{i}" for i in modes), "changed", "ready")
+
+
+#: Channel names with the default two modes.
+PHYSICAL_FEATURE_NAMES = physical_feature_names(2)
+
+
+class _PhysicalFrame:
+    """The fixed frame both physical-feature wrappers report in.
+
+    The nominal plant (the ETS-VIII at its 0 deg paddle angle) sets it:
+    ``G0 = diag(J0^-1)`` for the gain and the frequencies ``f0`` of its
+    ``n_modes`` dominant modes (largest input-output weight, in order of
+    frequency) for the modes, so every channel is about 0 at the nominal
+    plant and of order 1 over the family's range.
+    """
+
+    def __init__(self, env: gym.Env, n_modes: int) -> None:
+        if n_modes < 1:
+            raise ValueError(f"n_modes must be >= 1, got {n_modes}")
+        nominal = env.unwrapped.model.nominal()
+        self.k = int(n_modes)
+        self.g0 = np.diag(np.linalg.inv(nominal.inertia(0.0))).copy()
+        f0, _ = self.dominant_modes(nominal, 0.0)
+        if f0.size < self.k:
+            raise ValueError(f"the plant has {f0.size} flexible modes, n_modes={n_modes}")
+        self.f0 = f0
+        self.size = 7 + 3 * self.k + 2
+
+    def dominant_modes(self, model: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Frequencies (Hz) and damping of the true plant's ``k`` modes with the largest
+        input-output weight (:meth:`~spacecraft_env.FlexibleSpacecraftModel.modal_residues`),
+        in order of frequency: the modes data can reveal, and the ones an identifier
+        keeps (a mode that the torques hardly excite is invisible to both)."""
+        freq, zeta, weight = model.modal_residues(t)
+        keep = np.sort(np.argsort(-weight, kind="stable")[:self.k])
+        return freq[keep], zeta[keep]
+
+    def fill(self, out: np.ndarray, gain: np.ndarray, gain_rel_std: float,
+             freq: np.ndarray, zeta: np.ndarray, log_f_std: np.ndarray) -> None:
+        """Write one vector (``out``, length :attr:`size`; flags left to the caller)."""
+        k = self.k
+        diag = np.diag(gain)
+        out[:3] = np.log(np.maximum(diag, 1e-3 * self.g0) / self.g0)
+        norm = np.sqrt(self.g0[[0, 0, 1]] * self.g0[[1, 2, 2]])
+        sym = 0.5 * (gain + gain.T)
+        out[3:6] = sym[[0, 0, 1], [1, 2, 2]] / norm
+        out[6] = gain_rel_std
+        count = min(k, freq.size)
+        order = np.argsort(freq)[:count]
+        out[7:7 + count] = np.log(np.maximum(freq[order], 1e-6) / self.f0[:count])
+        out[7 + k:7 + k + count] = 10.0 * zeta[order]
+        out[7 + 2 * k:7 + 2 * k + count] = log_f_std[order]
+
+
+class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Append the identifier's physical estimates and their uncertainty.
+
+    The adaptation-module pattern of online system identification for RL: a
+    compact vector of physical parameters, estimated online from the
+    torques and the measurements and normalized against the nominal plant,
+    so the same channel means the same thing in every episode and every
+    model the identifier rebuilds. Appended (float32, clipped to [-10, 10];
+    names in :func:`physical_feature_names`):
+
+    ==================  ===  ================================================
+    channel             size  meaning
+    ==================  ===  ================================================
+    log gain diagonal   3    ``log(G_ii / G0_ii)``, ``G = J^-1`` the rigid-body
+                             gain (rad/s^2 per N m, including the actuator's
+                             efficiency) from the identifier's rate
+                             regression, ``G0`` the nominal plant's
+    gain off-diagonal   3    ``G_ij / sqrt(G0_ii G0_jj)`` (xy, xz, yz)
+    gain uncertainty    1    the estimate's relative standard deviation
+                             (:meth:`identifiers.RigidGainEstimate.relative_std`)
+    log frequencies     k    ``log(f_i / f0_i)`` of the k slowest tracked
+                             modes (an identifier keeps the modes the data
+                             reveal: the dominant ones)
+    damping             k    their damping ratios times 10
+    frequency std       k    standard deviation of ``log f_i`` in percent
+                             (the modal tracker's covariance of its last
+                             refinement; 0 before the first)
+    changed             1    1 if the identifier detected a change in the
+                             last 20 s (:data:`CHANGE_WINDOW_S`)
+    ready               1    1 once the identifier has warmed up (50 s by default); every
+                             other channel is 0 before
+    ==================  ===  ================================================
+
+    The identifier is fed the commanded torque the env reports
+    (``info["torque"]``, N m), so the wrapper can sit outside a
+    :class:`controllers.ResidualControl` and still see the whole torque.
+    It restarts every episode (a new plant of the family).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment observing attitude and rate (deflections
+        are used when observed).
+    identifier : identifiers.OnlineIdentifier, optional
+        Anything with ``rigid_gain`` and ``mode_estimates``; default
+        :func:`identifiers.default_identifier` for the observed sensors.
+    n_modes : int
+        k, tracked modes reported (default 2).
+    every : int
+        Env steps between refreshes of the vector (default 10: 1 s, one
+        decision of an agent under :class:`~spacecraft_env.ActionRepeat`).
+    """
+
+    def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,
+                 n_modes: int = 2, every: int = 10) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, identifier=identifier, n_modes=n_modes,
+                                                 every=every)
+        gym.Wrapper.__init__(self, env)
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every}")
+        base = env.unwrapped
+        model = base.model
+        layout = base.observation_layout
+        self._meas_obs, _ = match_groups(layout, model.output_layout)
+        measured = layout.sensors()
+        if not {"attitude", "rate"} <= set(measured.names):
+            raise ValueError("PhysicalFeatures needs the env to observe 'attitude' and 'rate', "
+                             f"got {measured.names}")
+        if identifier is None:
+            identifier = default_identifier(measured, n=model.n, dt=model.dt)
+        for needed in ("rigid_gain", "mode_estimates"):
+            if not hasattr(identifier, needed):
+                raise TypeError(f"identifier must provide {needed!r} "
+                                f"(e.g. identifiers.default_identifier())")
+        self.identifier = identifier
+        self.frame = _PhysicalFrame(env, n_modes)
+        self.n_modes = self.frame.k
+        self.every = int(every)
+        self.n_features = self.frame.size
+        self._dt = float(model.dt)
+        self.observation_space = _appended_space(env, self.n_features)
+        self._feats = np.zeros(self.n_features)
+        self._last_y: np.ndarray | None = None
+        self._steps = 0
+
+    def _refresh(self) -> None:
+        ident, out = self.identifier, np.zeros(self.n_features)
+        estimate = ident.rigid_gain
+        if estimate is not None and np.all(np.isfinite(estimate.gain)):
+            freq, zeta, cov = ident.mode_estimates
+            k = freq.size
+            log_f_std = np.zeros(k)
+            if cov is not None and cov.shape == (2 * k, 2 * k):
+                log_f_std = 100.0 * np.sqrt(np.maximum(np.diag(cov)[0::2], 0.0))
+            rel = estimate.relative_std()
+            self.frame.fill(out, estimate.gain, rel if np.isfinite(rel) else _CLIP,
+                            freq, zeta, log_f_std)
+            now = ident.n_samples * self._dt
+            events = getattr(ident, "events", [])
+            out[-2] = float(bool(events) and now - events[-1].time <= CHANGE_WINDOW_S)
+            out[-1] = 1.0
+        np.clip(out, -_CLIP, _CLIP, out=out)
+        out[~np.isfinite(out)] = 0.0
+        self._feats = out
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        if self._steps % self.every == 0:
+            self._refresh()
+        self._steps += 1
+        return np.concatenate([np.asarray(obs, dtype=float), self._feats]).astype(np.float32)
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.identifier.reset()
+        self._last_y = np.asarray(obs, dtype=float)[self._meas_obs]
+        self._steps = 0
+        return self._observe(obs), info
+
+    @single_threaded_blas
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
+                                              dict[str, Any]]:
+        if self._last_y is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        # (u_k, y_k): the torque applied after y_k was measured
+        self.identifier.update(np.asarray(info["torque"], dtype=float), self._last_y)
+        self._last_y = np.asarray(obs, dtype=float)[self._meas_obs]
+        return self._observe(obs), reward, terminated, truncated, info
+
+
+class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """The same vector as :class:`PhysicalFeatures`, from the true plant: the ceiling.
+
+    Gain ``G = a J(t)^-1`` with the actuator efficiency ``a`` of a family
+    draw, the k dominant true modes (largest input-output weight, in order
+    of frequency: the ones an identifier can see), zero uncertainty, ``changed`` = 1 when
+    any gain or frequency channel moved by more than 1 % over the last
+    20 s, and ``ready`` = 1 from the first step. For comparisons only: a
+    deployed agent cannot have it.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment.
+    n_modes : int
+        k, modes reported (default 2).
+    """
+
+    def __init__(self, env: gym.Env, n_modes: int = 2) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes)
+        gym.ObservationWrapper.__init__(self, env)
+        self.frame = _PhysicalFrame(env, n_modes)
+        self.n_modes = self.frame.k
+        self.n_features = self.frame.size
+        self.observation_space = _appended_space(env, self.n_features)
+        self._cache: dict = {}
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        self._cache.clear()            # a new draw changes the plant
+        return super().reset(seed=seed, options=options)
+
+    def _truth(self, t: float) -> np.ndarray:
+        base = self.env.unwrapped
+        model = base.model
+        key = model._key(max(t, 0.0))
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            plant = getattr(base, "plant", None)
+            efficiency = 1.0 if plant is None else plant.actuator_gain
+            hit = np.zeros(self.n_features)
+            freq, zeta = self.frame.dominant_modes(model, max(t, 0.0))
+            self.frame.fill(hit, efficiency * np.linalg.inv(model.inertia(max(t, 0.0))), 0.0,
+                            freq, zeta, np.zeros(freq.size))
+            hit[-1] = 1.0
+            self._cache[key] = hit
+        return hit
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        t = self.env.unwrapped.time
+        now = self._truth(t).copy()
+        before = self._truth(t - CHANGE_WINDOW_S)
+        k = self.n_modes
+        moved = np.abs(np.concatenate([now[:6] - before[:6], now[7:7 + k] - before[7:7 + k]]))
+        now[-2] = float(moved.max() > _CHANGE_TOLERANCE)
+        feats = np.clip(now, -_CLIP, _CLIP)
         return np.concatenate([np.asarray(observation, dtype=float), feats]).astype(np.float32)

@@ -54,7 +54,7 @@ from spacecraft_lab.sweeps import (
     run_sweep,
     summarize,
 )
-from spacecraft_lab.training import ACTION_REPEAT, ALGORITHMS, FEATURES, run_training
+from spacecraft_lab.training import ACTION_REPEAT, ALGORITHMS, EVAL_SEEDS, FEATURES, run_training
 
 __all__ = ["build_parser", "main"]
 
@@ -280,6 +280,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "termination penalty)")
     train.add_argument("--eval-every", type=_integer(1), default=20_000,
                        help="env steps between evaluations")
+    train.add_argument("--eval-episodes", type=_integer(1), default=len(EVAL_SEEDS),
+                       help="evaluation episodes (seeds 1000, 1001, ...), the same for the "
+                            "LQG comparators, every curve point and the final result")
     train.add_argument("--out", type=_output_directory, default="results/train",
                        help="output directory")
     train.add_argument("--tensorboard", type=_output_directory, default=None,
@@ -366,11 +369,15 @@ def _train(args: argparse.Namespace) -> int:
                      scenario=args.scenario, eval_every=args.eval_every,
                      tensorboard=None if args.tensorboard is None else str(args.tensorboard),
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
-                     first_seed=args.first_seed)
-    print(json.dumps({k: m[k] for k in ("algo", "features", "timesteps", "randomize", "repeat",
-                                       "reward",
-                                       "final_attitude_rms_deg", "final_vibration_rms_mm",
-                                       "final_return", "adaptive_lqg", "fixed_lqg")}, indent=2))
+                     first_seed=args.first_seed,
+                     eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)))
+    brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
+                               "repeat", "reward", "final_cost_after_100s",
+                               "final_attitude_rms_deg", "final_vibration_rms_mm",
+                               "final_return")}
+    for key in ("oracle_lqg", "adaptive_lqg", "fixed_lqg"):
+        brief[key] = {k: v for k, v in m[key].items() if not isinstance(v, list)}
+    print(json.dumps(brief, indent=2))
     print("steps to 2x adaptive LQG RMS:", [r["steps_to_2x_adaptive"] for r in m["runs"]])
     print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
     return 0

@@ -249,24 +249,29 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
 
 
 def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
-    """Evaluation attitude RMS and return against env steps, adaptive LQG dashed."""
-    fig = Figure(figsize=(11, 4))
-    axes = fig.subplots(1, 2)
+    """Evaluation cost, attitude RMS and return against env steps; the oracle, adaptive
+    and fixed LQG on the same episodes as horizontal lines."""
+    fig = Figure(figsize=(15, 4))
+    axes = fig.subplots(1, 3)
+    keys = ("cost_after_100s", "attitude_rms_deg", "return")
     for run in metrics["runs"]:
         if not run["curve"]:
             continue
         steps = [c["timesteps"] for c in run["curve"]]
-        axes[0].plot(steps, [c["attitude_rms_deg"] for c in run["curve"]], "o-",
-                     label=f"seed {run['seed']}")
-        axes[1].plot(steps, [c["return"] for c in run["curve"]], "o-")
-    axes[0].axhline(metrics["adaptive_lqg"]["attitude_rms_deg"], color="k", ls="--",
-                    label="adaptive LQG")
-    axes[0].axhline(metrics["target_attitude_rms_deg"], color="gray", ls=":",
-                    label="2x adaptive LQG")
-    axes[1].axhline(metrics["adaptive_lqg"]["return"], color="k", ls="--")
+        for ax, key in zip(axes, keys, strict=True):
+            if all(key in c for c in run["curve"]):
+                ax.plot(steps, [c[key] for c in run["curve"]], "o-", label=f"seed {run['seed']}")
+    for name, ref, style in (("oracle LQG", "oracle_lqg", ":"), ("adaptive LQG", "adaptive_lqg",
+                                                                "--"),
+                             ("fixed LQG", "fixed_lqg", "-.")):
+        for ax, key in zip(axes, keys, strict=True):
+            if ref in metrics and key in metrics[ref]:
+                ax.axhline(metrics[ref][key], color="k", ls=style, label=name)
     axes[0].set_yscale("log")
-    axes[0].set_ylabel("attitude RMS (deg), eval seeds")
-    axes[1].set_ylabel("return, eval seeds")
+    axes[1].set_yscale("log")
+    axes[0].set_ylabel("cost from 100 s (median episode)")
+    axes[1].set_ylabel("attitude RMS (deg), mean over episodes")
+    axes[2].set_ylabel("return, mean over episodes")
     for ax in axes:
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
@@ -279,13 +284,16 @@ def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
 def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> None:
     """Learning curves of several ``spacecraft train`` runs: median and range over seeds.
 
-    Evaluation attitude RMS (log scale) and return against env steps, one
-    colour per run (algorithm and features); the adaptive and fixed LQG and
-    zero torque on the same evaluation seeds as horizontal lines, 2x the
-    adaptive dotted.
+    The common cost from 100 s (log scale; the attitude RMS for runs that
+    did not record it) and the return against env steps, one colour per run
+    (algorithm and features); the oracle, adaptive and fixed LQG and zero
+    torque on the same evaluation episodes as horizontal lines.
     """
     fig = Figure(figsize=(12, 4.5))
     axes = fig.subplots(1, 2)
+    # the common cost where every run recorded it (older runs: the attitude RMS)
+    left = "cost_after_100s" if all("cost_after_100s" in c for m in runs for r in m["runs"]
+                                    for c in r["curve"]) else "attitude_rms_deg"
     for m in runs:
         curves = [r["curve"] for r in m["runs"] if r["curve"]]
         if not curves:
@@ -293,22 +301,25 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
         length = min(len(c) for c in curves)
         steps = np.array([c["timesteps"] for c in curves[0][:length]])
         label = f"{m['algo'].upper()}, {m['features']} ({len(curves)} seeds)"
-        for ax, key in zip(axes, ("attitude_rms_deg", "return"), strict=True):
+        for ax, key in zip(axes, (left, "return"), strict=True):
             values = np.array([[c[key] for c in curve[:length]] for curve in curves])
             line, = ax.plot(steps, np.median(values, axis=0), "o-", ms=3, label=label)
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
                             color=line.get_color(), alpha=0.15)
     last = runs[-1]
-    for name, key, style, colour in (("adaptive LQG", "adaptive_lqg", "--", "k"),
+    for name, key, style, colour in (("oracle LQG", "oracle_lqg", ":", "k"),
+                                     ("adaptive LQG", "adaptive_lqg", "--", "k"),
                                      ("fixed LQG", "fixed_lqg", "-.", "k"),
                                      ("zero torque", "zero_torque", "--", "darkgoldenrod")):
-        if key in last:
-            axes[0].axhline(last[key]["attitude_rms_deg"], color=colour, ls=style, label=name)
+        if key in last and left in last[key]:
+            axes[0].axhline(last[key][left], color=colour, ls=style, label=name)
             axes[1].axhline(last[key]["return"], color=colour, ls=style)
-    axes[0].axhline(last["target_attitude_rms_deg"], color="gray", ls=":",
-                    label="2x adaptive LQG")
+    if left == "attitude_rms_deg":
+        axes[0].axhline(last["target_attitude_rms_deg"], color="gray", ls=":",
+                        label="2x adaptive LQG")
     axes[0].set_yscale("log")
-    axes[0].set_ylabel("attitude RMS (deg), evaluation seeds")
+    axes[0].set_ylabel("cost from 100 s, median episode" if left == "cost_after_100s"
+                       else "attitude RMS (deg), evaluation seeds")
     bounded = last.get("reward", "cost") == "bounded"
     axes[1].set_ylabel("return (bounded reward: steps held, of 2500)" if bounded
                        else "return (negative cost), evaluation seeds")

@@ -174,11 +174,14 @@ def rl_table(directories: Sequence[str | Path]) -> str:
 
     Per setting (directories with equal algorithm, features, task, env
     steps, decision period and reward pool their seeds, so seeds trained in
-    separate processes make one row): the final evaluation's attitude RMS,
-    vibration and return as the median [min, max] over training seeds, and
+    separate processes make one row), first the common quadratic cost from
+    100 s (:func:`controllers.stage_costs`; per training seed the median
+    over the evaluation episodes), then its ratio to the oracle LQG's and to
+    the fixed LQG's on the same episodes, the attitude RMS, vibration and
     the env steps each seed needed to come within 2x of the adaptive LQG's
-    attitude RMS; then the adaptive and fixed LQG and zero torque (the
-    trivial baseline) on the same evaluation seeds (taken from the last
+    attitude RMS; each as the median [min, max] over training seeds. Then
+    the oracle, adaptive and fixed LQG and zero torque (the trivial
+    baseline) on the same evaluation episodes (taken from the last
     directory).
     """
     def spread(values: list[float], fmt: str) -> str:
@@ -187,6 +190,13 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             return "-"
         return (f"{np.median(values):{fmt}} [{min(values):{fmt}}, {max(values):{fmt}}]"
                 if len(values) > 1 else f"{values[0]:{fmt}}")
+
+    def cost(result: dict[str, Any]) -> float | None:
+        return result.get("cost_after_100s")
+
+    def ratio(result: dict[str, Any], ref: dict[str, Any] | None) -> float | None:
+        mine, theirs = cost(result), None if ref is None else cost(ref)
+        return None if mine is None or not theirs else mine / theirs
 
     rows = []
     pooled = pooled_training_runs(directories)
@@ -197,19 +207,24 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]
         rows.append(
             f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
-            f"| {len(finals)} | {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
+            f"| {len(finals)} | {spread([cost(f) for f in finals], '.4f')} "
+            f"| {spread([ratio(f, m.get('oracle_lqg')) for f in finals], '.2f')} "
+            f"| {spread([ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} "
+            f"| {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
             f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
-            f"| {spread([f['return'] for f in finals], '.3g')} "
             f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
-    head = ["| agent | features | task | env steps | seeds | final attitude RMS (deg) "
-            "| vibration RMS (mm) | return | env steps to <= 2x adaptive LQG RMS |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
+            "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
+            "| env steps to <= 2x adaptive LQG RMS |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
-        for name, key in (("adaptive LQG", "adaptive_lqg"), ("fixed LQG", "fixed_lqg"),
-                          ("zero torque", "zero_torque")):
+        for name, key in (("oracle LQG", "oracle_lqg"), ("adaptive LQG", "adaptive_lqg"),
+                          ("fixed LQG", "fixed_lqg"), ("zero torque", "zero_torque")):
             if key in last:
                 b = last[key]
-                rows.append(f"| {name} | - | - | - | - | {b['attitude_rms_deg']:.2f} "
-                            f"| {spread([b.get('vibration_rms_mm')], '.2f')} "
-                            f"| {b['return']:.3g} | - |")
+                rows.append(f"| {name} | - | - | - | - | {spread([cost(b)], '.4f')} "
+                            f"| {spread([ratio(b, last.get('oracle_lqg'))], '.2f')} "
+                            f"| {spread([ratio(b, last.get('fixed_lqg'))], '.2f')} "
+                            f"| {b['attitude_rms_deg']:.2f} "
+                            f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - |")
     return "\n".join(head + rows) + "\n"

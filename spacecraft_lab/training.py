@@ -1,36 +1,47 @@
 """Training stable-baselines3 agents on the spacecraft environments.
 
 ``spacecraft train --algo ppo|sac --features F --timesteps N --seeds S
-[--randomize] --out DIR`` calls :func:`run_training`: for each seed it
-trains an agent on a registered environment (slew task; ``--randomize``
-draws a new scenario every episode, e.g. docking masses, times and
-offsets), Monitor-wrapped, with observations and rewards normalized by
-``VecNormalize``. ``F`` (:data:`FEATURES`) appends nothing (``none``),
-:class:`controllers.IdentifiedModelFeatures` (``identified``: the
-identifier restarts every episode; ``identified-kept``: it is carried over
-episode resets; ``identified-kept-no-state``: carried over, and without
-the identifier's state estimate among the features) or (the ceiling)
-:class:`controllers.OracleModelFeatures` (``oracle``). Two more settings
-use a model through a controller instead (residual RL,
-:class:`controllers.ResidualControl`): the agent's action is added to that
-of the self-tuning LQG on the identified model (``residual-adaptive``) or of
-the fixed LQG on the nominal model (``residual-fixed``, the comparator: what
-a model the identifier did not learn gives). Every ``eval_every``
-steps the current policy is evaluated through the same harness as the
-controllers (:func:`controllers.run_episode`), and the evaluation (attitude
-RMS, vibration, return, share of stable episodes) goes to SB3's logger
-under ``eval/`` beside Monitor's ``rollout/ep_rew_mean`` and
-``ep_len_mean``, so TensorBoard shows them. It writes the saved models,
-``learning_curves.png``, ``metrics.json`` (final attitude RMS, vibration,
-return, and the env steps needed to come within 2x of the adaptive LQG's
-attitude RMS on the same evaluation seeds, with the fixed LQG beside it)
-and, with ``--tensorboard``, TensorBoard logs.
-"""
+[--scenario family] [--randomize] --out DIR`` calls :func:`run_training`:
+for each seed it trains an agent on a registered environment (slew task;
+``--scenario family`` flies a new plant of
+:class:`spacecraft_env.TaskFamily` every episode, the task where a model
+matters; ``--randomize`` draws a scenario variant every episode, e.g.
+docking masses, times and offsets), Monitor-wrapped, with observations and
+rewards normalized by ``VecNormalize``.
 
+``F`` (:data:`FEATURES`) appends nothing (``none``); the identifier's
+physical estimates, :class:`controllers.PhysicalFeatures` (``physical``:
+rigid-body gain, dominant modes, their uncertainty and a change flag in a
+fixed normalized frame) or the same vector from the truth,
+:class:`controllers.PrivilegedFeatures` (``privileged``, the ceiling); the
+identifier's raw model features, :class:`controllers.IdentifiedModelFeatures`
+(``identified``: the identifier restarts every episode;
+``identified-kept``: it is carried over episode resets;
+``identified-kept-no-state``: carried over, without its state estimate) or
+their truth version :class:`controllers.OracleModelFeatures` (``oracle``).
+Three settings use a model through a controller instead (residual RL,
+:class:`controllers.ResidualControl`): the agent's action is added to that
+of the self-tuning LQG on the identified model (``residual-adaptive``), of
+the fixed LQG on the nominal model (``residual-fixed``), or of the fixed LQG
+with the physical estimates observed (``residual-fixed-physical``).
+
+Every ``eval_every`` env steps, and once at the end, the current policy is
+evaluated through the same harness as the controllers
+(:func:`controllers.run_episode`) on the same episodes
+(:data:`EVAL_SEEDS`) as the oracle, adaptive and fixed LQG and zero torque:
+the common quadratic cost from 100 s (median, mean and worst episode, and
+per episode), attitude RMS, vibration, return and share of stable
+episodes. Each evaluation is dumped at once to SB3's logger under ``eval/``
+at the env-step count (TensorBoard's x-axis for it; Monitor's
+``rollout/`` curves use SB3's own count of decisions), and the final result
+is the curve's last point. It writes the saved models,
+``learning_curves.png``, ``metrics.json`` and, with ``--tensorboard``,
+TensorBoard logs.
+"""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -44,7 +55,10 @@ from controllers import (
     Controller,
     FixedLQG,
     IdentifiedModelFeatures,
+    OracleLQG,
     OracleModelFeatures,
+    PhysicalFeatures,
+    PrivilegedFeatures,
     ResidualControl,
     episode_metrics,
     run_episode,
@@ -61,7 +75,8 @@ ALGORITHMS = ("ppo", "sac")
 #: What the agent gets on top of the env: observation features, or (residual-*) a
 #: controller whose action it corrects.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
-            "residual-adaptive", "residual-fixed")
+            "physical", "privileged", "residual-adaptive", "residual-fixed",
+            "residual-fixed-physical")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -69,9 +84,11 @@ _IDENTIFIED = {
     "identified-kept-no-state": {"keep_identifier": True, "include_state": False},
 }
 #: Base controller of each residual setting (``ResidualControl``).
-_RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG}
-#: Evaluation episode seeds (disjoint from training seeds).
-EVAL_SEEDS = (1000, 1001, 1002)
+_RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
+             "residual-fixed-physical": FixedLQG}
+#: Evaluation episode seeds (disjoint from training seeds): every point of a
+#: learning curve and the final result use the same ten episodes.
+EVAL_SEEDS = tuple(range(1000, 1010))
 #: Seed of the discarded episode that precedes the evaluation episodes when the
 #: identifier is carried over episodes (``identified-kept``): evaluated
 #: episodes then start with a learnt model, as in training.
@@ -130,29 +147,45 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
     elif features == "oracle":
         env = OracleModelFeatures(env)
-    elif features in _RESIDUAL:
+    elif features == "physical":
+        env = PhysicalFeatures(env)
+    elif features == "privileged":
+        env = PrivilegedFeatures(env)
+    if features in _RESIDUAL:
         env = ResidualControl(env, _RESIDUAL[features](env.unwrapped))
+    if features.endswith("-physical"):
+        # outside the residual wrapper: the identifier sees the whole torque
+        env = PhysicalFeatures(env)
     return env
 
 
-def _evaluate(controller: Controller, scenario: str, features: str,
-              env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, float]:
+def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario: str,
+              features: str, env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, Any]:
+    """Harness scores over the evaluation episodes. ``controller``: one controller for
+    every episode, or a factory called with each episode's env (a controller that
+    reads its env's true model, e.g. the oracle, must fly the env it is scored on)."""
+    make = controller if not isinstance(controller, Controller) else (lambda env: controller)
     per_seed = []
     kept = _IDENTIFIED.get(features, {}).get("keep_identifier", False)
     shared = _make_env(scenario, features, env_kwargs) if kept else None
     if shared is not None:
         # one env: its identifier learns through a first, discarded episode and
         # is carried into every evaluated one
-        run_episode(shared, controller, seed=EVAL_WARMUP_SEED)
+        run_episode(shared, make(shared.unwrapped), seed=EVAL_WARMUP_SEED)
     for seed in seeds:
         env = shared or _make_env(scenario, features, env_kwargs)
-        traj = run_episode(env, controller, seed=seed)
+        traj = run_episode(env, make(env.unwrapped), seed=seed)
         per_seed.append(episode_metrics(traj, env.unwrapped.model))
         if shared is None:
             env.close()
     if shared is not None:
         shared.close()
-    return {"attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
+    costs = np.array([m["cost_after_100s"] for m in per_seed], dtype=float)
+    return {"cost_after_100s": float(np.median(costs)),
+            "cost_after_100s_mean": float(np.mean(costs)),
+            "cost_after_100s_worst": float(np.max(costs)),
+            "cost_after_100s_per_seed": costs.tolist(),
+            "attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
             "vibration_rms_mm": float(np.mean([m["vibration_rms_mm"] for m in per_seed])),
             "return": float(np.mean([m["return"] for m in per_seed])),
             "stable_share": float(np.mean([m["stable"] for m in per_seed]))}
@@ -179,12 +212,16 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  scenario: str = "docking", eval_every: int = 20_000,
                  tensorboard: str | None = None, progress: bool = True,
                  randomize: bool = False, repeat: int = ACTION_REPEAT,
-                 reward: str = "bounded", first_seed: int = 0) -> dict:
+                 reward: str = "bounded", first_seed: int = 0,
+                 eval_seeds: tuple[int, ...] = EVAL_SEEDS) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
     split over processes; ``spacecraft rl-table`` pools directories of equal
     settings).
+
+    ``eval_seeds``: the evaluation episodes (default :data:`EVAL_SEEDS`), the
+    same for the comparators, every point of the curves and the final result.
 
     ``timesteps`` and ``eval_every`` count env steps (0.1 s samples), also
     under ``repeat`` (agent decisions are ``timesteps / repeat``), so runs
@@ -206,14 +243,23 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1 or first_seed < 0:
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
+    eval_seeds = tuple(int(s) for s in eval_seeds)
+    if not eval_seeds or min(eval_seeds) < 0:
+        raise ValueError(f"eval_seeds must be one or more seeds >= 0, got {eval_seeds}")
     env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
     # the env checks the reward form and the wrapper the repeat, before anything is written
-    baseline_env = ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat)
+    ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    baseline = _evaluate(AdaptiveLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
-    fixed = _evaluate(FixedLQG(baseline_env.unwrapped), scenario, "none", env_kwargs)
-    zero = _evaluate(ZeroTorque(), scenario, "none", env_kwargs)
+    bar = tqdm(total=4, desc="controllers on the evaluation episodes", disable=not progress)
+    comparators = {}
+    for key, make in (("adaptive_lqg", AdaptiveLQG), ("fixed_lqg", FixedLQG),
+                      ("oracle_lqg", OracleLQG), ("zero_torque", None)):
+        comparators[key] = _evaluate(ZeroTorque() if make is None else make, scenario, "none",
+                                     env_kwargs, eval_seeds)
+        bar.update()
+    bar.close()
+    baseline = comparators["adaptive_lqg"]
     target = 2.0 * baseline["attitude_rms_deg"]
 
     runs = []
@@ -231,12 +277,12 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             name = f"{algo}-{features}-seed{seed}"
 
             callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
-                                     eval_every, scenario, features, env_kwargs, progress, repeat)
+                                     eval_every, scenario, features, env_kwargs, progress, repeat,
+                                     eval_seeds)
             model.learn(total_timesteps=-(-timesteps // repeat), callback=callback,
                         tb_log_name=name if tensorboard else "run")
-            venv.training = False
-            final = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario, features,
-                              env_kwargs)
+            # the final evaluation is the curve's last point (same episodes, same axis)
+            final = callback.evaluate_now()
             model.save(out / f"{name}.zip")
             venv.save(str(out / f"{name}_vecnormalize.pkl"))
             reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
@@ -246,10 +292,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
-        "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(EVAL_SEEDS),
+        "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(eval_seeds),
         "torch_threads": torch_threads,
-        "adaptive_lqg": baseline, "fixed_lqg": fixed, "zero_torque": zero,
+        **comparators,
         "target_attitude_rms_deg": target, "runs": runs,
+        "final_cost_after_100s": float(np.median([r["final"]["cost_after_100s"] for r in runs])),
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
         "final_vibration_rms_mm": float(np.mean([r["final"]["vibration_rms_mm"] for r in runs])),
         "final_return": float(np.mean([r["final"]["return"] for r in runs])),
@@ -260,7 +307,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
 
 def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
-                  features, env_kwargs, progress, repeat):
+                  features, env_kwargs, progress, repeat, eval_seeds):
     """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` env
     steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each)."""
 
@@ -269,18 +316,34 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             super().__init__()
             self.bar = tqdm(total=timesteps, desc=name, disable=not progress)
             self.next_eval = eval_every
+            self.last_eval: int | None = None
+
+        def evaluate_now(self) -> dict[str, Any]:
+            """Evaluate the current policy, append it to the curve and dump it to the
+            logger at the env-step count (TensorBoard's x-axis for ``eval/``)."""
+            env_steps = int(self.num_timesteps * repeat)
+            if self.last_eval == env_steps:          # already the curve's last point
+                return {k: v for k, v in curve[-1].items() if k != "timesteps"}
+            training, venv.training = venv.training, False
+            score = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario,
+                              features, env_kwargs, eval_seeds)
+            venv.training = training
+            curve.append({"timesteps": env_steps, **score})
+            for key, value in score.items():
+                if np.isscalar(value):
+                    self.logger.record(f"eval/{key}", value)
+            self.logger.record("time/env_steps", env_steps)
+            # dumped now, at this env step: recorded values would otherwise wait for
+            # the next rollout's dump (and only the last of several would survive)
+            self.logger.dump(step=env_steps)
+            self.last_eval = env_steps
+            return score
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs * repeat)
             if self.num_timesteps * repeat >= self.next_eval:
                 self.next_eval += eval_every
-                venv.training = False
-                score = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario,
-                                  features, env_kwargs)
-                venv.training = True
-                curve.append({"timesteps": int(self.num_timesteps * repeat), **score})
-                for key, value in score.items():
-                    self.logger.record(f"eval/{key}", value)
+                self.evaluate_now()
             return True
 
         def _on_training_end(self) -> None:

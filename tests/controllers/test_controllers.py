@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -392,3 +394,33 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
         assert solo.stats["redesigns"] + solo.stats["rejected"] > 0   # the identified loop ran
     # the reference is read from the float32 observation instead of info
     np.testing.assert_allclose(sorted(returns), sorted(alone), rtol=1e-4)
+
+
+def test_batched_evaluate_policy_equals_per_env_evaluation_to_1e9():
+    """One controller state per env and per-env seeds: a batch of two scores each env
+    exactly as that env's own stream of predict calls does (same float32 inputs)."""
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    kwargs = {"scenario": "docking", "task": "slew", "max_episode_steps": 600,
+              "outputs": ("attitude", "rate", "deflection", "reference")}
+    vec = DummyVecEnv([lambda: gym.make("FlexibleSpacecraft-v1", **kwargs) for _ in range(2)])
+    vec.seed(200)
+    ctrl = AdaptiveLQG(vec.envs[0].unwrapped)
+    with warnings.catch_warnings():            # no Monitor: its returns are rounded to 1e-6
+        warnings.filterwarnings("ignore", message="Evaluation environment is not wrapped")
+        batched, _ = evaluate_policy(ctrl, vec, n_eval_episodes=2, return_episode_rewards=True)
+    per_env = []
+    for i in range(2):
+        env = gym.make("FlexibleSpacecraft-v1", **kwargs)
+        solo = AdaptiveLQG(env.unwrapped)
+        solo.reset(seed=i)                      # env i's first batched episode: seed i
+        obs, _ = env.reset(seed=200 + i)
+        total, done = 0.0, False
+        while not done:
+            action, _ = solo.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(np.float32(reward))   # DummyVecEnv's reward buffer is float32
+            done = terminated or truncated
+        per_env.append(total)
+    np.testing.assert_allclose(sorted(batched), sorted(per_env), rtol=1e-9, atol=0)

@@ -1,0 +1,159 @@
+"""RL bridge: the physical-parameter features (identified and privileged)."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import spacecraft_env  # noqa: F401  (registers the environments)
+from controllers import FixedLQG, PhysicalFeatures, PrivilegedFeatures, ResidualControl
+from controllers.features import PHYSICAL_FEATURE_NAMES, physical_feature_names
+
+N_OBS = 13                       # attitude, rate, four deflections, reference (slew task)
+N_FEAT = len(PHYSICAL_FEATURE_NAMES)
+GAIN_DIAG = slice(0, 3)
+LOG_FREQ = slice(7, 9)
+
+
+def _checked(env):
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    from gymnasium.utils.env_checker import check_env
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(env, warn=True)
+        # Gymnasium's checker flags any wrapper as such; only that notice is allowed
+        warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
+        check_env(env, skip_render_check=True)
+
+
+@pytest.mark.parametrize("wrapper", [PhysicalFeatures, PrivilegedFeatures])
+def test_both_wrappers_pass_both_env_checkers(wrapper):
+    env = wrapper(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    assert env.observation_space.shape == (N_OBS + N_FEAT,)
+    _checked(env)
+
+
+def test_names_describe_every_channel():
+    assert len(physical_feature_names(3)) == 7 + 3 * 3 + 2
+    assert PHYSICAL_FEATURE_NAMES[-2:] == ("changed", "ready")
+
+
+def test_privileged_is_zero_at_the_nominal_plant_and_follows_a_draw():
+    env = PrivilegedFeatures(gym.make("FlexibleSpacecraft-v1", task="slew"))
+    obs, _ = env.reset(seed=0)
+    feats = obs[N_OBS:]
+    np.testing.assert_allclose(feats[GAIN_DIAG], 0.0, atol=1e-6)   # the frame's origin
+    np.testing.assert_allclose(feats[LOG_FREQ], 0.0, atol=1e-6)
+    assert feats[-1] == 1.0 and feats[6] == 0.0                      # known exactly
+    family = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    plant = {"inertia_scale": 1.0, "stiffness_scale": 1.21, "actuator_gain": 0.8,
+             "module_masses_kg": [0.0, 0.0], "paddle_angle_deg": 0.0,
+             "paddle_rate_deg_s": 0.0}
+    obs, _ = family.reset(seed=0, options={"plant": plant})
+    feats = obs[N_OBS:]
+    # no docking and the paddles at 0 deg: only the efficiency and the stiffness differ
+    np.testing.assert_allclose(feats[GAIN_DIAG], np.log(0.8), atol=1e-5)
+    assert 0.0 < feats[7] < np.log(1.1) + 1e-3       # a sqrt(1.21) = 1.1 stiffer appendage
+
+
+def test_privileged_change_flag_marks_a_docking_for_twenty_seconds():
+    env = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    plant = {"module_masses_kg": [600.0, 0.0], "docking_times_s": [50.0, 200.0],
+             "paddle_angle_deg": 0.0, "paddle_rate_deg_s": 0.0}
+    env.reset(seed=0, options={"plant": plant})
+    flags = []
+    for _ in range(1000):
+        obs, *_ = env.step(np.zeros(3, dtype=np.float32))
+        flags.append(obs[-2])
+    t = 0.1 * np.arange(1, 1001)
+    changed = t[np.asarray(flags) > 0]
+    assert changed.min() == pytest.approx(50.0, abs=0.2)
+    assert changed.max() == pytest.approx(70.0, abs=0.2)
+
+
+def _multisine_episode(env, steps, seed=0):
+    """Open-loop random-phase multisine (0.01-0.5 Hz, 1 N m RMS per axis) through ``env``."""
+    rng = np.random.default_rng(seed)
+    freqs = np.linspace(0.01, 0.5, 25)
+    phases = rng.uniform(0, 2 * np.pi, (3, freqs.size))
+    scale = 0.1 / np.sqrt(freqs.size / 2)
+    obs, _ = env.reset(seed=seed)
+    for k in range(steps):
+        a = scale * np.sin(2 * np.pi * freqs * 0.1 * k + phases).sum(axis=1)
+        obs, *_ = env.step(a.astype(np.float32))
+    return obs
+
+
+def test_identified_gain_and_modes_agree_with_the_privileged_ones():
+    """Constant plant drawn off-nominal: the identified vector converges to the truth."""
+    plant = {"inertia_scale": 1.3, "stiffness_scale": 1.0, "actuator_gain": 0.9,
+             "module_masses_kg": [0.0, 0.0], "paddle_angle_deg": 0.0,
+             "paddle_rate_deg_s": 0.0}
+
+    class Fixed(gym.Wrapper):
+        def reset(self, *, seed=None, options=None):
+            return self.env.reset(seed=seed, options={"plant": plant})
+
+    ident = PhysicalFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v1", task="slew")))
+    truth = PrivilegedFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v1", task="slew")))
+    got = _multisine_episode(ident, 1500)[N_OBS:]
+    want = _multisine_episode(truth, 1500)[N_OBS:]
+    assert got[-1] == 1.0
+    # the rigid-body gain of each axis within 5 % (log ratio), its uncertainty reported
+    np.testing.assert_allclose(got[GAIN_DIAG], want[GAIN_DIAG], atol=0.05)
+    assert 0.0 < got[6] < 0.2          # relative std over all nine entries
+    # the nominal would be 0: truth and estimate are well away from it (the hub's own
+    # inertia is scaled, not the appendages')
+    assert want[0] < -0.15 and got[0] < -0.15
+    np.testing.assert_allclose(got[LOG_FREQ], want[LOG_FREQ], atol=0.03)
+
+
+def test_identified_features_are_zero_before_warm_up_and_restart_every_episode():
+    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    obs, _ = env.reset(seed=0)
+    assert np.all(obs[N_OBS:] == 0.0)
+    obs = _multisine_episode(env, 450)
+    assert obs[-1] == 0.0 and np.all(obs[N_OBS:] == 0.0)      # the 50 s warm-up
+    obs = _multisine_episode(env, 600)
+    assert obs[-1] == 1.0
+    obs, _ = env.reset(seed=1)
+    assert np.all(obs[N_OBS:] == 0.0) and env.identifier.n_samples == 0
+
+
+def test_identifier_sees_the_whole_torque_outside_a_residual_controller():
+    inner = gym.make("FlexibleSpacecraftFamily-v1", task="slew")
+    env = PhysicalFeatures(ResidualControl(inner, FixedLQG(inner.unwrapped)))
+    env.reset(seed=0)
+    seen = []
+    original = env.identifier.update
+
+    def spy(u, y):
+        seen.append(np.array(u))
+        return original(u, y)
+
+    env.identifier.update = spy
+    _, _, _, _, info = env.step(np.zeros(3, dtype=np.float32))
+    # a zero residual: the torque fed is the fixed LQG's, in N m
+    np.testing.assert_array_equal(seen[0], info["torque"])
+    assert np.abs(seen[0]).max() > 0
+
+
+def test_physical_features_pickle_and_reject_bad_input():
+    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    _multisine_episode(env, 550)
+    clone = pickle.loads(pickle.dumps(env))
+    a = np.array([0.02, -0.01, 0.0], dtype=np.float32)
+    np.testing.assert_array_equal(env.step(a)[0], clone.step(a)[0])
+    with pytest.raises(ValueError, match="n_modes"):
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1"), n_modes=0)
+    with pytest.raises(ValueError, match="every"):
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1"), every=0)
+    with pytest.raises(ValueError, match="'attitude' and 'rate'"):
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1", outputs=("attitude", "deflection")))
+    with pytest.raises(gym.error.ResetNeeded):
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1")).step(np.zeros(3, np.float32))
