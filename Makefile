@@ -8,14 +8,21 @@ SOURCES := spacecraft_conventions spacecraft_env identifiers controllers spacecr
 PEERS_VENV  ?= .venv-peers
 PEERS_STAMP := $(PEERS_VENV)/.installed
 
-.PHONY: demo test test-all test-peers lint bench bench-peers clean
+.PHONY: demo docs test test-all test-peers lint bench bench-peers clean
 
-$(STAMP): pyproject.toml constraints.txt
+# the demo needs the main dependencies only; the tests add the RL and dev extras
+MAIN_STAMP := $(VENV)/.installed-main
+
+$(MAIN_STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --upgrade pip
+	$(BIN)/pip install -c constraints.txt -e .
+	touch $(MAIN_STAMP)
+
+$(STAMP): $(MAIN_STAMP)
 	# torch first and explicitly, so no resolver ever reaches for a CUDA build
 	$(BIN)/pip install -c constraints.txt "torch==2.13.0"
-	$(BIN)/pip install -c constraints.txt -e ".[rl,dev]"
+	$(BIN)/pip install -c constraints.txt -e ".[rl,dev,docs]"
 	touch $(STAMP)
 
 # the peers live in their own environment: they are large and pin their own stacks
@@ -25,9 +32,18 @@ $(PEERS_STAMP): pyproject.toml constraints.txt
 	$(PEERS_VENV)/bin/pip install -c constraints.txt -e ".[peers]" pytest
 	touch $(PEERS_STAMP)
 
-demo: $(STAMP)
-	$(BIN)/spacecraft demo --scenario docking --out results/demo
-	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 10 --out results/control
+# each stage prints its wall time
+demo: $(MAIN_STAMP)
+	@start=$$(date +%s); $(BIN)/spacecraft demo --scenario docking --out results/demo; \
+	echo "[demo stage: $$(( $$(date +%s) - start )) s]"
+	@start=$$(date +%s); \
+	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 10 --out results/control; \
+	echo "[control stage: $$(( $$(date +%s) - start )) s]"
+
+# the API reference from the numpydoc docstrings (pdoc), into build/api
+docs: $(STAMP)
+	$(BIN)/python -W error -m pdoc -d numpy -o build/api spacecraft_conventions spacecraft_env \
+	    identifiers controllers spacecraft_lab
 
 test: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)

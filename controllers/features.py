@@ -89,7 +89,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         A spacecraft environment (observing at least one sensor group).
     identifier : identifiers.OnlineIdentifier, optional
         Default: :func:`identifiers.default_identifier` for the observed
-        sensor groups (the adaptive LQR's identifier).
+        sensor groups (the identifier the adaptive LQG uses).
     n_modes : int
         k, number of modal frequencies and damping ratios appended.
     state_scale : float

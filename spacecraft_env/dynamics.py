@@ -76,6 +76,13 @@ class StateSpaceMatrices(NamedTuple):
     dt: float | None
 
 
+# The generated constructor holds the fields' annotations as strings, to be resolved in
+# a namespace without numpy (``from __future__ import annotations``); resolved here, so
+# introspection (help(), the API reference) sees the types.
+StateSpaceMatrices.__new__.__annotations__.update(
+    {name: np.ndarray for name in "ABCD"} | {"dt": float | None})
+
+
 def skew(r: np.ndarray) -> np.ndarray:
     """Cross-product matrix ``S(r)`` with ``S(r) v = r x v``."""
     x, y, z = r

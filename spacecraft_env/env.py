@@ -159,6 +159,17 @@ class FlexibleSpacecraftEnv(gym.Env):
         (:meth:`Scenario.parameters`: docking times, masses and positions,
         rotation rate), so a randomized draw is on record; a policy must not
         read it (that would be privileged knowledge).
+    Version history
+        * v1 (package 0.1.0, updated in 0.2.0): leaving the attitude bound
+          is charged every step left to the time limit (``reward="cost"``);
+          ``reward="bounded"`` added; 0.2.0 adds
+          ``FlexibleSpacecraftFamily-v1`` (``scenario="family"``, a new plant
+          every episode) and the ``"plant"`` info and reset option, and
+          stepping after termination returns reward 0 (the penalty is
+          charged once). The ``-v1`` dynamics and the other ids' rewards are
+          unchanged.
+        * v0 (package 0.1.0 only): an episode that left the bound ended with
+          no penalty, so crashing paid; not registered any more.
 
     Parameters
     ----------

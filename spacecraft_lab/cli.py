@@ -40,10 +40,10 @@ from controllers import LQRWeights
 from spacecraft_conventions import __version__
 from spacecraft_env import REWARDS, SCENARIOS
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
-from spacecraft_lab.demo import run_demo
+from spacecraft_lab.demo import demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.plots import plot_rl_comparison
-from spacecraft_lab.reporting import pooled_training_runs, rl_table
+from spacecraft_lab.reporting import control_summary, pooled_training_runs, rl_table
 from spacecraft_lab.sweeps import (
     BACKENDS,
     MAX_TASKS,
@@ -56,7 +56,7 @@ from spacecraft_lab.sweeps import (
 )
 from spacecraft_lab.training import ACTION_REPEAT, ALGORITHMS, EVAL_SEEDS, FEATURES, run_training
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "synopsis"]
 
 
 # ----------------------------------------------------------------- value checks
@@ -166,10 +166,79 @@ def _prepare_outputs(args: argparse.Namespace) -> None:
 
 
 # ----------------------------------------------------------------- the parser
+class _HelpFormatter(argparse.HelpFormatter):
+    """Help that names each option's default once: appended when the help text does not
+    already say it, left out when there is none (None, False)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.choices is not None and action.option_strings and "|" not in str(
+                action.metavar):
+            text = f"{text}; one of: {', '.join(map(str, action.choices))}"
+        default = action.default
+        if ("default" in text or default in (None, False, argparse.SUPPRESS)
+                or not action.option_strings):
+            return text
+        shown = " ".join(map(str, default)) if isinstance(default, list | tuple) else default
+        return f"{text} (default: {shown})"
+
+
+#: Metavariables of the options whose values are not self-explaining.
+_METAVARS = {"scenario": "S", "seeds": "N", "seed": "N", "steps": "N", "out": "DIR",
+             "methods": "M", "controllers": "C", "preset": "P", "snr_db": "DB|none",
+             "modes": "K", "samples": "N", "convergence": "S", "task": "T",
+             "module_mass": "KG", "rotation_rate": "DEG_S", "paddle_angle": "DEG",
+             "torque_weight": "R", "max_torque": "NM", "actuator_delay": "N",
+             "torque_rate_limit": "NM_S", "disturbance_torque": "NM", "algo": "ppo|sac",
+             "features": "F", "timesteps": "N", "first_seed": "N", "repeat": "N",
+             "reward": "bounded|cost", "eval_every": "N", "eval_episodes": "N",
+             "tensorboard": "DIR", "config": "FILE", "backend": "local|ray|serial",
+             "workers": "N", "address": "ADDR", "timeout": "S", "max_tasks": "N"}
+
+
+def synopsis(parser: argparse.ArgumentParser | None = None, width: int = 100) -> str:
+    """One usage block per command, as the README shows it (generated, so it cannot
+    drift from the parser; ``tests/test_docs.py`` compares them)."""
+    parser = parser or build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    names = list(sub.choices)
+    pad = max(map(len, names)) + len("spacecraft ") + 1
+    lines = []
+    for name, command in sub.choices.items():
+        items = []
+        for action in command._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            if not action.option_strings:
+                items.append(f"{action.metavar or action.dest.upper()} "
+                             f"[{action.metavar or action.dest.upper()} ...]"
+                             if action.nargs == "+" else action.metavar or action.dest.upper())
+                continue
+            flag = action.option_strings[-1]
+            if action.nargs == 0:
+                text = flag
+            else:
+                meta = action.metavar
+                meta = " ".join(meta) if isinstance(meta, tuple) else meta
+                text = f"{flag} {meta}" + (" ..." if action.nargs == "+" else "")
+            items.append(text if action.required else f"[{text}]")
+        line = f"spacecraft {name}".ljust(pad)
+        for item in items:
+            if len(line) + 1 + len(item) > width and line.strip():
+                lines.append(line.rstrip())
+                line = " " * pad
+            line += item + " "
+        lines.append(line.rstrip())
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with one sub-parser per command."""
-    fmt = argparse.ArgumentDefaultsHelpFormatter
-    parser = argparse.ArgumentParser(prog="spacecraft", description=__doc__.splitlines()[0],
+    fmt = _HelpFormatter
+    description = ("The flexible-spacecraft lab: rendered demo, identification, closed-loop "
+                   "control, RL training and Monte-Carlo sweeps. 'spacecraft COMMAND --help' "
+                   "describes a command.")
+    parser = argparse.ArgumentParser(prog="spacecraft", description=description,
                                      formatter_class=fmt, allow_abbrev=False)
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -323,7 +392,11 @@ def build_parser() -> argparse.ArgumentParser:
                             "code named by the sweep file")
 
     summ = command("sweep-summary", help="tables and plots of a sweep directory")
-    summ.add_argument("dir", type=_sweep_directory, help="sweep output directory")
+    summ.add_argument("dir", type=_sweep_directory, metavar="DIR", help="sweep output directory")
+    for command_parser in sub.choices.values():
+        for action in command_parser._actions:
+            if action.option_strings and action.metavar is None and action.nargs != 0:
+                action.metavar = _METAVARS.get(action.dest, action.dest.upper())
     return parser
 
 
@@ -331,8 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _demo(args: argparse.Namespace) -> int:
     summary = run_demo(args.scenario, args.out, seed=args.seed, steps=args.steps,
                        save_trajectory=args.save_trajectories)
-    print(json.dumps(summary, indent=2))
-    print(f"wrote {args.out}/summary.json, response.png, rollout.gif, frame.png")
+    print(demo_summary(summary, args.out))
     return 0
 
 
@@ -356,10 +428,11 @@ def _control(args: argparse.Namespace) -> int:
                                 torque_rate_limit=args.torque_rate_limit,
                                 disturbance_torque=args.disturbance_torque)
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
-    run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs, weights=weights,
-                controllers=args.controllers, steps=args.steps,
-                save_trajectories=args.save_trajectories)
+    metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
+                          weights=weights, controllers=args.controllers, steps=args.steps,
+                          save_trajectories=args.save_trajectories)
     print((Path(args.out) / "table.md").read_text())
+    print(control_summary(metrics["controllers"], args.scenario, args.out))
     print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
     return 0
 

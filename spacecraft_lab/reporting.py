@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_table", "identification_table", "pooled_training_runs", "rl_table"]
+__all__ = ["control_summary", "control_table", "identification_table", "paired_cost_ratio",
+           "pooled_training_runs", "rl_table"]
 
 
 def _median(cell: dict[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -119,15 +120,9 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
         return (f"{row['median'][key]:.{digits}g} "
                 f"[{row['q25'][key]:.{digits}g}, {row['q75'][key]:.{digits}g}]")
 
-    def paired(row: dict, ref: str | None) -> str:
-        if ref not in table:
-            return "-"
-        a = np.array([m["cost_after_100s"] for m in row["per_seed"]], dtype=float)
-        b = np.array([m["cost_after_100s"] for m in table[ref]["per_seed"]], dtype=float)
-        n = min(len(a), len(b))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = a[:n] / b[:n]
-        return f"{np.nanmedian(ratio):.2f}" if np.isfinite(ratio).any() else "-"
+    def paired(name: str, ref: str | None) -> str:
+        ratio = None if ref is None else paired_cost_ratio(table, name, ref)
+        return "-" if ratio is None else f"{ratio:.2f}"
 
     head = ("| controller | cost t >= 100 s | / oracle | / robust | split: att / rate / defl "
             "/ torque (excitation) | verdicts | attitude RMS t >= 100 s (deg) "
@@ -140,7 +135,7 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
         split = " / ".join(f"{med[f'cost_{p}_after_100s']:.2g}"
                            for p in ("attitude", "rate", "deflection", "torque")) \
             + f" ({med['cost_excitation_after_100s']:.2g})"
-        cells = [cell(row, "cost_after_100s", 3), paired(row, oracle), paired(row, baseline),
+        cells = [cell(row, "cost_after_100s", 3), paired(name, oracle), paired(name, baseline),
                  split, verdicts, cell(row, "attitude_rms_after_100s_deg", 3),
                  cell(row, "vibration_rms_after_100s_mm", 3),
                  f"{med['excitation_rms_Nm']:.3g}", f"{100 * med['rejected_share']:.0f} %",
@@ -228,3 +223,47 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                             f"| {b['attitude_rms_deg']:.2f} "
                             f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - |")
     return "\n".join(head + rows) + "\n"
+
+
+def paired_cost_ratio(table: dict[str, dict], name: str, ref: str) -> float | None:
+    """Median over paired seeds of ``name``'s cost from 100 s over ``ref``'s (None if
+    either is missing or no seed has a finite ratio)."""
+    if name not in table or ref not in table:
+        return None
+    a = np.array([m["cost_after_100s"] for m in table[name]["per_seed"]], dtype=float)
+    b = np.array([m["cost_after_100s"] for m in table[ref]["per_seed"]], dtype=float)
+    n = min(len(a), len(b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = a[:n] / b[:n]
+    return float(np.nanmedian(ratio)) if np.isfinite(ratio).any() else None
+
+
+def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> str:
+    """Plain sentences on a comparison: how the adaptive LQG did against its ceiling (the
+    oracle LQG) and the robust fixed design, in the common cost, and where to look."""
+    lines = []
+    seeds = max(row["runs"] for row in table.values())
+    adaptive, oracle, robust = "adaptive LQG", "oracle LQG", "robust LQG"
+    if adaptive in table:
+        to_oracle = paired_cost_ratio(table, adaptive, oracle)
+        to_robust = paired_cost_ratio(table, adaptive, robust)
+        parts = []
+        if to_oracle is not None:
+            parts.append(f"{to_oracle:.1f} times the oracle LQG's (the true model, the "
+                         "ceiling)")
+        if to_robust is not None:
+            parts.append(f"{to_robust:.2f} times the robust fixed design's")
+        verdicts = table[adaptive]["verdicts"]
+        stable = verdicts.get("stable", 0)
+        if parts:
+            lines.append(f"On {scenario} over {seeds} seeds, the adaptive LQG's quadratic cost "
+                         f"from 100 s was {' and '.join(parts)} (median of paired seeds; lower "
+                         f"is better); it was judged stable on {stable} of {seeds}.")
+    fixed = table.get("fixed LQG")
+    if fixed is not None:
+        bad = sum(c for v, c in fixed["verdicts"].items() if v != "stable")
+        lines.append(f"The fixed LQG designed at the nominal plant was judged not stable on "
+                     f"{bad} of {fixed['runs']} seeds.")
+    lines.append(f"The figure is {Path(out) / 'comparison.png'}; per-seed numbers are in "
+                 f"{Path(out) / 'results.csv'}.")
+    return "\n".join(lines)

@@ -276,10 +276,14 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             curve: list[dict[str, float]] = []
             name = f"{algo}-{features}-seed{seed}"
 
-            callback = _eval_callback(BaseCallback, model, venv, name, curve, timesteps,
+            decisions = -(-timesteps // repeat)
+            # PPO collects whole rollouts: it runs to the next multiple of n_steps
+            rollout = getattr(model, "n_steps", 1) * venv.num_envs
+            total = -(-decisions // rollout) * rollout * repeat
+            callback = _eval_callback(BaseCallback, model, venv, name, curve, total,
                                      eval_every, scenario, features, env_kwargs, progress, repeat,
                                      eval_seeds)
-            model.learn(total_timesteps=-(-timesteps // repeat), callback=callback,
+            model.learn(total_timesteps=decisions, callback=callback,
                         tb_log_name=name if tensorboard else "run")
             # the final evaluation is the curve's last point (same episodes, same axis)
             final = callback.evaluate_now()
