@@ -21,6 +21,8 @@ __all__ = ["SpacecraftRenderer"]
 _W, _H, _STRIP = 720, 400, 70
 _BG, _HUB, _PADDLE, _ANTENNA, _MODULE, _TEXT = (
     (12, 16, 32), (190, 190, 200), (70, 120, 230), (230, 180, 60), (150, 110, 200), (230, 230, 230))
+#: Height (m) a docked module reaches from the hub's centre: the panels leave room for it.
+_MODULE_REACH_M = 4.7
 
 
 class SpacecraftRenderer:
@@ -94,8 +96,13 @@ class SpacecraftRenderer:
                 (("y", psi[0], "view along roll (y-z): solar paddles"),
                  ("x", psi[1], "view along pitch (x-z): antennas"))):
             items = [(m, _MODULE, 0) for m in modules] + [(hub, _HUB, 0)] + views[axis]
-            self._panel(draw, (panel_w * (i + 0.5), cy), scale * (1.0 if i == 0 else 2.5),
-                        angle, items)
+            # zoom in on the short antennas, but keep a docked module (up to 4.5 m above
+            # or below the hub's centre) and the appendages inside the panel
+            reach_z = max(_MODULE_REACH_M, *(np.abs(pts[:, 1]).max() for pts, _, _ in items))
+            reach_y = max(np.abs(pts[:, 0]).max() for pts, _, _ in items)
+            zoom = min(scale * (1.0 if i == 0 else 2.5), (cy - 28) / reach_z,
+                       (panel_w / 2 - 12) / reach_y)
+            self._panel(draw, (panel_w * (i + 0.5), cy), zoom, angle, items)
             draw.text((panel_w * i + 10, 8), title, fill=_TEXT)
         draw.line([(panel_w, 0), (panel_w, _H - _STRIP)], fill=(60, 60, 80))
         deg = np.rad2deg(psi)

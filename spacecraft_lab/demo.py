@@ -93,7 +93,8 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
     plot_demo_response(out / "response.png", t, att, defl,
                        env.model.output_labels[layout.slice("deflection")], t_sparse,
                        inertia_arr, freq_arr, events,
-                       f"{scenario}: PD-regulated rollout, seed {seed} (dashed: docking events)")
+                       f"{scenario}: PD-regulated rollout, seed {seed}"
+                       + (" (dashed: docking events)" if events else ""))
 
     frames[0].save(out / "rollout.gif", save_all=True, append_images=frames[1:],
                    duration=100, loop=0)

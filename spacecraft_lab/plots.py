@@ -32,6 +32,7 @@ __all__ = [
     "plot_rigid_gain",
     "plot_rl_comparison",
     "save",
+    "sensor_name",
 ]
 
 
@@ -135,8 +136,9 @@ def plot_rigid_gain(path: str | Path, truth: FlexibleSpacecraftModel,
     mark_events(axes, truth.scenario.event_times())
     axes[0].legend(fontsize=7, ncol=4)
     axes[-1].set_xlabel("time (s)")
-    fig.suptitle(f"{scenario}: rigid-body gain J(t)^-1 read from the identified model "
-                 "(axis zoomed to +-30 % of the truth; dashed: dockings), seed 0")
+    events = "; dashed: dockings" if truth.scenario.event_times() else ""
+    fig.suptitle(f"{scenario}: rigid-body gain J(t)^-1 read from the identified model, seed 0\n"
+                 f"(axis zoomed to +-30 % of the truth{events})", fontsize=10)
     save(fig, path)
 
 
@@ -334,6 +336,19 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
     save(fig, path)
 
 
+_APPENDAGES = {"s": "solar paddle", "a": "antenna"}
+
+
+def sensor_name(label: str) -> str:
+    """A deflection channel's label in words: ``"w_s1_1.00"`` -> ``"solar paddle 1, tip"``
+    (``w_<appendage><number>_<position along the span>``); other labels unchanged."""
+    parts = label.split("_")
+    if len(parts) != 3 or parts[0] != "w" or parts[1][:1] not in _APPENDAGES:
+        return label
+    where = "tip" if float(parts[2]) == 1.0 else f"{float(parts[2]):.0%} of the span"
+    return f"{_APPENDAGES[parts[1][0]]} {parts[1][1:]}, {where}"
+
+
 def plot_demo_response(path: str | Path, t: np.ndarray, attitude_deg: np.ndarray,
                        deflection_m: np.ndarray, deflection_labels: Sequence[str],
                        t_sparse: np.ndarray, inertia_diag: np.ndarray,
@@ -346,7 +361,7 @@ def plot_demo_response(path: str | Path, t: np.ndarray, attitude_deg: np.ndarray
         axes[0].plot(t, attitude_deg[:, i], label=name)
     axes[0].set_ylabel("attitude (deg)")
     for i, label in enumerate(deflection_labels):
-        axes[1].plot(t, 1e3 * deflection_m[:, i], label=label)
+        axes[1].plot(t, 1e3 * deflection_m[:, i], label=sensor_name(label))
     axes[1].set_ylabel("tip deflection (mm)")
     for i, name in enumerate(("J_xx", "J_yy", "J_zz")):
         axes[2].plot(t_sparse, inertia_diag[:, i], label=name)

@@ -27,13 +27,12 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.ticker import SymmetricalLogLocator
 
 from spacecraft_lab.plots import save
 from spacecraft_lab.sweeps.config import SummarySpec, SweepConfig
 from spacecraft_lab.sweeps.store import ResultStore
 
-__all__ = ["group_statistics", "summarize"]
+__all__ = ["METRIC_LABELS", "group_statistics", "metric_label", "summarize"]
 
 _STATS = ("count", "finite", "errors", "mean", "std", "median", "min", "max")
 
@@ -334,8 +333,35 @@ def _ratio(a: dict[str, Any] | None, b: dict[str, Any] | None) -> float | None:
     return _div(a["mean"], b["mean"])
 
 
+#: Readable panel titles (with units) of the metrics sweeps usually plot.
+METRIC_LABELS = {
+    "time_s": "run time (s)",
+    "cost_after_100s": "quadratic cost from 100 s",
+    "attitude_rms_deg": "attitude RMS (deg)",
+    "attitude_rms_after_100s_deg": "attitude RMS from 100 s (deg)",
+    "vibration_rms_mm": "vibration RMS (mm)",
+    "test_error_attitude_pct": "test-response error, attitude (%)",
+    "test_error_rate_pct": "test-response error, rate (%)",
+    "vaf_h100_attitude": "10 s-ahead VAF, attitude (%)",
+    "vaf_h100_rate": "10 s-ahead VAF, rate (%)",
+    "vaf_h100_deflection": "10 s-ahead VAF, deflection (%)",
+    "gain_error_pct": "rigid-body gain error (%)",
+}
+#: A plotted value beyond this many times the panel's median magnitude is drawn
+#: at the bound (a diverged run), so the typical values stay readable.
+_CLIP_FACTOR = 1e3
+
+
+def metric_label(key: str) -> str:
+    """A panel title for a metric key: :data:`METRIC_LABELS` or the key in words."""
+    return METRIC_LABELS.get(key, key.replace("_", " "))
+
+
 def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
-    metrics = summary["metrics"][:9]
+    # a metric that is 0 everywhere says nothing: no panel for it
+    metrics = [m for m in summary["metrics"]
+               if any(st["mean"] not in (None, 0) for row in summary["table"][m].values()
+                      for st in row.values())][:9]
     if not metrics:
         return
     cols = summary["column_names"]
@@ -378,20 +404,29 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
                     positive.extend(ry)
         vals = np.array(positive, dtype=float)
         mags = np.abs(vals)
-        if vals.size and np.all(vals > 0) and vals.max() / vals.min() > 50:
+        bound = _CLIP_FACTOR * max(float(np.median(mags)), 1.0) if vals.size else np.inf
+        clipped = bool(vals.size and mags.max() > bound)
+        if clipped:
+            # diverged runs: the axis ends at the bound; the points beyond sit on it
+            for line in ax.get_lines():
+                y = np.asarray(line.get_ydata(), dtype=float)
+                line.set_ydata(np.clip(y, -bound, bound))
+            inside = vals[np.abs(vals) <= bound]
+            lo = min(float(inside.min()) if inside.size else 0.0, 0.0)
+            hi = max(float(inside.max()) if inside.size else 0.0, 0.0)
+            lo = -bound if vals.min() < -bound else lo
+            hi = bound if vals.max() > bound else hi
+            pad = 0.05 * (hi - lo)
+            ax.set_ylim(lo - pad, hi + pad)
+        elif vals.size and np.all(vals > 0) and vals.max() / vals.min() > 50:
             ax.set_yscale("log")
-        elif vals.size and mags.max() > 1e3 * max(float(np.median(mags)), 1.0):
-            # orders of magnitude apart (diverged runs): linear near the
-            # typical small values, logarithmic beyond
-            small = mags[mags > 0].min() if np.any(mags > 0) else 1.0
-            linthresh = 10.0 ** np.floor(np.log10(max(small, 1.0)))
-            ax.set_yscale("symlog", linthresh=linthresh)
-            locator = SymmetricalLogLocator(base=10, linthresh=linthresh)
-            locator.set_params(numticks=7)
-            ax.yaxis.set_major_locator(locator)
-        m = f"{m} (median: diverged runs)" if heavy else m
-        ax.set_title(m)
-        ax.set_xlabel(summary["columns"] or "")
+        title = metric_label(m)
+        if heavy:
+            title += ", median (some runs diverged)"
+        if clipped:
+            title += f"\nvalues beyond {bound:.3g} drawn at it"
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(metric_label(summary["columns"]) if summary["columns"] else "")
         ax.set_xticks(xs, cols, rotation=20 if categorical else 0)
         ax.grid(alpha=0.3)
     axes.flat[0].legend(fontsize=7)

@@ -450,3 +450,51 @@ def test_a_task_over_its_time_limit_is_recorded_and_the_sweep_goes_on(tmp_path, 
     with pytest.raises(ValueError, match="timeout_s"):
         SweepConfig.from_dict({"task": "sweep_tasks:sleepy", "seeds": 1, "timeout_s": 0},
                               allow_custom_tasks=True)
+
+
+def test_summary_plot_reads_without_raw_keys_empty_panels_or_runaway_axes(tmp_path):
+    """Readable titles with units, no panel for an all-zero metric, and a diverged run
+    drawn at the axis bound instead of stretching it to 1e221."""
+    from spacecraft_lab.sweeps.config import SummarySpec
+    from spacecraft_lab.sweeps.summary import _plot
+
+    def cell(mean, median=None):
+        return {"mean": mean, "median": mean if median is None else median, "std": 0.1}
+
+    table = {
+        "time_s": {"a": {"22": cell(1.0), "30": cell(2.0)}, "b": {"22": cell(1.5),
+                                                                   "30": cell(2.5)}},
+        "test_error_attitude_pct": {"a": {"22": cell(5.0), "30": cell(-1e221, 6.0)},
+                                    "b": {"22": cell(4.0), "30": cell(7.0)}},
+        "vaf_h100_rate": {"a": {"22": cell(0.0), "30": cell(0.0)},
+                          "b": {"22": cell(0.0), "30": cell(0.0)}},
+    }
+    summary = {"metrics": list(table), "table": table, "row_names": ["a", "b"],
+               "column_names": ["22", "30"], "columns": "order", "sweep": "t"}
+    path = tmp_path / "summary.png"
+    _plot(path, summary, SummarySpec())
+    assert path.stat().st_size > 5000
+    # rebuild the figure's axes to inspect them
+    import matplotlib.image
+
+    assert matplotlib.image.imread(path).shape[1] > 500
+    from matplotlib.figure import Figure
+
+    captured = {}
+    original = Figure.savefig
+
+    def spy(self, *args, **kwargs):
+        captured["axes"] = [ax for ax in self.axes if ax.get_visible()]
+        return original(self, *args, **kwargs)
+
+    Figure.savefig = spy
+    try:
+        _plot(path, summary, SummarySpec())
+    finally:
+        Figure.savefig = original
+    titles = [ax.get_title() for ax in captured["axes"]]
+    assert len(titles) == 2                                   # the all-zero metric dropped
+    assert titles[0] == "run time (s)"
+    assert titles[1].startswith("test-response error, attitude (%)")
+    low, high = captured["axes"][1].get_ylim()
+    assert low > -1e5 and high < 1e5
