@@ -313,7 +313,12 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
                   features, env_kwargs, progress, repeat, eval_seeds):
     """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` env
-    steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each)."""
+    steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each).
+
+    Not SB3's ``EvalCallback``: that one scores returns through
+    ``evaluate_policy``, while these runs are judged on the controllers' harness
+    (the common cost and its verdicts, on the LQG comparators' episodes); it
+    dumps its record at each evaluation as ``EvalCallback`` does."""
 
     class EvalCallback(base):
         def __init__(self) -> None:
