@@ -35,8 +35,9 @@ from spacecraft_env.scenarios import Scenario, make_scenario
 __all__ = ["REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
 
 #: Reward forms (the ``reward`` argument): the negative stage cost, or its
-#: bounded survival form for learning agents.
-REWARDS = ("cost", "bounded")
+#: bounded survival form for learning agents, and its log-scaled form that resolves
+#: precision near the target (``"log"``).
+REWARDS = ("cost", "bounded", "log")
 
 #: Accepted range of ``snr_db``: from noise 100x the nominal level to 1e-15 of it.
 SNR_RANGE_DB = (-40.0, 300.0)
@@ -64,6 +65,10 @@ class RewardWeights:
     (``reward="bounded"``: ``1 - min(cost / saturation, 1)``) reaches 0;
     the default, 300, is the cost of a 10 deg error on all three axes (the
     largest slew the slew task draws) with the default weights.
+    ``precision`` is the cost the log-scaled reward resolves down to
+    (``reward="log"``: ``1 - log(1 + cost / precision) / log(1 + saturation /
+    precision)``, clipped at 0); the default, 3e-4, is a 0.01 deg error on
+    all three axes, the attitude an LQG holds.
     """
 
     attitude: float = 1.0
@@ -71,15 +76,16 @@ class RewardWeights:
     vibration: float = 0.1
     torque: float = 0.01
     saturation: float = 300.0
+    precision: float = 3e-4
 
     def __post_init__(self) -> None:
-        for name in ("attitude", "rate", "vibration", "torque", "saturation"):
+        for name in ("attitude", "rate", "vibration", "torque", "saturation", "precision"):
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"reward weight {name} must be finite and >= 0, got {value}")
             object.__setattr__(self, name, value)
-        if self.saturation == 0:
-            raise ValueError("reward weight saturation must be > 0")
+        if self.saturation == 0 or self.precision == 0:
+            raise ValueError("reward weights saturation and precision must be > 0")
 
 
 def _vector3(name: str, value: Any) -> np.ndarray:
@@ -128,6 +134,11 @@ class FlexibleSpacecraftEnv(gym.Env):
         learning agent normalizes by; with the bounded form (and
         :class:`~spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew
         task where it did not with the cost (docs/results/rl.md).
+        ``reward="log"``: ``1 - log(1 + cost / precision) / log(1 + saturation
+        / precision)`` per step, in [0, 1], no termination penalty: the
+        bounded form's survival incentive, but an error of 0.01 deg pays
+        visibly more than one of 0.1 deg (with the bounded form both pay
+        1 - 1e-5 and 1 - 1e-3: an agent cannot tell them apart).
     Episode end
         ``terminated`` when any true attitude angle exceeds
         ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
@@ -162,7 +173,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     Version history
         * v1 (package 0.1.0, updated in 0.2.0): leaving the attitude bound
           is charged every step left to the time limit (``reward="cost"``);
-          ``reward="bounded"`` added; 0.2.0 adds
+          ``reward="bounded"`` added; 0.2.0 adds ``reward="log"``,
           ``FlexibleSpacecraftFamily-v1`` (``scenario="family"``, a new plant
           every episode) and the ``"plant"`` info and reset option, and
           stepping after termination returns reward 0 (the penalty is
@@ -221,7 +232,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         the applied torque moves toward the (delayed) command by at most
         ``torque_rate_limit * dt`` per step, as a reaction wheel's
         acceleration limit does.
-    reward : {"cost", "bounded"}
+    reward : {"cost", "bounded", "log"}
         Reward form, see above.
     reward_weights : RewardWeights, optional
     max_attitude_deg : float
@@ -534,6 +545,10 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._terminated = terminated
         if self.reward == "bounded":
             reward = 1.0 - min(float(cost) / self.reward_weights.saturation, 1.0)
+        elif self.reward == "log":
+            w = self.reward_weights
+            reward = max(1.0 - math.log1p(float(cost) / w.precision)
+                         / math.log1p(w.saturation / w.precision), 0.0)
         else:
             reward = -float(cost + self.termination_penalty()) if terminated else -float(cost)
         obs = self._observe()

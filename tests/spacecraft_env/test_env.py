@@ -344,6 +344,43 @@ def test_bounded_reward_is_one_minus_the_saturated_cost():
     assert min(seen) == 0.0 and 0.1 < max(seen) < 1.0
 
 
+def test_log_reward_resolves_precision_where_the_bounded_one_cannot():
+    """log = 1 - log(1 + cost / precision) / log(1 + saturation / precision), from the same
+    stage cost; 0.01 deg and 0.1 deg errors pay visibly different rewards."""
+    weights = RewardWeights(saturation=20.0, precision=1e-3)
+    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=form, reward_weights=weights)
+            for form in ("cost", "log")]
+    for env in envs:
+        env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    seen = []
+    for _ in range(600):
+        action = rng.uniform(-1, 1, 3).astype(np.float32)
+        (_, r_cost, term, *_), (_, r_log, term_l, *_) = (env.step(action) for env in envs)
+        assert term == term_l
+        if term:
+            break
+        want = max(1.0 - np.log1p(-r_cost / 1e-3) / np.log1p(20.0 / 1e-3), 0.0)
+        assert r_log == pytest.approx(want, abs=1e-12)
+        seen.append(r_log)
+    assert 0.0 <= min(seen) and max(seen) <= 1.0
+    # at the default weights: a 0.01 deg and a 0.1 deg error on every axis, at rest
+    env = FlexibleSpacecraftEnv("constant", reward="log", snr_db=None)
+    rewards = {}
+    for err_deg in (0.01, 0.1):
+        env.reset(seed=0, options={"initial_attitude": np.full(3, np.deg2rad(err_deg)),
+                                   "reference_attitude": np.zeros(3)})
+        rewards[err_deg] = env.step(np.zeros(3, dtype=np.float32))[1]
+    assert rewards[0.01] - rewards[0.1] > 0.1
+    bounded = FlexibleSpacecraftEnv("constant", reward="bounded", snr_db=None)
+    gaps = []
+    for err_deg in (0.01, 0.1):
+        bounded.reset(seed=0, options={"initial_attitude": np.full(3, np.deg2rad(err_deg)),
+                                       "reference_attitude": np.zeros(3)})
+        gaps.append(bounded.step(np.zeros(3, dtype=np.float32))[1])
+    assert gaps[0] - gaps[1] < 1e-3
+
+
 @pytest.mark.parametrize("bad", [{"reward": "sparse"}, {"reward": None}])
 def test_unknown_reward_form_raises(bad):
     with pytest.raises(ValueError, match="reward must be one of"):
@@ -353,6 +390,8 @@ def test_unknown_reward_form_raises(bad):
 def test_saturation_must_be_positive():
     with pytest.raises(ValueError, match="saturation"):
         RewardWeights(saturation=0.0)
+    with pytest.raises(ValueError, match="precision"):
+        RewardWeights(precision=0.0)
 
 
 def test_action_repeat_sums_the_rewards_of_the_held_steps():
