@@ -450,10 +450,13 @@ def test_d12_an_interrupted_comparison_writes_the_completed_seeds(tmp_path, monk
 
 
 def test_d12_ctrl_c_prints_one_line_and_exits_130(tmp_path):
+    # a shell's background job inherits an ignored SIGINT, and Python then installs no
+    # KeyboardInterrupt handler: give the child the default disposition, as a terminal does
     proc = subprocess.Popen([sys.executable, "-m", "spacecraft_lab.cli", "control", "--seeds",
                              "1000", "--controllers", "pd", "--steps", "100", "--out",
                              str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     buffer = ""
     while "closed loop" not in buffer:                 # the progress bar: work has begun
         char = proc.stderr.read(1)
