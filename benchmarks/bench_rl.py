@@ -8,7 +8,10 @@ per second on
 * ``FlexibleSpacecraftDocking-v1`` (slew task) with no features,
 * the same with :class:`controllers.IdentifiedModelFeatures` (the default
   identifier runs every step),
-* the same with :class:`controllers.OracleModelFeatures` (truth features).
+* the same with :class:`controllers.OracleModelFeatures` (truth features),
+* the task family with no features, with :class:`controllers.PhysicalFeatures`
+  (the identifier's physical estimates, the default identifier every step)
+  and with :class:`controllers.PrivilegedFeatures` (the same from the truth).
 
 and prints every rate beside the no-feature rate and Pendulum's.
 
@@ -26,7 +29,12 @@ import torch
 from stable_baselines3 import PPO
 
 import spacecraft_env  # noqa: F401  (registers the environments)
-from controllers import IdentifiedModelFeatures, OracleModelFeatures
+from controllers import (
+    IdentifiedModelFeatures,
+    OracleModelFeatures,
+    PhysicalFeatures,
+    PrivilegedFeatures,
+)
 from spacecraft_conventions import single_threaded_blas
 
 CASES = {
@@ -36,6 +44,11 @@ CASES = {
         gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
     "docking, oracle features": lambda: OracleModelFeatures(
         gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
+    "family, no features": lambda: gym.make("FlexibleSpacecraftFamily-v1", task="slew"),
+    "family, physical features": lambda: PhysicalFeatures(
+        gym.make("FlexibleSpacecraftFamily-v1", task="slew")),
+    "family, privileged features": lambda: PrivilegedFeatures(
+        gym.make("FlexibleSpacecraftFamily-v1", task="slew")),
 }
 
 
@@ -56,10 +69,12 @@ def main() -> None:
     torch.set_num_threads(1)
     with single_threaded_blas:
         rates = {name: ppo_rate(make, args.steps) for name, make in CASES.items()}
-    pend, plain = rates["Pendulum-v1"], rates["docking, no features"]
-    print(f"PPO training env steps/s ({args.steps} steps, one env, torch on one thread)")
+    pend = rates["Pendulum-v1"]
+    print(f"PPO training env steps/s ({args.steps} steps, one env, torch on one thread); "
+          "'/ no features': against the same task without features")
     print(f"{'case':<32}{'steps/s':>10}{'/ no features':>15}{'/ Pendulum':>12}")
     for name, rate in rates.items():
+        plain = rates.get(f"{name.split(',')[0]}, no features", rate)
         print(f"{name:<32}{rate:>10,.0f}{rate / plain:>15.2f}{rate / pend:>12.2f}")
     if args.json:
         with open(args.json, "w") as fh:
