@@ -196,22 +196,37 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
                             title: str = "", scored_from_s: float = 100.0) -> None:
     """Closed-loop comparison over seeds: median and interquartile band.
 
-    Panels: attitude error (log), tip deflection, torque, and for controllers
-    with an identifier the identified rigid-body gain's error against the true
+    Panels: the common quadratic stage cost (mean over the last 10 s, log; the
+    quantity every LQG here minimizes, :func:`controllers.stage_costs`), the
+    attitude error (log), tip deflection, torque, and for controllers with an
+    identifier the identified rigid-body gain's error against the true
     ``J(t)^-1`` and the identified against the true modal frequencies (seed 0,
     zoomed on the flexible band). Dashed lines: scenario events; dotted: the
     start of the scored window.
     """
+    from controllers import stage_costs
+
     adaptive = {n: r for n, r in runs.items() if r[0].gain_error is not None}
-    rows = 5 if adaptive else 3
+    rows = 6 if adaptive else 4
     layout = model.output_layout
     c_att = model.C[layout.slice("attitude")]
     c_defl = model.C[layout.slice("deflection")]
     fig = Figure(figsize=(11, 2.5 * rows))
-    axes = fig.subplots(rows, 1, sharex=True)
+    all_axes = fig.subplots(rows, 1, sharex=True)
+    cost_ax, axes = all_axes[0], all_axes[1:]
     colors = dict(zip(runs, [f"C{i}" for i in range(len(runs))], strict=True))
+    window = max(1, round(10.0 / model.dt))
+
+    def trailing_mean(values: np.ndarray) -> np.ndarray:
+        """Mean over the last ``window`` samples (fewer at the start)."""
+        total = np.cumsum(values)
+        total[window:] = total[window:] - total[:-window]
+        return total / np.minimum(np.arange(1, values.size + 1), window)
+
     for name, trajs in runs.items():
         t = trajs[0].time
+        costs = [trailing_mean(stage_costs(tr, model)[:, :4].sum(axis=1)) for tr in trajs]
+        _band(cost_ax, t, [np.maximum(c, 1e-8) for c in costs], name, colors[name], log=True)
         err = [np.abs((tr.states[1:] @ c_att.T - tr.reference[1:]) * DEG_PER_RAD).max(axis=1)
                for tr in trajs]
         _band(axes[0], t, [np.maximum(e, 1e-5) for e in err], name, colors[name], log=True)
@@ -225,6 +240,9 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
         first = trajs[0]
         axes[4].plot(tf, first.identified_frequencies, ".", ms=2, color=colors[name])
         axes[4].plot(tf, first.true_frequencies, "k-", lw=1)
+    cost_ax.set_ylabel("stage cost, last 10 s mean")
+    cost_ax.set_title("the common quadratic cost (what every LQG here minimizes); "
+                      "tables score its mean from 100 s", fontsize=9)
     axes[0].set_ylabel("max |attitude error| (deg)")
     axes[1].set_ylabel("max |tip deflection| (mm)")
     axes[2].set_ylabel("|torque| (N m)")
@@ -241,11 +259,11 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
                           fontsize=9)
     axes[-1].set_xlabel("time (s)")
     first_run = next(iter(runs.values()))[0]
-    mark_events(axes, first_run.events)
-    for ax in axes:
+    mark_events(all_axes, first_run.events)
+    for ax in all_axes:
         ax.axvline(scored_from_s, color="gray", ls=":", lw=0.8)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=4)
+    cost_ax.legend(fontsize=8, ncol=4)
     fig.suptitle(title, fontsize=10)
     save(fig, path)
 
