@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from controllers import Trajectory
+from controllers import Trajectory, stage_costs
 from identifiers import ModelSequence
 from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftModel
@@ -204,8 +204,6 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
     zoomed on the flexible band). Dashed lines: scenario events; dotted: the
     start of the scored window.
     """
-    from controllers import stage_costs
-
     adaptive = {n: r for n, r in runs.items() if r[0].gain_error is not None}
     rows = 6 if adaptive else 4
     layout = model.output_layout
