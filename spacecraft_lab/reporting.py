@@ -200,6 +200,7 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         finals = [r["final"] for r in m["runs"]]
         reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
         task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]
+        task += f", {m.get('reward', 'cost')} reward"
         rows.append(
             f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
             f"| {len(finals)} | {spread([cost(f) for f in finals], '.4f')} "

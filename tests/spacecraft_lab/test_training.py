@@ -119,7 +119,7 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     from spacecraft_lab.reporting import rl_table
 
     table = rl_table([tmp_path / "out"])
-    assert "| PPO | oracle | randomized docking | 2,048 | 1 |" in table
+    assert "| PPO | oracle | randomized docking, bounded reward | 2,048 | 1 |" in table
     assert "| fixed LQG |" in table and "| adaptive LQG |" in table
     assert "| oracle LQG | - | - | - | - |" in table and "| 1.00 |" in table
     assert "| zero torque |" in table
@@ -153,10 +153,11 @@ def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
     assert [(m["features"], len(m["runs"])) for m in pooled] == [("none", 3), ("oracle", 1)]
     table = rl_table(dirs)
     # cost (median [min, max] over seeds), / oracle, / fixed, then the attitude RMS
-    assert ("| PPO | none | randomized docking | 1,000 | 3 | 0.0400 [0.0300, 0.0500] "
-            "| 4.00 [3.00, 5.00] | 1.00 [0.75, 1.25] | 4.00 [3.00, 5.00] |") in table
-    assert "| PPO | oracle | randomized docking | 1,000 | 1 | 0.0300 | 3.00 | 0.75 | 3.00 |" \
-        in table
+    assert ("| PPO | none | randomized docking, bounded reward | 1,000 | 3 "
+            "| 0.0400 [0.0300, 0.0500] | 4.00 [3.00, 5.00] | 1.00 [0.75, 1.25] "
+            "| 4.00 [3.00, 5.00] |") in table
+    assert ("| PPO | oracle | randomized docking, bounded reward | 1,000 | 1 | 0.0300 | 3.00 "
+            "| 0.75 | 3.00 |") in table
     assert "| oracle LQG | - | - | - | - | 0.0100 | 1.00 | 0.25 |" in table
 
 
