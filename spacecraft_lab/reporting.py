@@ -172,9 +172,12 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     separate processes make one row), first the common quadratic cost from
     100 s (:func:`controllers.stage_costs`; per training seed the median
     over the evaluation episodes), then its ratio to the oracle LQG's and to
-    the fixed LQG's on the same episodes, the attitude RMS, vibration and
+    the fixed LQG's on the same episodes, the attitude RMS, vibration,
     the env steps each seed needed to come within 2x of the adaptive LQG's
-    attitude RMS; each as the median [min, max] over training seeds. Then
+    attitude RMS, and the cost's mean over the episodes (which counts an
+    unstable episode at its full cost, where the median does not) with its
+    ratio to the fixed LQG's mean; each as the median [min, max] over
+    training seeds. Then
     the oracle, adaptive and fixed LQG and zero torque (the trivial
     baseline) on the same evaluation episodes (taken from the last
     directory).
@@ -193,6 +196,13 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         mine, theirs = cost(result), None if ref is None else cost(ref)
         return None if mine is None or not theirs else mine / theirs
 
+    def mean_cost(result: dict[str, Any]) -> float | None:
+        return result.get("cost_after_100s_mean")
+
+    def mean_ratio(result: dict[str, Any], ref: dict[str, Any] | None) -> float | None:
+        mine, theirs = mean_cost(result), None if ref is None else mean_cost(ref)
+        return None if mine is None or not theirs else mine / theirs
+
     rows = []
     pooled = pooled_training_runs(directories)
     last = pooled[-1] if pooled else None
@@ -208,11 +218,14 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             f"| {spread([ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} "
             f"| {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
             f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
-            f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} |")
+            f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} "
+            f"| {spread([mean_cost(f) for f in finals], '.3g')} "
+            f"| {spread([mean_ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} |")
     head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
             "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
-            "| env steps to <= 2x adaptive LQG RMS |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| env steps to <= 2x adaptive LQG RMS | cost, mean over episodes "
+            "| mean / fixed LQG's mean |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
         for name, key in (("oracle LQG", "oracle_lqg"), ("adaptive LQG", "adaptive_lqg"),
                           ("fixed LQG", "fixed_lqg"), ("zero torque", "zero_torque")):
@@ -222,7 +235,9 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                             f"| {spread([ratio(b, last.get('oracle_lqg'))], '.2f')} "
                             f"| {spread([ratio(b, last.get('fixed_lqg'))], '.2f')} "
                             f"| {b['attitude_rms_deg']:.2f} "
-                            f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - |")
+                            f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - "
+                            f"| {spread([mean_cost(b)], '.3g')} "
+                            f"| {spread([mean_ratio(b, last.get('fixed_lqg'))], '.2f')} |")
     return "\n".join(head + rows) + "\n"
 
 
