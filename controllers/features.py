@@ -490,20 +490,31 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         A spacecraft environment.
     n_modes : int
         k, modes reported (default 2).
+    every : int
+        Env steps between refreshes of the vector (default 10, as
+        :class:`PhysicalFeatures`: the same instants, so an agent under
+        :class:`~spacecraft_env.ActionRepeat` sees both at its decisions; the
+        truth's modal analysis costs as much as an identifier update).
     """
 
-    def __init__(self, env: gym.Env, n_modes: int = 2) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes)
+    def __init__(self, env: gym.Env, n_modes: int = 2, every: int = 10) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes, every=every)
         gym.ObservationWrapper.__init__(self, env)
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every}")
         self.frame = _PhysicalFrame(env, n_modes)
         self.n_modes = self.frame.k
+        self.every = int(every)
         self.n_features = self.frame.size
         self.observation_space = _appended_space(env, self.n_features)
         self._cache: dict = {}
+        self._feats = np.zeros(self.n_features)
+        self._steps = 0
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         self._cache.clear()            # a new draw changes the plant
+        self._steps = 0
         return super().reset(seed=seed, options=options)
 
     def _truth(self, t: float) -> np.ndarray:
@@ -525,11 +536,15 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         return hit
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        t = self.env.unwrapped.time
-        now = self._truth(t).copy()
-        before = self._truth(t - CHANGE_WINDOW_S)
-        k = self.n_modes
-        moved = np.abs(np.concatenate([now[:6] - before[:6], now[7:7 + k] - before[7:7 + k]]))
-        now[-2] = float(moved.max() > _CHANGE_TOLERANCE)
-        feats = np.clip(now, -_CLIP, _CLIP)
-        return np.concatenate([np.asarray(observation, dtype=float), feats]).astype(np.float32)
+        if self._steps % self.every == 0:
+            t = self.env.unwrapped.time
+            now = self._truth(t).copy()
+            before = self._truth(t - CHANGE_WINDOW_S)
+            k = self.n_modes
+            moved = np.abs(np.concatenate([now[:6] - before[:6],
+                                           now[7:7 + k] - before[7:7 + k]]))
+            now[-2] = float(moved.max() > _CHANGE_TOLERANCE)
+            self._feats = np.clip(now, -_CLIP, _CLIP)
+        self._steps += 1
+        return np.concatenate([np.asarray(observation, dtype=float),
+                               self._feats]).astype(np.float32)

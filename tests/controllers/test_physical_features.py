@@ -62,7 +62,7 @@ def test_privileged_is_zero_at_the_nominal_plant_and_follows_a_draw():
 
 
 def test_privileged_change_flag_marks_a_docking_for_twenty_seconds():
-    env = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    env = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"), every=1)
     plant = {"module_masses_kg": [600.0, 0.0], "docking_times_s": [50.0, 200.0],
              "paddle_angle_deg": 0.0, "paddle_rate_deg_s": 0.0}
     env.reset(seed=0, options={"plant": plant})
@@ -74,6 +74,16 @@ def test_privileged_change_flag_marks_a_docking_for_twenty_seconds():
     changed = t[np.asarray(flags) > 0]
     assert changed.min() == pytest.approx(50.0, abs=0.2)
     assert changed.max() == pytest.approx(70.0, abs=0.2)
+    # refreshed every 10 steps (the default), the agent's decisions see the same vector
+    sparse = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    dense = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"), every=1)
+    for wrapper in (sparse, dense):
+        wrapper.reset(seed=0, options={"plant": plant})
+    for k in range(1, 701):
+        a = np.zeros(3, dtype=np.float32)
+        (obs_s, *_), (obs_d, *_) = sparse.step(a), dense.step(a)
+        if k % 10 == 0:
+            np.testing.assert_array_equal(obs_s[N_OBS:], obs_d[N_OBS:])
 
 
 def _multisine_episode(env, steps, seed=0):
