@@ -220,7 +220,7 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
             f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} "
             f"| {spread([mean_cost(f) for f in finals], '.3g')} "
-            f"| {spread([mean_ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} |")
+            f"| {spread([mean_ratio(f, m.get('fixed_lqg')) for f in finals], '.3g')} |")
     head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
             "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
             "| env steps to <= 2x adaptive LQG RMS | cost, mean over episodes "
@@ -237,7 +237,7 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                             f"| {b['attitude_rms_deg']:.2f} "
                             f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - "
                             f"| {spread([mean_cost(b)], '.3g')} "
-                            f"| {spread([mean_ratio(b, last.get('fixed_lqg'))], '.2f')} |")
+                            f"| {spread([mean_ratio(b, last.get('fixed_lqg'))], '.3g')} |")
     return "\n".join(head + rows) + "\n"
 
 
