@@ -183,7 +183,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     directory).
     """
     def spread(values: list[float], fmt: str) -> str:
-        values = [v for v in values if v is not None and np.isfinite(v)]
+        # inf is a result (an episode that left the bound before 100 s), NaN is not
+        values = [v for v in values if v is not None and not np.isnan(v)]
         if not values:
             return "-"
         return (f"{np.median(values):{fmt}} [{min(values):{fmt}}, {max(values):{fmt}}]"

@@ -180,7 +180,10 @@ def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario
             env.close()
     if shared is not None:
         shared.close()
+    # an episode that left the attitude bound before the scored window has no cost
+    # from 100 s: it counts as infinitely costly (a failure), not as missing
     costs = np.array([m["cost_after_100s"] for m in per_seed], dtype=float)
+    costs[np.isnan(costs)] = np.inf
     return {"cost_after_100s": float(np.median(costs)),
             "cost_after_100s_mean": float(np.mean(costs)),
             "cost_after_100s_worst": float(np.max(costs)),

@@ -208,3 +208,18 @@ def test_a_silent_residual_agent_scores_exactly_its_base_controller():
 
     pushed = _evaluate(FullResidual(), "docking", "residual-fixed", kwargs)
     assert pushed["attitude_rms_deg"] != alone["attitude_rms_deg"]
+
+
+def test_an_episode_that_leaves_the_bound_before_the_scored_window_costs_infinity():
+    """No cost from 100 s exists for it: the evaluation counts it as a failure (inf),
+    not as missing, so a median over episodes cannot hide it."""
+    from spacecraft_lab.training import ZeroTorque, _evaluate
+
+    class FullTorque(ZeroTorque):
+        def act(self, obs, info=None):
+            return np.ones(3, dtype=np.float32)
+
+    kwargs = {"task": "slew", "max_episode_steps": 1100}
+    score = _evaluate(FullTorque(), "docking", "none", kwargs, seeds=(1000, 1001))
+    assert score["cost_after_100s"] == np.inf and score["cost_after_100s_mean"] == np.inf
+    assert score["stable_share"] == 0.0
