@@ -183,17 +183,26 @@ class _HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {shown})"
 
 
-#: Metavariables of the options whose values are not self-explaining.
+#: Metavariables of the options whose values are not self-explaining (an option with
+#: at most :data:`_SPELLED_CHOICES` choices shows them instead, ``a|b|c``).
 _METAVARS = {"scenario": "S", "seeds": "N", "seed": "N", "steps": "N", "out": "DIR",
              "methods": "M", "controllers": "C", "preset": "P", "snr_db": "DB|none",
              "modes": "K", "samples": "N", "convergence": "S", "task": "T",
              "module_mass": "KG", "rotation_rate": "DEG_S", "paddle_angle": "DEG",
              "torque_weight": "R", "max_torque": "NM", "actuator_delay": "N",
-             "torque_rate_limit": "NM_S", "disturbance_torque": "NM", "algo": "ppo|sac",
+             "torque_rate_limit": "NM_S", "disturbance_torque": "NM",
              "features": "F", "timesteps": "N", "first_seed": "N", "repeat": "N",
-             "reward": "bounded|cost", "eval_every": "N", "eval_episodes": "N",
-             "tensorboard": "DIR", "config": "FILE", "backend": "local|ray|serial",
+             "eval_every": "N", "eval_episodes": "N", "tensorboard": "DIR", "config": "FILE",
              "workers": "N", "address": "ADDR", "timeout": "S", "max_tasks": "N"}
+_SPELLED_CHOICES = 3
+
+
+def _metavar(action: argparse.Action) -> str:
+    """The metavariable of an option: its choices when few, else :data:`_METAVARS`."""
+    if action.dest not in _METAVARS and action.choices is not None \
+            and len(action.choices) <= _SPELLED_CHOICES:
+        return "|".join(map(str, action.choices))
+    return _METAVARS.get(action.dest, action.dest.upper())
 
 
 def synopsis(parser: argparse.ArgumentParser | None = None, width: int = 100) -> str:
@@ -345,8 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "10 = one decision per second)")
     train.add_argument("--reward", choices=REWARDS, default="bounded",
                        help="env reward form: 'bounded' (1 - min(cost / saturation, 1) "
-                            "per step alive) or 'cost' (negative stage cost and a "
-                            "termination penalty)")
+                            "per step alive), 'log' (the same on a log scale of the cost, "
+                            "which resolves precision near the target) or 'cost' (negative "
+                            "stage cost and a termination penalty)")
     train.add_argument("--eval-every", type=_integer(1), default=20_000,
                        help="env steps between evaluations")
     train.add_argument("--eval-episodes", type=_integer(1), default=len(EVAL_SEEDS),
@@ -396,7 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     for command_parser in sub.choices.values():
         for action in command_parser._actions:
             if action.option_strings and action.metavar is None and action.nargs != 0:
-                action.metavar = _METAVARS.get(action.dest, action.dest.upper())
+                action.metavar = _metavar(action)
     return parser
 
 
