@@ -10,6 +10,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -86,6 +87,16 @@ class RewardWeights:
             object.__setattr__(self, name, value)
         if self.saturation == 0 or self.precision == 0:
             raise ValueError("reward weights saturation and precision must be > 0")
+
+    @cached_property
+    def _log_span(self) -> float:
+        """``log(1 + saturation / precision)``: the log reward's scale (once per weights)."""
+        return math.log1p(self.saturation / self.precision)
+
+    def log_reward(self, cost: float) -> float:
+        """``reward="log"`` for a stage cost: ``1 - log(1 + cost / precision) / log(1 +
+        saturation / precision)``, clipped at 0."""
+        return max(1.0 - math.log1p(cost / self.precision) / self._log_span, 0.0)
 
 
 def _vector3(name: str, value: Any) -> np.ndarray:
@@ -546,9 +557,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         if self.reward == "bounded":
             reward = 1.0 - min(float(cost) / self.reward_weights.saturation, 1.0)
         elif self.reward == "log":
-            w = self.reward_weights
-            reward = max(1.0 - math.log1p(float(cost) / w.precision)
-                         / math.log1p(w.saturation / w.precision), 0.0)
+            reward = self.reward_weights.log_reward(float(cost))
         else:
             reward = -float(cost + self.termination_penalty()) if terminated else -float(cost)
         obs = self._observe()
