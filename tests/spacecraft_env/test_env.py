@@ -323,21 +323,30 @@ def test_the_slew_task_observes_its_reference_by_default():
     assert regulation.unwrapped.outputs == ("attitude", "rate", "deflection")
 
 
-def test_bounded_reward_is_one_minus_the_saturated_cost():
-    """Both reward forms see the same stage cost: bounded = 1 - min(cost / saturation, 1)."""
-    weights = RewardWeights(saturation=20.0)
-    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=form, reward_weights=weights)
-            for form in ("cost", "bounded")]
+def _rewards_beside_the_cost(form, weights, steps):
+    """(cost reward, ``form`` reward) of each step of one random-torque docking run, both
+    envs fed the same actions, up to ``steps`` or the first termination."""
+    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=f, reward_weights=weights)
+            for f in ("cost", form)]
     for env in envs:
         env.reset(seed=4)
     rng = np.random.default_rng(0)
-    seen = []
-    for _ in range(2500):
+    pairs = []
+    for _ in range(steps):
         action = rng.uniform(-1, 1, 3).astype(np.float32)
-        (_, r_cost, term, *_), (_, r_bounded, term_b, *_) = (env.step(action) for env in envs)
-        assert term == term_b
+        (_, r_cost, term, *_), (_, r_form, term_f, *_) = (env.step(action) for env in envs)
+        assert term == term_f
         if term:
             break
+        pairs.append((r_cost, r_form))
+    return pairs
+
+
+def test_bounded_reward_is_one_minus_the_saturated_cost():
+    """Both reward forms see the same stage cost: bounded = 1 - min(cost / saturation, 1)."""
+    seen = []
+    for r_cost, r_bounded in _rewards_beside_the_cost("bounded", RewardWeights(saturation=20.0),
+                                                      2500):
         assert r_bounded == pytest.approx(1.0 - min(-r_cost / 20.0, 1.0), abs=1e-12)
         seen.append(r_bounded)
     # the run covers both the graded range and saturation
@@ -348,18 +357,8 @@ def test_log_reward_resolves_precision_where_the_bounded_one_cannot():
     """log = 1 - log(1 + cost / precision) / log(1 + saturation / precision), from the same
     stage cost; 0.01 deg and 0.1 deg errors pay visibly different rewards."""
     weights = RewardWeights(saturation=20.0, precision=1e-3)
-    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=form, reward_weights=weights)
-            for form in ("cost", "log")]
-    for env in envs:
-        env.reset(seed=4)
-    rng = np.random.default_rng(0)
     seen = []
-    for _ in range(600):
-        action = rng.uniform(-1, 1, 3).astype(np.float32)
-        (_, r_cost, term, *_), (_, r_log, term_l, *_) = (env.step(action) for env in envs)
-        assert term == term_l
-        if term:
-            break
+    for r_cost, r_log in _rewards_beside_the_cost("log", weights, 600):
         want = max(1.0 - np.log1p(-r_cost / 1e-3) / np.log1p(20.0 / 1e-3), 0.0)
         assert r_log == pytest.approx(want, abs=1e-12)
         seen.append(r_log)
