@@ -75,6 +75,18 @@ def _put_modes(block: np.ndarray, freq: np.ndarray, zeta: np.ndarray) -> None:
     block[k:k + count] = zeta[:count]
 
 
+def _plant_cached(cache: dict, model: Any, t: float, compute: Any) -> np.ndarray:
+    """``compute()`` for the true plant at ``t``, memoized by the plant's configuration
+    key (the truth changes only with the plant; bounded to 4096 entries)."""
+    key = model._key(t)
+    hit = cache.get(key)
+    if hit is None:
+        if len(cache) > 4096:
+            cache.clear()
+        hit = cache[key] = compute()
+    return hit
+
+
 def _gain_scale(env: gym.Env) -> float:
     """Mean diagonal of the nominal inertia, kg m^2: makes ``J^-1`` about 1."""
     return float(np.mean(np.diag(env.unwrapped.model.nominal().inertia(0.0))))
@@ -254,17 +266,15 @@ class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArg
     def _truth(self) -> np.ndarray:
         base = self.env.unwrapped
         model, t = base.model, base.time
-        key = model._key(t)             # the features change only with the plant
-        hit = self._cache.get(key)
-        if hit is None:
-            if len(self._cache) > 4096:
-                self._cache.clear()
+
+        def compute() -> np.ndarray:
             k = self.n_modes
-            hit = np.zeros(self.n_features)
-            hit[:6] = np.linalg.inv(model.inertia(t))[_UPPER] * self._gain_scale
-            _put_modes(hit[6:6 + 2 * k], *model.modal(t))
-            self._cache[key] = hit
-        return hit
+            feats = np.zeros(self.n_features)
+            feats[:6] = np.linalg.inv(model.inertia(t))[_UPPER] * self._gain_scale
+            _put_modes(feats[6:6 + 2 * k], *model.modal(t))
+            return feats
+
+        return _plant_cached(self._cache, model, t, compute)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         feats = np.clip(self._truth(), -_CLIP, _CLIP)
@@ -519,21 +529,19 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
 
     def _truth(self, t: float) -> np.ndarray:
         base = self.env.unwrapped
-        model = base.model
-        key = model._key(max(t, 0.0))
-        hit = self._cache.get(key)
-        if hit is None:
-            if len(self._cache) > 4096:
-                self._cache.clear()
+        model, t = base.model, max(t, 0.0)
+
+        def compute() -> np.ndarray:
             plant = getattr(base, "plant", None)
             efficiency = 1.0 if plant is None else plant.actuator_gain
-            hit = np.zeros(self.n_features)
-            freq, zeta = self.frame.dominant_modes(model, max(t, 0.0))
-            self.frame.fill(hit, efficiency * np.linalg.inv(model.inertia(max(t, 0.0))), 0.0,
+            feats = np.zeros(self.n_features)
+            freq, zeta = self.frame.dominant_modes(model, t)
+            self.frame.fill(feats, efficiency * np.linalg.inv(model.inertia(t)), 0.0,
                             freq, zeta, np.zeros(freq.size))
-            hit[-1] = 1.0
-            self._cache[key] = hit
-        return hit
+            feats[-1] = 1.0
+            return feats
+
+        return _plant_cached(self._cache, model, t, compute)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         if self._steps % self.every == 0:
