@@ -190,18 +190,11 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         return (f"{np.median(values):{fmt}} [{min(values):{fmt}}, {max(values):{fmt}}]"
                 if len(values) > 1 else f"{values[0]:{fmt}}")
 
-    def cost(result: dict[str, Any]) -> float | None:
-        return result.get("cost_after_100s")
+    median, mean = "cost_after_100s", "cost_after_100s_mean"
 
-    def ratio(result: dict[str, Any], ref: dict[str, Any] | None) -> float | None:
-        mine, theirs = cost(result), None if ref is None else cost(ref)
-        return None if mine is None or not theirs else mine / theirs
-
-    def mean_cost(result: dict[str, Any]) -> float | None:
-        return result.get("cost_after_100s_mean")
-
-    def mean_ratio(result: dict[str, Any], ref: dict[str, Any] | None) -> float | None:
-        mine, theirs = mean_cost(result), None if ref is None else mean_cost(ref)
+    def ratio(result: dict[str, Any], ref: dict[str, Any] | None,
+              key: str = median) -> float | None:
+        mine, theirs = result.get(key), None if ref is None else ref.get(key)
         return None if mine is None or not theirs else mine / theirs
 
     rows = []
@@ -214,14 +207,14 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         task += f", {m.get('reward', 'cost')} reward"
         rows.append(
             f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
-            f"| {len(finals)} | {spread([cost(f) for f in finals], '.4f')} "
+            f"| {len(finals)} | {spread([f.get(median) for f in finals], '.4f')} "
             f"| {spread([ratio(f, m.get('oracle_lqg')) for f in finals], '.2f')} "
             f"| {spread([ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} "
             f"| {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
             f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
             f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} "
-            f"| {spread([mean_cost(f) for f in finals], '.3g')} "
-            f"| {spread([mean_ratio(f, m.get('fixed_lqg')) for f in finals], '.3g')} |")
+            f"| {spread([f.get(mean) for f in finals], '.3g')} "
+            f"| {spread([ratio(f, m.get('fixed_lqg'), mean) for f in finals], '.3g')} |")
     head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
             "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
             "| env steps to <= 2x adaptive LQG RMS | cost, mean over episodes "
@@ -232,13 +225,13 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                           ("fixed LQG", "fixed_lqg"), ("zero torque", "zero_torque")):
             if key in last:
                 b = last[key]
-                rows.append(f"| {name} | - | - | - | - | {spread([cost(b)], '.4f')} "
+                rows.append(f"| {name} | - | - | - | - | {spread([b.get(median)], '.4f')} "
                             f"| {spread([ratio(b, last.get('oracle_lqg'))], '.2f')} "
                             f"| {spread([ratio(b, last.get('fixed_lqg'))], '.2f')} "
                             f"| {b['attitude_rms_deg']:.2f} "
                             f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - "
-                            f"| {spread([mean_cost(b)], '.3g')} "
-                            f"| {spread([mean_ratio(b, last.get('fixed_lqg'))], '.3g')} |")
+                            f"| {spread([b.get(mean)], '.3g')} "
+                            f"| {spread([ratio(b, last.get('fixed_lqg'), mean)], '.3g')} |")
     return "\n".join(head + rows) + "\n"
 
 
