@@ -38,6 +38,7 @@ is the curve's last point. It writes the saved models,
 ``learning_curves.png``, ``metrics.json`` and, with ``--tensorboard``,
 TensorBoard logs.
 """
+
 from __future__ import annotations
 
 import json
@@ -290,6 +291,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                         tb_log_name=name if tensorboard else "run")
             # the final evaluation is the curve's last point (same episodes, same axis)
             final = callback.evaluate_now()
+            venv.training = False       # saved for inference: the statistics stay fixed
             model.save(out / f"{name}.zip")
             venv.save(str(out / f"{name}_vecnormalize.pkl"))
             reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)

@@ -223,3 +223,14 @@ def test_an_episode_that_leaves_the_bound_before_the_scored_window_costs_infinit
     score = _evaluate(FullTorque(), "docking", "none", kwargs, seeds=(1000, 1001))
     assert score["cost_after_100s"] == np.inf and score["cost_after_100s_mean"] == np.inf
     assert score["stable_share"] == 0.0
+
+
+def test_the_saved_normalization_is_frozen_for_inference(tmp_path):
+    """The VecNormalize saved beside a model no longer updates its statistics."""
+    pytest.importorskip("stable_baselines3")
+    import pickle
+
+    run_training("ppo", "none", 2048, 1, tmp_path, eval_every=10**9, progress=False,
+                 eval_seeds=(1000,))
+    with open(tmp_path / "ppo-none-seed0_vecnormalize.pkl", "rb") as fh:
+        assert pickle.load(fh).training is False
