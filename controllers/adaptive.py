@@ -2,15 +2,16 @@
 
 Every control step k (docs/design/control.md):
 
-1. the identifier's state corrected by the current measurement,
-   ``x_{k|k}`` (:meth:`~identifiers.OnlineIdentifier.filtered_state`: a
-   Kalman filter on the current identified model). With
-   ``rigid_state="measured"`` (the default, for identifiers whose state has
-   attitude and rate states, :attr:`~identifiers.OnlineIdentifier.rigid_states`)
-   the attitude and rate states are then read from the sensors, less the
-   filter's flexible contribution to them: the filter's own rigid estimate
-   drifts with the identified model's errors (measured in
-   docs/results/control.md), while attitude and rate are measured directly;
+1. ``x_{k|k}`` from the controller's own Kalman filter on the current
+   identified ``(A, B, C)`` (``rigid_state="kalman"``, the default), with
+   the noise every baseline's filter assumes (:data:`PROCESS_NOISE` N m of
+   unmodelled torque, the sensors' specified noise) and the applied torque
+   in its time update: the filter the oracle LQG runs on the true model,
+   run on the identified one. The identifier's own filter (``"filter"``)
+   is tuned for prediction and made the loop reject its gain 5-10x more
+   often; reading attitude and rate from the sensors (``"measured"``, the
+   former default) pushes the gyro noise through the rate gain (0.05-0.07
+   N m of white torque per axis). Measurements: docs/design/control.md;
 2. the gain re-designed on the current identified ``(A, B, C)`` by the
    warm-started Riccati iteration, with integral action on the attitude
    error (:class:`~controllers.lqg.LQGLaw`);
@@ -52,7 +53,7 @@ from numpy.typing import ArrayLike
 
 from controllers.acceptance import GainAcceptance, input_disk_margin
 from controllers.base import Controller
-from controllers.baselines import RobustLQG, _LQGController
+from controllers.baselines import PROCESS_NOISE, RobustLQG, _LQGController
 from controllers.excitation import BinaryExcitation
 from controllers.lqg import LQRWeights, equilibrium_state
 from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
@@ -112,11 +113,15 @@ class AdaptiveLQG(_LQGController):
         limit cycle.
     iterations : int
         Riccati iterations per re-design.
-    rigid_state : {"measured", "filter"}
-        Where the attitude and rate states come from (see step 1 above);
-        "measured" needs an identifier with
-        :attr:`~identifiers.OnlineIdentifier.rigid_states` and falls back
-        to "filter" otherwise.
+    rigid_state : {"kalman", "filter", "measured"}
+        Where the state comes from (see step 1 above): "kalman" (default)
+        this controller's own Kalman filter on the identified model, with
+        the noise the baselines' filters assume; "filter" the identifier's
+        own filter (:meth:`~identifiers.OnlineIdentifier.filtered_state`,
+        tuned for prediction, not control); "measured" that filter with the
+        attitude and rate states read from the sensors (needs an identifier
+        with :attr:`~identifiers.OnlineIdentifier.rigid_states`, else as
+        "filter"), which feeds the sensor noise through the rate gain.
     """
 
     name = "adaptive LQG"
@@ -125,15 +130,16 @@ class AdaptiveLQG(_LQGController):
                  weights: LQRWeights | None = None, excitation: BinaryExcitation | None = None,
                  acceptance: GainAcceptance | None = None, fallback: Controller | None = None,
                  bridge_s: float = 0.0, iterations: int = 4,
-                 rigid_state: str = "measured", uncertainty_tolerance: float = 0.1,
+                 rigid_state: str = "kalman", uncertainty_tolerance: float = 0.1,
                  excitation_budget: float = 0.1, dwell_s: float = 10.0) -> None:
         super().__init__(env, weights)
         model = self.env.model
         if identifier is None:
             identifier = default_identifier(self.measured_layout, n=model.n, dt=model.dt,
                                             **CLOSED_LOOP_SETTINGS)
-        if rigid_state not in ("measured", "filter"):
-            raise ValueError(f"rigid_state must be 'measured' or 'filter', got {rigid_state!r}")
+        if rigid_state not in ("kalman", "filter", "measured"):
+            raise ValueError(f"rigid_state must be 'kalman', 'filter' or 'measured', "
+                             f"got {rigid_state!r}")
         self.rigid_state = rigid_state
         self.identifier = identifier
         warm = int(getattr(identifier, "warmup", 500))
@@ -246,6 +252,18 @@ class AdaptiveLQG(_LQGController):
                 x[cols] = inverse @ (y[rows] - others @ x[rest])
         return x
 
+    def _own_filter(self, model: Any, y: np.ndarray, info: dict[str, Any] | None
+                    ) -> np.ndarray | None:
+        """``x_{k|k}`` from this controller's own Kalman filter on the identified model,
+        with the noise the baselines' filters assume (:data:`PROCESS_NOISE` of torque,
+        the sensors' specified noise)."""
+        a, b, c = model.A, model.B, model.C
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.isfinite(c))):
+            return None
+        qn = PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(a.shape[0])
+        return self._filter(a, b, c, qn, self._noise_var,
+                            np.where(np.isfinite(y), y, np.nan), info)
+
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:
         """Keep (filtered state, rates, applied torque) of the last samples; a sample
         with a non-finite entry breaks the record (it restarts from the next good one)."""
@@ -352,7 +370,10 @@ class AdaptiveLQG(_LQGController):
         self._watch_events()
         x = None
         if model is not None and np.all(np.isfinite(model.A)):
-            x = self.identifier.filtered_state(y)
+            if self.rigid_state == "kalman":
+                x = self._own_filter(model, y, info)
+            else:
+                x = self.identifier.filtered_state(y)
             if x is not None and self.rigid_state == "measured":
                 x = self._measured_rigid(x, y, model.C)
             agreement = self._agreement(y, model, x)

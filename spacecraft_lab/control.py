@@ -129,6 +129,15 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                               "disturbance_torque": disturbance_torque}
     if max_torque is not None:
         kwargs["max_torque"] = float(max_torque)
+    if scenario not in SCENARIOS:
+        # the task family draws its own plant every episode: no scenario variants
+        variants = {"module_mass": module_mass, "rotation_rate": rotation_rate,
+                    "paddle_angle": paddle_angle, "capture_momentum": capture_momentum}
+        given = sorted(k for k, v in variants.items() if v is not None)
+        if given or mass_centre_shift:
+            raise ValueError(f"{', '.join(given) or 'mass_centre_shift'} does not apply to "
+                             f"the {scenario!r} scenario (it draws its plant every episode)")
+        return kwargs
     base = SCENARIOS[scenario]()
     rotating = isinstance(base, SolarRotationScenario)
     if module_mass is not None:

@@ -302,12 +302,7 @@ def test_sb3_style_predict_and_policy_wrapper():
         PolicyController(object())
 
 
-@pytest.mark.parametrize("make", [FixedLQG, RobustLQG, OracleLQG, pytest.param(
-    AdaptiveLQG, marks=pytest.mark.xfail(strict=True, reason=(
-        "with no excitation on a noise-free plant the identified rigid gain's uncertainty "
-        "hovers at the acceptance threshold: the loop changes between its design and the "
-        "fallback about every 10-20 s (24 changes in 400 s, dwell and bumpless transfer "
-        "notwithstanding) and a 0.002-0.005 deg offset cycle remains")))])
+@pytest.mark.parametrize("make", [FixedLQG, RobustLQG, OracleLQG, AdaptiveLQG])
 def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(make):
     """0.01 N m on every axis: PD keeps d / kp (about 0.01 deg); integral action removes it."""
     def steady_error(ctrl_factory):

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from spacecraft_env import DockingScenario
-from spacecraft_lab.control import env_kwargs_for
+from spacecraft_lab.cli import build_parser, main
+from spacecraft_lab.control import SCENARIO_NAMES, env_kwargs_for
 
 
 def test_capture_and_mass_centre_options_build_the_docking_scenario():
@@ -16,3 +19,22 @@ def test_capture_and_mass_centre_options_build_the_docking_scenario():
     assert "scenario" not in env_kwargs_for("docking")        # the registered default
     with pytest.raises(ValueError, match="docking scenario"):
         env_kwargs_for("paddle_rotation", capture_momentum=(0, 0, 1))
+
+
+@pytest.mark.parametrize("scenario", SCENARIO_NAMES)
+def test_every_scenario_help_offers_runs_from_the_cli(scenario, tmp_path):
+    """``spacecraft control --scenario S`` for every S that ``--help`` offers (the task
+    family failed with KeyError: 'family')."""
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    offered = next(a for a in commands.choices["control"]._actions if a.dest == "scenario")
+    assert scenario in offered.choices
+    main(["control", "--scenario", scenario, "--seeds", "1", "--steps", "100",
+          "--controllers", "robust-lqg", "--out", str(tmp_path / scenario)])
+    assert (tmp_path / scenario / "metrics.json").exists()
+
+
+def test_the_family_takes_no_scenario_variants():
+    assert "scenario" not in env_kwargs_for("family")
+    with pytest.raises(ValueError, match="module_mass does not apply"):
+        env_kwargs_for("family", module_mass=900.0)
