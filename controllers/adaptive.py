@@ -55,6 +55,7 @@ from controllers.acceptance import GainAcceptance, input_disk_margin
 from controllers.base import Controller
 from controllers.baselines import PROCESS_NOISE, RobustLQG, _LQGController
 from controllers.excitation import BinaryExcitation
+from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.lqg import LQRWeights, equilibrium_state
 from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
 from spacecraft_conventions import single_threaded_blas
@@ -73,6 +74,16 @@ PERMANENT_EXCITATION = 0.1
 #: Samples between evaluations of the loop's disk margin (it costs about a
 #: re-design's worth; the gain moves little in 1 s).
 MARGIN_EVERY = 10
+#: The supervisor's windows, s: the peaks of the measured attitude error and tip
+#: deflections (in their nominal scales) over consecutive windows of this length.
+SUPERVISOR_WINDOW_S = 10.0
+#: Windows whose peaks the supervisor fits (100 s): a log-linear fit growing by more
+#: than the harness's :data:`~controllers.harness.GROWTH_LIMIT` per 100 s, with the
+#: last peak above its envelope floor, takes the identified design off for
+#: :data:`SUPERVISOR_HOLD_S`: the verdict the harness would give from the truth,
+#: given by the controller from its sensors, while the loop is still small.
+SUPERVISOR_WINDOWS = 10
+SUPERVISOR_HOLD_S = 60.0
 
 
 class AdaptiveLQG(_LQGController):
@@ -162,6 +173,11 @@ class AdaptiveLQG(_LQGController):
         layout = self.measured_layout
         self._att_rows = layout.indices("attitude")
         self._rate_rows = layout.indices("rate")
+        self._defl_rows = (layout.indices("deflection") if "deflection" in layout.names
+                           else np.zeros(0, dtype=int))
+        self._scales = layout.scales()
+        self._window_steps = max(1, round(SUPERVISOR_WINDOW_S / self.dt))
+        self._hold_steps = round(SUPERVISOR_HOLD_S / self.dt)
         self._softest_reference = self._reference_design()
         self.reset()
 
@@ -192,11 +208,15 @@ class AdaptiveLQG(_LQGController):
         self._flying = False
         self._flying_gain: np.ndarray | None = None
         self._switched = -self.dwell_steps
+        self._peaks: deque = deque(maxlen=SUPERVISOR_WINDOWS)
+        self._peak = 0.0
+        self._hold_until = 0
         self.last_excitation = np.zeros(3)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
                                       "nonfinite_observations": 0, "excitation_rms_Nm": 0.0,
-                                      "excited_steps": 0, "switches": 0}
+                                      "excited_steps": 0, "switches": 0,
+                                      "steps_after_60s": 0, "fallback_steps_after_60s": 0}
 
     # ------------------------------------------------------------ pieces
     def _agreement(self, y: np.ndarray, model: Any, x: np.ndarray | None) -> float:
@@ -350,6 +370,38 @@ class AdaptiveLQG(_LQGController):
         if callable(shape) and self._k % 50 == 0:
             self.excitation.shape(shape())
 
+    def _supervise(self, y: np.ndarray, ref: np.ndarray) -> None:
+        """Take the identified design off when the measured envelope grows.
+
+        The identified model can go stale while its gain still passes every
+        test on that model (the paddles turn the modal couplings' signs over
+        hundreds of seconds). The peaks of the measured attitude error and
+        tip deflections (nominal scales) over :data:`SUPERVISOR_WINDOW_S`
+        windows are watched while the identified design flies; when a
+        log-linear fit of the last :data:`SUPERVISOR_WINDOWS` grows by more
+        than :data:`~controllers.harness.GROWTH_LIMIT` per 100 s and the
+        last is above the harness's envelope floor, the fallback flies for
+        :data:`SUPERVISOR_HOLD_S` (counted as a rejection "growing")."""
+        level = np.abs(y[self._att_rows] - ref) / self._scales[self._att_rows]
+        if self._defl_rows.size:
+            level = np.concatenate([level, np.abs(y[self._defl_rows])
+                                    / self._scales[self._defl_rows]])
+        if np.all(np.isfinite(level)):
+            self._peak = max(self._peak, float(level.max()))
+        if (self._k + 1) % self._window_steps:
+            return
+        self._peaks.append(self._peak if self._flying else np.nan)
+        self._peak = 0.0
+        peaks = np.array(self._peaks)
+        if peaks.size < SUPERVISOR_WINDOWS or not np.all(peaks > 0) or \
+                peaks[-1] <= ENVELOPE_FLOOR:
+            return
+        slope = np.polyfit(np.arange(peaks.size) * SUPERVISOR_WINDOW_S, np.log(peaks), 1)[0]
+        if np.exp(100.0 * slope) > GROWTH_LIMIT:
+            self._hold_until = self._k + self._hold_steps
+            self._peaks.clear()
+            self.stats["rejected_by"]["growing"] = self.stats["rejected_by"].get("growing", 0) + 1
+
     def _watch_events(self) -> None:
         events = getattr(self.identifier, "events", ())
         if len(events) > self._events_seen:
@@ -380,19 +432,26 @@ class AdaptiveLQG(_LQGController):
             self.gain = self._design(model, agreement)
         bridging = self._k < self._bridge_until
         ref = self._reference(info)
+        self._supervise(y, ref)
+        held = self._k < self._hold_until
         usable = x is not None and np.all(np.isfinite(x))
-        wanted = self.gain is not None and usable and not bridging
+        wanted = self.gain is not None and usable and not bridging and not held
         if wanted:
             self._flying_gain = self.gain
         # dwell time: the loop changes between the identified design and the fallback at
-        # most once per dwell, so two integrators never take turns at every sample
-        if wanted != self._flying and self._k - self._switched >= self.dwell_steps:
+        # most once per dwell, so two integrators never take turns at every sample; the
+        # supervisor's hold takes the identified design off at once
+        if wanted != self._flying and (self._k - self._switched >= self.dwell_steps
+                                       or (held and self._flying)):
             self._transfer_integral(to_identified=wanted)
             self._flying, self._switched = wanted, self._k
             self.stats["switches"] += 1
         fly = self._flying and usable and self._flying_gain is not None
+        judged = self._k * self.dt >= JUDGED_FROM_S
+        self.stats["steps_after_60s"] += judged
         if not fly:
             self.stats["fallback_steps"] += 1
+            self.stats["fallback_steps_after_60s"] += judged
             torque = fallback_action.astype(float) * self.max_torque
             if np.all(np.isfinite(obs[self._att])):
                 self.law.integrate(obs[self._att] - ref, saturated=True)   # hold the integral

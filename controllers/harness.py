@@ -23,7 +23,8 @@ from controllers.lqg import LQRWeights
 from identifiers import relative_gain_error, rigid_body_gain
 from spacecraft_conventions import DEG_PER_RAD, NOMINAL_SCALE, single_threaded_blas
 
-__all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "SCORED_FROM_S", "ComparisonInterrupted",
+__all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "ENVELOPE_FLOOR", "GROWTH_LIMIT",
+           "JUDGED_FROM_S", "SCORED_FROM_S", "ComparisonInterrupted",
            "Trajectory", "compare", "controller_shares", "episode_metrics", "run_episode",
            "stage_costs"]
 
@@ -64,6 +65,11 @@ class Trajectory:
         Relative error of the identified rigid-body gain against the true
         ``J(t)^-1`` (:func:`identifiers.relative_gain_error`) at
         ``frequency_time``, NaN before warm-up.
+    gain_covered : (K,) ndarray or None
+        1 where the identifier's own calibrated rigid-body gain
+        (``identifier.rigid_gain``, :class:`identifiers.RigidGainEstimate`)
+        covers the true ``J(t)^-1`` within two standard deviations, else 0;
+        NaN before warm-up (identifiers that report one).
     controller_stats : dict
     excitation : (N, 3) ndarray or None
         The controller's excitation torque of each step (N m), for controllers
@@ -87,6 +93,7 @@ class Trajectory:
     true_frequencies: np.ndarray | None = None
     frequency_time: np.ndarray | None = None
     gain_error: np.ndarray | None = None
+    gain_covered: np.ndarray | None = None
     controller_stats: dict = field(default_factory=dict)
     excitation: np.ndarray | None = None
     radius_time: np.ndarray | None = None
@@ -175,7 +182,8 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     observations, actions, torques, states, refs, rewards = [obs], [], [], [info["state"]], \
         [info["reference"]], []
     ident = getattr(controller, "identifier", None)
-    freq_t, freq_id, freq_true, gain_err = [], [], [], []
+    freq_t, freq_id, freq_true, gain_err, covered = [], [], [], [], []
+    reports_gain = ident is not None and hasattr(ident, "rigid_gain")
     layout = getattr(controller, "measured_layout", None)
     rate_rows = (layout.indices("rate") if layout is not None and "rate" in layout.names
                  else None)
@@ -208,10 +216,14 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 freq_id.append(np.full(n_freq, np.nan) if model is None
                                else _first(model.modal()[0], n_freq))
                 freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
+                true_gain = np.linalg.inv(base.model.inertia(info["time"]))
                 gain_err.append(np.nan if model is None or rate_rows is None else
                                 relative_gain_error(rigid_body_gain(model, rate_rows),
-                                                    np.linalg.inv(base.model.inertia(
-                                                        info["time"]))))
+                                                    true_gain))
+                if reports_gain:
+                    estimate = ident.rigid_gain
+                    covered.append(np.nan if estimate is None
+                                   else float(estimate.covers(true_gain)))
             k += 1
     dt = base.model.dt
     return Trajectory(
@@ -224,6 +236,7 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         true_frequencies=np.array(freq_true) if freq_true else None,
         frequency_time=np.array(freq_t) if freq_t else None,
         gain_error=np.array(gain_err) if gain_err else None,
+        gain_covered=np.array(covered) if covered else None,
         controller_stats=dict(getattr(controller, "stats", {})),
         excitation=np.array(excitation).reshape(-1, 3) if excitation is not None else None,
         radius_time=np.array(radius_t) if radius_t else None,
@@ -233,6 +246,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
 
 #: Start of the scored window after warm-up, s (``attitude_rms_after_100s_deg``).
 SCORED_FROM_S = 100.0
+#: Start of the window over which an adaptive loop's identification and design are
+#: judged (fallback share, rigid-gain error and coverage), s: its warm-up is over.
+JUDGED_FROM_S = 60.0
 #: Length of the windows whose peaks form the envelope of the stability verdict, s.
 ENVELOPE_WINDOW_S = 10.0
 #: Envelope growth over 100 s above which a loop is judged unstable.
@@ -256,12 +272,15 @@ SETTLED_BEFORE_S = 10.0
 
 def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
     """Excitation RMS torque (N m) and the shares of steps with a rejected gain and
-    flown by a fallback, from a controller's ``stats`` (0 for controllers
+    flown by a fallback (all steps, and from :data:`JUDGED_FROM_S` on: after the
+    identifier's warm-up), from a controller's ``stats`` (0 for controllers
     without them)."""
     steps = max(1, int(stats.get("steps", 0)))
+    late = max(1, int(stats.get("steps_after_60s", 0)))
     return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
             "rejected_share": stats.get("rejected", 0) / steps,
-            "fallback_share": stats.get("fallback_steps", 0) / steps}
+            "fallback_share": stats.get("fallback_steps", 0) / steps,
+            "fallback_share_after_60s": stats.get("fallback_steps_after_60s", 0) / late}
 
 
 def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tuple[float, float]:
@@ -370,7 +389,12 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         episode); ``saturated_share`` (share of the last 10 % of steps with an
         actuator at its limit); ``verdict`` and ``stable``; and the
         controller's ``excitation_rms_Nm``, ``rejected_share`` and
-        ``fallback_share`` (:func:`controller_shares`).
+        ``fallback_share`` and ``fallback_share_after_60s``
+        (:func:`controller_shares`); for controllers with an identifier,
+        ``gain_error_after_60s`` (median relative error of the identified
+        rigid-body gain from :data:`JUDGED_FROM_S` on) and
+        ``gain_coverage_after_60s`` (share of those samples whose reported
+        2-sigma band covers the truth; None without a reported uncertainty).
 
     Notes
     -----
@@ -449,6 +473,16 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         # a crash costs infinity whenever it happens: averaged over the steps that exist,
         # one after 100 s would look cheaper than a loop that flew to the end
         cost = np.full(len(COST_PARTS), np.inf)
+    gain_error = gain_coverage = None
+    if traj.gain_error is not None and traj.frequency_time is not None:
+        judged = traj.frequency_time >= JUDGED_FROM_S
+        errors = traj.gain_error[judged]
+        errors = errors[np.isfinite(errors)]
+        gain_error = float(np.median(errors)) if errors.size else None
+        if traj.gain_covered is not None:
+            covered = traj.gain_covered[judged]
+            covered = covered[np.isfinite(covered)]
+            gain_coverage = float(covered.mean()) if covered.size else None
     radius_max = None
     if traj.true_radius is not None and traj.radius_time is not None:
         scored = traj.true_radius[traj.radius_time >= scored_from]
@@ -458,6 +492,8 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         **{f"cost_{part}_after_100s": float(value)
            for part, value in zip(COST_PARTS, cost, strict=True)},
         "true_radius_max": radius_max,
+        "gain_error_after_60s": gain_error,
+        "gain_coverage_after_60s": gain_coverage,
         "attitude_rms_deg": float(np.sqrt(np.mean(err**2))),
         "attitude_rms_after_100s_deg": (float(np.sqrt(np.mean(err[late] ** 2))) if late.any()
                                         else float("nan")),
@@ -485,7 +521,8 @@ AGGREGATED = ("cost_after_100s", "cost_attitude_after_100s", "cost_rate_after_10
               "attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_deg",
               "vibration_rms_mm", "vibration_rms_after_100s_mm", "torque_rms_Nm",
               "effort_N2m2s", "return", "envelope_growth_per_100s", "excitation_rms_Nm",
-              "rejected_share", "fallback_share")
+              "rejected_share", "fallback_share", "fallback_share_after_60s",
+              "gain_error_after_60s", "gain_coverage_after_60s")
 
 
 class ComparisonInterrupted(KeyboardInterrupt):
@@ -506,9 +543,10 @@ class ComparisonInterrupted(KeyboardInterrupt):
 
 
 def _over_seeds(values: np.ndarray, statistic: Callable[[np.ndarray], Any]) -> float:
-    """``statistic`` of the finite values; NaN (silently) when there is none, e.g. a
-    metric scored from 100 s on episodes shorter than that."""
-    finite = values[np.isfinite(values)]
+    """``statistic`` of the values that exist; NaN (silently) when there is none, e.g. a
+    metric scored from 100 s on episodes shorter than that. An infinite value (the
+    cost of a crash) counts: it is a result, not a missing one."""
+    finite = values[~np.isnan(values)]
     return float(statistic(finite)) if finite.size else float("nan")
 
 

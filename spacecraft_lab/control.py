@@ -343,7 +343,8 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
             "attitude_rms_deg", "attitude_peak_deg", "vibration_rms_mm", "torque_rms_Nm",
             "effort_N2m2s", "return",
             "envelope_growth_per_100s", "excitation_rms_Nm", "rejected_share",
-            "fallback_share", "verdict"]
+            "fallback_share", "fallback_share_after_60s", "gain_error_after_60s",
+            "gain_coverage_after_60s", "verdict"]
     with open(out / "results.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(["controller", "seed", *cols, "settling_s"])

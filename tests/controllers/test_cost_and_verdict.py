@@ -182,3 +182,23 @@ def test_a_crash_costs_infinity_whenever_it_happens(start_s):
     m = episode_metrics(run_episode(env, _Push(start_s), seed=0), env.unwrapped.model)
     assert m["verdict"] == "terminated"
     assert m["cost_after_100s"] == np.inf
+
+
+def test_the_supervisor_takes_a_growing_loop_off_the_identified_design():
+    """A measured envelope growing 3x per 100 s (above the floor) while the identified
+    design flies trips the supervisor: the fallback flies for the hold; a decaying
+    one does not."""
+    env = _env(steps=10)
+    for growth, trips in ((3.0, True), (0.5, False)):
+        ctrl = AdaptiveLQG(env.unwrapped, identifier=TrueModelIdentifier(env.unwrapped))
+        ctrl._flying = True
+        layout = ctrl.measured_layout
+        y = np.zeros(layout.size)
+        for k in range(1200):
+            ctrl._k = k
+            level = 0.1 * growth ** (k * ctrl.dt / 100.0)
+            y[layout.indices("deflection")[0]] = level * layout.scales()[
+                layout.indices("deflection")[0]] * (-1) ** k
+            ctrl._supervise(y, np.zeros(3))
+        assert (ctrl.stats["rejected_by"].get("growing", 0) > 0) is trips
+        assert (ctrl._hold_until > 0) is trips
