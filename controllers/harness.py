@@ -69,7 +69,8 @@ class Trajectory:
         1 where the identifier's own calibrated rigid-body gain
         (``identifier.rigid_gain``, :class:`identifiers.RigidGainEstimate`)
         covers the true ``J(t)^-1`` within two standard deviations, else 0;
-        NaN before warm-up (identifiers that report one).
+        NaN before warm-up and for an exact gain (zero covariance: an
+        oracle's); for identifiers that report one.
     controller_stats : dict
     excitation : (N, 3) ndarray or None
         The controller's excitation torque of each step (N m), for controllers
@@ -222,7 +223,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                                                     true_gain))
                 if reports_gain:
                     estimate = ident.rigid_gain
+                    # an exact gain (an oracle's: zero covariance) has no band to judge
                     covered.append(np.nan if estimate is None
+                                   or not np.trace(estimate.covariance) > 0
                                    else float(estimate.covers(true_gain)))
             k += 1
     dt = base.model.dt
