@@ -9,7 +9,9 @@ results are the application layer's (``spacecraft_lab``).
 from __future__ import annotations
 
 import json
+import multiprocessing
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -569,26 +571,55 @@ def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _run_seed(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
+              seed: int, options: dict[str, Any] | None
+              ) -> dict[str, tuple[dict[str, Any], Trajectory]]:
+    """Every controller on one seed, each built fresh on a fresh environment, so the
+    result depends on the seed alone (not on which seeds ran before, or where)."""
+    out = {}
+    for name, factory in controllers.items():
+        env = make_env()
+        try:
+            ctrl = factory(env)
+            traj = run_episode(env, ctrl, seed=seed, options=options)
+            metrics = episode_metrics(traj, env.unwrapped.model)
+        finally:
+            env.close()
+        metrics["seed"] = int(seed)
+        metrics["controller_stats"] = traj.controller_stats
+        out[name] = (metrics, traj)
+    return out
+
+
 def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
             seeds: Sequence[int], options: dict[str, Any] | None = None,
-            progress: bool = True) -> tuple[dict[str, dict], dict[str, list[Trajectory]]]:
+            progress: bool = True, workers: int = 1
+            ) -> tuple[dict[str, dict], dict[str, list[Trajectory]]]:
     """Run every controller on the same seeds.
 
-    Seeds are the outer loop (every controller flies seed 0, then seed 1,
-    ...), so an interruption leaves whole seeds: Ctrl-C raises
-    :class:`ComparisonInterrupted` holding the table of the seeds every
-    controller finished. Each controller keeps one environment; every
-    episode is seeded, so the order changes no number.
+    Every episode runs on a fresh environment with a freshly built
+    controller, so each result depends on its seed alone: the serial run
+    and any number of workers give the same numbers (test). Ctrl-C raises
+    :class:`ComparisonInterrupted` holding the table of the first seeds
+    every controller finished.
 
     Parameters
     ----------
     controllers : dict
-        Name -> factory ``env -> Controller``.
+        Name -> factory ``env -> Controller``. With ``workers > 1`` the
+        factories and ``make_env`` must be picklable (module-level functions
+        or :func:`functools.partial` of them, not lambdas).
     make_env : callable
         Returns a fresh environment.
     seeds : sequence of int
     options : dict, optional
         ``env.reset`` options.
+    progress : bool
+        Show a progress bar (episodes done, with an estimate of the time left).
+    workers : int
+        Processes that run seeds side by side (default 1: this process). Each
+        worker runs its episodes with single-threaded BLAS, as the serial run
+        does.
 
     Returns
     -------
@@ -603,32 +634,51 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
     ------
     ComparisonInterrupted
         On Ctrl-C, with the complete seeds' results.
+    ValueError
+        If ``workers`` is not a positive integer.
     """
-    per_seed: dict[str, list[dict[str, Any]]] = {name: [] for name in controllers}
-    trajectories: dict[str, list[Trajectory]] = {name: [] for name in controllers}
-    envs = {name: make_env() for name in controllers}
-    done = 0
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    seeds = [int(s) for s in seeds]
+    results: dict[int, dict[str, tuple[dict[str, Any], Trajectory]]] = {}
+    pool = None
     try:
-        ctrls = {name: factory(envs[name]) for name, factory in controllers.items()}
         with tqdm(total=len(controllers) * len(seeds), desc="closed loop",
                   disable=not progress) as bar:
-            for seed in seeds:
-                for name, ctrl in ctrls.items():
-                    env = envs[name]
-                    traj = run_episode(env, ctrl, seed=seed, options=options)
-                    m = episode_metrics(traj, env.unwrapped.model)
-                    m["seed"] = int(seed)
-                    m["controller_stats"] = traj.controller_stats
-                    per_seed[name].append(m)
-                    trajectories[name].append(traj)
-                    bar.update()
-                done += 1
+            if workers == 1 or len(seeds) < 2:
+                for seed in seeds:
+                    results[seed] = _run_seed(controllers, make_env, seed, options)
+                    bar.update(len(controllers))
+            else:
+                pool = ProcessPoolExecutor(min(workers, len(seeds)),
+                                           mp_context=multiprocessing.get_context("spawn"))
+                futures = {pool.submit(_run_seed, controllers, make_env, seed, options): seed
+                           for seed in seeds}
+                for future in as_completed(futures):
+                    results[futures[future]] = future.result()
+                    bar.update(len(controllers))
     except KeyboardInterrupt:
-        table = {name: _aggregate(rows[:done]) for name, rows in per_seed.items()} \
-            if done else {}
-        runs = {name: trajs[:done] for name, trajs in trajectories.items()} if done else {}
-        raise ComparisonInterrupted(table, runs, done, len(seeds)) from None
+        if pool is not None:
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            pool = None
+        done = 0                       # the first seeds that all finished
+        while done < len(seeds) and seeds[done] in results:
+            done += 1
+        table, runs = _collect(controllers, [results[s] for s in seeds[:done]])
+        raise ComparisonInterrupted(table if done else {}, runs if done else {},
+                                    done, len(seeds)) from None
     finally:
-        for env in envs.values():
-            env.close()
-    return {name: _aggregate(rows) for name, rows in per_seed.items()}, trajectories
+        if pool is not None:
+            pool.shutdown()
+    return _collect(controllers, [results[s] for s in seeds])
+
+
+def _collect(controllers: dict[str, Any],
+             per_seed_results: list[dict[str, tuple[dict[str, Any], Trajectory]]]
+             ) -> tuple[dict[str, dict], dict[str, list[Trajectory]]]:
+    """The aggregated table and the trajectories, in seed order."""
+    table = {name: _aggregate([r[name][0] for r in per_seed_results]) for name in controllers}
+    runs = {name: [r[name][1] for r in per_seed_results] for name in controllers}
+    return table, runs

@@ -331,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
                      default=0.0, help="constant external torque on every axis, N m")
     ctl.add_argument("--save-trajectories", action="store_true",
                      help="also write every episode to OUT/trajectories/ (npz)")
+    ctl.add_argument("--workers", type=_integer(1), default=None,
+                     help="processes running the seeds side by side; the numbers do not "
+                          "depend on it (default: all cores)")
 
     train = command("train", help="train SB3 agents (PPO/SAC)")
     train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
@@ -440,7 +443,7 @@ def _control(args: argparse.Namespace) -> int:
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,
-                          save_trajectories=args.save_trajectories)
+                          save_trajectories=args.save_trajectories, workers=args.workers)
     print((Path(args.out) / "table.md").read_text())
     print(control_summary(metrics["controllers"], args.scenario, args.out))
     print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")

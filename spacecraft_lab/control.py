@@ -15,8 +15,10 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import os
 import time
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +53,8 @@ from spacecraft_env import (
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
 
-__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "ORACLE", "SAME_LAW", "SCENARIO_NAMES",
+__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE", "SAME_LAW",
+           "SCENARIO_NAMES",
            "control_task",
            "env_kwargs_for", "run_control"]
 
@@ -63,20 +66,37 @@ ORACLE = "oracle LQG"
 SAME_LAW = "same-law oracle"
 
 
+def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
+    """The controller ``name`` (a key of :func:`CONTROLLERS`) for ``env``."""
+    if name == "fixed LQG":
+        return FixedLQG(env, weights)
+    if name == "robust LQG":
+        return RobustLQG(env, weights)
+    if name == "scheduled LQG":
+        return ScheduledLQG(env, weights)
+    if name == "PD":
+        return PD(env)
+    if name == "adaptive LQG":
+        return AdaptiveLQG(env, weights=weights)
+    if name == SAME_LAW:
+        return AdaptiveLQG(env, weights=weights, identifier=TrueModelIdentifier(env),
+                           excitation=BinaryExcitation(0.0, 0.0))
+    if name == ORACLE:
+        return OracleLQG(env, weights)
+    if name == "full-state oracle":
+        return OracleLQR(env, weights)
+    raise ValueError(f"unknown controller {name!r}")
+
+
+#: The controllers of the comparison, in their table order.
+CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", SAME_LAW,
+                    ORACLE, "full-state oracle")
+
+
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
-    """Name -> factory ``env -> Controller`` for the comparison."""
-    return {
-        "fixed LQG": lambda env: FixedLQG(env, weights),
-        "robust LQG": lambda env: RobustLQG(env, weights),
-        "scheduled LQG": lambda env: ScheduledLQG(env, weights),
-        "PD": lambda env: PD(env),
-        "adaptive LQG": lambda env: AdaptiveLQG(env, weights=weights),
-        SAME_LAW: lambda env: AdaptiveLQG(env, weights=weights,
-                                          identifier=TrueModelIdentifier(env),
-                                          excitation=BinaryExcitation(0.0, 0.0)),
-        ORACLE: lambda env: OracleLQG(env, weights),
-        "full-state oracle": lambda env: OracleLQR(env, weights),
-    }
+    """Name -> factory ``env -> Controller`` for the comparison (picklable, so the
+    comparison can run its seeds on a process pool)."""
+    return {name: partial(_build, name, weights) for name in CONTROLLER_NAMES}
 
 
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
@@ -259,7 +279,7 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
                 out: str | Path = "results/control", *, env_kwargs: dict[str, Any] | None = None,
                 weights: LQRWeights | None = None, controllers: Sequence[str] | None = None,
                 steps: int | None = None, progress: bool = True,
-                save_trajectories: bool = False) -> dict:
+                save_trajectories: bool = False, workers: int | None = None) -> dict:
     """Compare the controllers and write the artefacts.
 
     Parameters
@@ -281,6 +301,9 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     save_trajectories : bool
         Also write every episode as ``trajectories/<controller>-seed<k>.npz``
         (:meth:`controllers.Trajectory.save`).
+    workers : int, optional
+        Processes that run the seeds side by side (default: one per core,
+        at most one per seed); the results do not depend on it.
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
@@ -297,11 +320,11 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    def make_env() -> gym.Env:
-        return gym.make(env_id(scenario), **kwargs)
-
+    make_env = partial(gym.make, env_id(scenario), **kwargs)
+    workers = (os.cpu_count() or 1) if workers is None else workers
     try:
-        table, runs = compare(factories, make_env, list(range(seeds)), progress=progress)
+        table, runs = compare(factories, make_env, list(range(seeds)), progress=progress,
+                              workers=workers)
     except ComparisonInterrupted as stop:
         # Ctrl-C: write what the completed seeds say, then let the interrupt go on
         if stop.completed:

@@ -202,3 +202,28 @@ def test_the_supervisor_takes_a_growing_loop_off_the_identified_design():
             ctrl._supervise(y, np.zeros(3))
         assert (ctrl.stats["rejected_by"].get("growing", 0) > 0) is trips
         assert (ctrl._hold_until > 0) is trips
+
+
+def test_compare_on_a_process_pool_equals_the_serial_run():
+    """Each episode is built fresh from its seed, so the numbers do not depend on the
+    number of workers (nor on which seeds a process ran before)."""
+    from functools import partial
+
+    from controllers import compare
+
+    factories = {"robust": partial(RobustLQG), "adaptive": partial(AdaptiveLQG)}
+    make_env = partial(gym.make, "spacecraft_env:FlexibleSpacecraftDocking-v1", task="slew",
+                       max_episode_steps=1100)
+    serial, _ = compare(factories, make_env, [0, 1, 2], progress=False)
+    pooled, _ = compare(factories, make_env, [0, 1, 2], progress=False, workers=2)
+    for name in factories:
+        a = [m["cost_after_100s"] for m in serial[name]["per_seed"]]
+        b = [m["cost_after_100s"] for m in pooled[name]["per_seed"]]
+        assert np.all(np.isfinite(a))
+        np.testing.assert_allclose(b, a, rtol=1e-9)
+        assert [m["seed"] for m in pooled[name]["per_seed"]] == [0, 1, 2]
+    alone, _ = compare(factories, make_env, [2], progress=False)
+    assert alone["adaptive"]["per_seed"][0]["cost_after_100s"] == pytest.approx(
+        serial["adaptive"]["per_seed"][2]["cost_after_100s"], rel=1e-9)
+    with pytest.raises(ValueError, match="workers"):
+        compare(factories, make_env, [0], workers=0)
