@@ -22,7 +22,10 @@ Every control step k (docs/design/control.md):
    model's Kalman predictor, evaluated every :data:`MARGIN_EVERY`
    samples). A gain that fails does not fly: the robust fixed design
    (:class:`~controllers.baselines.RobustLQG`), which runs alongside all
-   the time, acts instead;
+   the time, acts instead. A supervisor also takes the identified design
+   off for :data:`SUPERVISOR_HOLD_S` when the measured envelope grows
+   (:meth:`AdaptiveLQG._supervise`): a stale model can pass every test on
+   itself;
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
    is added only when information is needed (dual control): the warm-up's
    budget while the identifier warms up, and afterwards an amplitude that
@@ -30,15 +33,18 @@ Every control step k (docs/design/control.md):
    rigid-body gain beyond what the design tolerates
    (``uncertainty_tolerance``), up to ``excitation_budget``, steered toward
    the torque directions the identifier knows least. At steady state, with
-   the gain known, there is none; after a change the identifier's covariance
-   grows and the excitation returns;
+   the gain known, there is none; it returns when the identifier's
+   covariance grows (after a detected change, for identifiers that run a
+   change test; :data:`identifiers.CLOSED_LOOP_SETTINGS` does not);
 5. the measurement and the torque actually applied after it (the env's
    ``info["torque"]``, which includes whatever a wrapper added to this
    controller's action) go to the identifier, at the start of the next step.
 
 :attr:`AdaptiveLQG.stats` counts steps, steps flown by the fallback,
-re-designs, gains rejected (by reason), failed designs and non-finite
-observations, and reports the excitation's RMS torque.
+re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
+failed designs and non-finite observations, the steps (and fallback steps)
+from :data:`~controllers.harness.JUDGED_FROM_S`, and reports the excitation's
+RMS torque.
 """
 
 from __future__ import annotations
