@@ -431,9 +431,9 @@ def test_d12_an_interrupted_comparison_writes_the_completed_seeds(tmp_path, monk
         return real(*args, **kwargs)
 
     monkeypatch.setitem(control_job.compare.__globals__, "run_episode", interrupted)
-    with pytest.raises(SystemExit) as stop:
+    with pytest.raises(SystemExit) as stop:       # in this process, where the patch holds
         main(["control", "--seeds", "5", "--controllers", "pd", "fixed-lqg", "--steps", "150",
-              "--out", str(tmp_path)])
+              "--workers", "1", "--out", str(tmp_path)])
     assert stop.value.code == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("spacecraft control: interrupted; wrote")
