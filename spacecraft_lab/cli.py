@@ -287,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="record length, samples of 0.1 s (paper: 2500)")
     ident.add_argument("--convergence", type=_number(0.0), default=150.0,
                        help="start of the scored window, s")
+    ident.add_argument("--workers", type=_integer(1), default=None,
+                       help="processes running the seeds side by side; the numbers do not "
+                            "depend on it (default: all cores)")
 
     ctl = command("control", help="closed-loop comparison of the controllers")
     ctl.add_argument("--scenario", choices=sorted(SCENARIO_NAMES), default="paddle_rotation",
@@ -424,7 +427,8 @@ def _demo(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     metrics = run_identification(args.scenario, args.seeds, args.out, methods=args.methods,
                                  preset=args.preset, snr_db=args.snr_db, n_modes=args.modes,
-                                 n_samples=args.samples, convergence_s=args.convergence)
+                                 n_samples=args.samples, convergence_s=args.convergence,
+                                 workers=args.workers)
     print((Path(args.out) / "table.md").read_text())
     print(f"wrote {args.out}/metrics.json, table.md, prediction.png, gain.png, modal.png, "
           f"responses.png ({len(metrics['methods'])} rows, {args.seeds} seeds)")

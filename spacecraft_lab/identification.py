@@ -36,9 +36,13 @@ from __future__ import annotations
 
 import functools
 import json
+import multiprocessing
+import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -405,7 +409,8 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
                        out: str | Path = "results/identify", *,
                        methods: Sequence[str] | None = None, preset: str = "default",
                        snr_db: float | None = 40.0, n_modes: int = 2, n_samples: int = 2500,
-                       convergence_s: float = 150.0, progress: bool = True) -> dict[str, Any]:
+                       convergence_s: float = 150.0, progress: bool = True,
+                       workers: int | None = None) -> dict[str, Any]:
     """Run the identification experiment and write its artefacts.
 
     Parameters
@@ -428,6 +433,12 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
         Record length (paper: 2500 = 250 s).
     convergence_s : float
         Start of the scored window (prediction, gain, modes), s.
+    progress : bool
+        Show a progress bar.
+    workers : int, optional
+        Processes that run the seeds side by side (default: one per core, at
+        most one per seed); the numbers do not depend on it (each seed's
+        record and identifiers are built from the seed alone).
 
     Returns
     -------
@@ -442,34 +453,40 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
         raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    workers = min((os.cpu_count() or 1) if workers is None else workers, seeds)
     for name in methods:             # every value checked before any work
         _task_setup(name, scenario, None, n_modes, preset, n_samples, convergence_s)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = _truth(scenario, n_modes)
     test = paper_test_response(truth, n_samples)
-    k_conv = round(convergence_s / truth.dt)
-    end_s = n_samples * truth.dt
     rows = [*BASELINES, *methods]
     per_seed: dict[str, list[dict[str, Any]]] = {name: [] for name in rows}
     raw: dict[str, list[IdentificationScore]] = {name: [] for name in rows}
-    bar = tqdm(total=seeds * len(methods), desc=f"identify {scenario}", disable=not progress)
-    with single_threaded_blas:
-        for seed in range(seeds):
-            record = identification_records(truth, seed, n_samples, snr_db)
-            scores = _baselines(record, truth, k_conv, HORIZONS)
-            for name in methods:
-                scores[name] = score_identifier(make_identifier(name, truth, preset), record,
-                                                truth, test, k_conv)
-                bar.update()
-            for name in rows:
-                score = scores[name]
-                per_seed[name].append(summarize_score(score, truth, end_s, convergence_s))
-                if seed == 0:
-                    raw[name].append(score)
-                else:                       # keep only what the figures need
-                    raw[name].append(IdentificationScore(score.h_step_vaf))
-    bar.close()
+    task = partial(_identify_seed, scenario, n_modes, n_samples, snr_db, tuple(methods), preset,
+                   convergence_s)
+    done: dict[int, tuple[dict, dict]] = {}
+    with tqdm(total=seeds * len(methods), desc=f"identify {scenario}",
+              disable=not progress) as bar:
+        if workers == 1:
+            for seed in range(seeds):
+                done[seed] = task(seed)
+                bar.update(len(methods))
+        else:
+            with ProcessPoolExecutor(workers,
+                                     mp_context=multiprocessing.get_context("spawn")) as pool:
+                futures = {pool.submit(task, seed): seed for seed in range(seeds)}
+                for future in as_completed(futures):
+                    done[futures[future]] = future.result()
+                    bar.update(len(methods))
+    for seed in range(seeds):
+        summaries, scores = done[seed]
+        for name in rows:
+            per_seed[name].append(summaries[name])
+            raw[name].append(scores[name])
     metrics = {
         "scenario": scenario, "seeds": seeds, "snr_db": snr_db, "preset": preset,
         "order_n": truth.n, "n_samples": n_samples, "dt": truth.dt,
@@ -488,6 +505,28 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
     plot_identification_responses(out / "responses.png", *test,
                                   {n: s.models for n, s in seed0.items()}, scenario, truth.dt)
     return metrics
+
+
+@single_threaded_blas
+def _identify_seed(scenario: str, n_modes: int, n_samples: int, snr_db: float | None,
+                   methods: tuple[str, ...], preset: str, convergence_s: float,
+                   seed: int) -> tuple[dict[str, dict[str, Any]], dict[str, IdentificationScore]]:
+    """One seed of :func:`run_identification`: the summaries of every row and the
+    scores the figures need (all of seed 0's, only the prediction VAF of the others)."""
+    truth = _truth(scenario, n_modes)
+    test = paper_test_response(truth, n_samples)
+    k_conv = round(convergence_s / truth.dt)
+    end_s = n_samples * truth.dt
+    record = identification_records(truth, seed, n_samples, snr_db)
+    scores = _baselines(record, truth, k_conv, HORIZONS)
+    for name in methods:
+        scores[name] = score_identifier(make_identifier(name, truth, preset), record, truth,
+                                        test, k_conv)
+    summaries = {name: summarize_score(score, truth, end_s, convergence_s)
+                 for name, score in scores.items()}
+    if seed != 0:                       # keep only what the figures need
+        scores = {name: IdentificationScore(score.h_step_vaf) for name, score in scores.items()}
+    return summaries, scores
 
 
 @functools.lru_cache(maxsize=8)
