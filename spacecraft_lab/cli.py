@@ -368,6 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--eval-episodes", type=_integer(1), default=len(EVAL_SEEDS),
                        help="evaluation episodes (seeds 1000, 1001, ...), the same for the "
                             "LQG comparators, every curve point and the final result")
+    train.add_argument("--workers", type=_integer(1), default=None,
+                       help="processes scoring the LQG comparators side by side before "
+                            "training; the scores do not depend on it (default: all cores)")
     train.add_argument("--out", type=_output_directory, default="results/train",
                        help="output directory")
     train.add_argument("--tensorboard", type=_output_directory, default=None,
@@ -460,7 +463,8 @@ def _train(args: argparse.Namespace) -> int:
                      tensorboard=None if args.tensorboard is None else str(args.tensorboard),
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
                      first_seed=args.first_seed,
-                     eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)))
+                     eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
+                     workers=args.workers)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
                                "repeat", "reward", "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",

@@ -42,7 +42,10 @@ TensorBoard logs.
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -64,6 +67,7 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
+from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
@@ -195,6 +199,42 @@ def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario
             "stable_share": float(np.mean([m["stable"] for m in per_seed]))}
 
 
+#: The LQG comparators every agent is scored beside (None: zero torque).
+COMPARATORS = (("adaptive_lqg", AdaptiveLQG), ("fixed_lqg", FixedLQG), ("oracle_lqg", OracleLQG),
+               ("zero_torque", None))
+
+
+def _score_comparator(make: Any, scenario: str, env_kwargs: dict[str, Any],
+                      eval_seeds: tuple[int, ...]) -> dict[str, Any]:
+    """:func:`_evaluate` of one comparator (``make`` None: zero torque), single-threaded."""
+    with single_threaded_blas:
+        return _evaluate(ZeroTorque() if make is None else make, scenario, "none", env_kwargs,
+                         eval_seeds)
+
+
+def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
+                       workers: int | None, progress: bool) -> dict[str, dict[str, Any]]:
+    """The comparators on the evaluation episodes, on a process pool when
+    ``workers`` (default: the cores) is above 1."""
+    workers = min((os.cpu_count() or 1) if workers is None else workers, len(COMPARATORS))
+    out: dict[str, dict[str, Any]] = {}
+    with tqdm(total=len(COMPARATORS), desc="controllers on the evaluation episodes",
+              disable=not progress) as bar:
+        if workers == 1:
+            for key, make in COMPARATORS:
+                out[key] = _score_comparator(make, scenario, env_kwargs, eval_seeds)
+                bar.update()
+        else:
+            with ProcessPoolExecutor(workers,
+                                     mp_context=multiprocessing.get_context("spawn")) as pool:
+                futures = {pool.submit(_score_comparator, make, scenario, env_kwargs,
+                                       eval_seeds): key for key, make in COMPARATORS}
+                for future in as_completed(futures):
+                    out[futures[future]] = future.result()
+                    bar.update()
+    return {key: out[key] for key, _ in COMPARATORS}
+
+
 @contextmanager
 def _one_torch_thread(torch) -> Iterator[None]:
     """torch on one intra-op thread inside, the caller's setting restored after.
@@ -217,7 +257,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  tensorboard: str | None = None, progress: bool = True,
                  randomize: bool = False, repeat: int = ACTION_REPEAT,
                  reward: str = "bounded", first_seed: int = 0,
-                 eval_seeds: tuple[int, ...] = EVAL_SEEDS) -> dict:
+                 eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -230,6 +270,10 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ``timesteps`` and ``eval_every`` count env steps (0.1 s samples), also
     under ``repeat`` (agent decisions are ``timesteps / repeat``), so runs
     with different ``repeat`` compare at equal simulated time.
+
+    ``workers``: processes that score the four comparators side by side
+    before training (default: one per core, at most four); every episode is
+    built from its seed, so the scores do not depend on it.
     """
     # optional dependency (the "rl" extra): imported where it is needed
     import torch
@@ -247,6 +291,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1 or first_seed < 0:
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
     eval_seeds = tuple(int(s) for s in eval_seeds)
     if not eval_seeds or min(eval_seeds) < 0:
         raise ValueError(f"eval_seeds must be one or more seeds >= 0, got {eval_seeds}")
@@ -255,14 +302,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    bar = tqdm(total=4, desc="controllers on the evaluation episodes", disable=not progress)
-    comparators = {}
-    for key, make in (("adaptive_lqg", AdaptiveLQG), ("fixed_lqg", FixedLQG),
-                      ("oracle_lqg", OracleLQG), ("zero_torque", None)):
-        comparators[key] = _evaluate(ZeroTorque() if make is None else make, scenario, "none",
-                                     env_kwargs, eval_seeds)
-        bar.update()
-    bar.close()
+    comparators = _score_comparators(scenario, env_kwargs, eval_seeds, workers, progress)
     baseline = comparators["adaptive_lqg"]
     target = 2.0 * baseline["attitude_rms_deg"]
 

@@ -234,3 +234,17 @@ def test_the_saved_normalization_is_frozen_for_inference(tmp_path):
                  eval_seeds=(1000,))
     with open(tmp_path / "ppo-none-seed0_vecnormalize.pkl", "rb") as fh:
         assert pickle.load(fh).training is False
+
+
+def test_the_comparators_score_the_same_on_a_process_pool():
+    from spacecraft_lab.training import _score_comparators
+
+    kwargs = {"task": "slew", "randomize": False, "reward": "bounded",
+              "max_episode_steps": 1100}
+    serial = _score_comparators("docking", kwargs, (1000, 1001), 1, False)
+    pooled = _score_comparators("docking", kwargs, (1000, 1001), 2, False)
+    assert list(pooled) == ["adaptive_lqg", "fixed_lqg", "oracle_lqg", "zero_torque"]
+    for key, row in serial.items():
+        assert np.isfinite(row["cost_after_100s_per_seed"]).all()
+        np.testing.assert_allclose(pooled[key]["cost_after_100s_per_seed"],
+                                   row["cost_after_100s_per_seed"], rtol=1e-9)
