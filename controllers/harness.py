@@ -165,17 +165,25 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     options : dict, optional
         Passed to ``env.reset``.
     max_steps : int, optional
-        Step budget; default the spec's ``max_episode_steps`` (2500 for the
-        registered ids), or 2500 for an env built without ``gym.make``, so an
-        unwrapped env (no time limit) still ends.
+        Step budget, at least 1; default the spec's ``max_episode_steps``
+        (2500 for the registered ids), or 2500 for an env built without
+        ``gym.make``, so an unwrapped env (no time limit) still ends.
     freq_every, n_freq : int
         Sampling of identified/true modal frequencies.
     radius_every : int
         Steps between evaluations of the true closed loop's spectral radius
         (controllers with a ``closed_loop_radius(model, t)``); default 10,
         every second (sampled every 10 s, a 56 s stretch above 1 went unseen).
+
+    Raises
+    ------
+    ValueError
+        If ``max_steps`` is given and is not an integer >= 1.
     """
     base = env.unwrapped
+    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(
+            max_steps, (int, np.integer)) or max_steps < 1):
+        raise ValueError(f"max_steps must be an integer >= 1 (or None), got {max_steps!r}")
     if max_steps is None:
         spec = getattr(env, "spec", None)
         max_steps = (spec.max_episode_steps if spec is not None and spec.max_episode_steps

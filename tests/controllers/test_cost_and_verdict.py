@@ -227,3 +227,10 @@ def test_compare_on_a_process_pool_equals_the_serial_run():
         serial["adaptive"]["per_seed"][2]["cost_after_100s"], rel=1e-9)
     with pytest.raises(ValueError, match="workers"):
         compare(factories, make_env, [0], workers=0)
+
+
+@pytest.mark.parametrize("steps", [0, -5, 2.5, True])
+def test_run_episode_refuses_a_step_budget_that_is_not_a_positive_integer(steps):
+    env = _env(steps=10)
+    with pytest.raises(ValueError, match="max_steps must be an integer >= 1"):
+        run_episode(env, RobustLQG(env.unwrapped), seed=0, max_steps=steps)
