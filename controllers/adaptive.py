@@ -4,9 +4,10 @@ Every control step k (docs/design/control.md):
 
 1. ``x_{k|k}`` from the controller's own Kalman filter on the current
    identified ``(A, B, C)`` (``rigid_state="kalman"``, the default), with
-   the noise every baseline's filter assumes (:data:`PROCESS_NOISE` N m of
-   unmodelled torque, the sensors' specified noise) and the applied torque
-   in its time update: the filter the oracle LQG runs on the true model,
+   the noise every baseline's filter assumes
+   (:func:`~controllers.baselines.process_noise`: 0.05 N m of unmodelled
+   torque; the sensors' specified noise) and the applied torque in its
+   time update: the filter the oracle LQG runs on the true model,
    run on the identified one. The identifier's own filter (``"filter"``)
    is tuned for prediction and made the loop reject its gain 5-10x more
    often; reading attitude and rate from the sensors (``"measured"``, the
@@ -59,7 +60,7 @@ from numpy.typing import ArrayLike
 
 from controllers.acceptance import GainAcceptance, input_disk_margin
 from controllers.base import Controller
-from controllers.baselines import PROCESS_NOISE, RobustLQG, _LQGController
+from controllers.baselines import RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.lqg import LQRWeights, equilibrium_state
@@ -281,13 +282,12 @@ class AdaptiveLQG(_LQGController):
     def _own_filter(self, model: Any, y: np.ndarray, info: dict[str, Any] | None
                     ) -> np.ndarray | None:
         """``x_{k|k}`` from this controller's own Kalman filter on the identified model,
-        with the noise the baselines' filters assume (:data:`PROCESS_NOISE` of torque,
-        the sensors' specified noise)."""
+        with the noise the baselines' filters assume
+        (:func:`~controllers.baselines.process_noise`, the sensors' specified noise)."""
         a, b, c = model.A, model.B, model.C
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.isfinite(c))):
             return None
-        qn = PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(a.shape[0])
-        return self._filter(a, b, c, qn, self._noise_var,
+        return self._filter(a, b, c, process_noise(b), self._noise_var,
                             np.where(np.isfinite(y), y, np.nan), info)
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:

@@ -45,6 +45,13 @@ __all__ = ["PD", "FixedLQG", "OracleLQG", "OracleLQR", "RobustLQG", "ScheduledLQ
 PROCESS_NOISE = 0.05
 
 
+def process_noise(b: np.ndarray) -> np.ndarray:
+    """The state noise covariance of every LQG filter here: :data:`PROCESS_NOISE` N m
+    of white torque per axis through ``b`` (n, 3), plus 1e-14 on the diagonal so the
+    covariance stays positive definite."""
+    return PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(b.shape[0])
+
+
 def nominal_model(model: Any, paddle_angle_deg: float = 0.0) -> Any:
     """The design model of a fixed controller: ``model``'s spacecraft (an env's truth
     model, :class:`spacecraft_env.FlexibleSpacecraftModel`) with nothing docked and
@@ -274,7 +281,7 @@ class FixedLQG(_LQGController):
         design = nominal_model(self.env.model, paddle_angle_deg).discrete(0.0)
         self.a, self.b = design.A, design.B
         self.gain = self.law.design(self.a, self.b, self._c, self._c_att)
-        self.qn = PROCESS_NOISE**2 * self.b @ self.b.T + 1e-14 * np.eye(self.a.shape[0])
+        self.qn = process_noise(self.b)
         self.reset()
 
     @single_threaded_blas
@@ -323,7 +330,7 @@ class ScheduledLQG(_LQGController):
             design = nominal_model(self.env.model, float(np.rad2deg(angle))).discrete(0.0)
             self.law.tracker = None                     # each design from scratch
             gain = self.law.design(design.A, design.B, self._c, self._c_att)
-            qn = PROCESS_NOISE**2 * design.B @ design.B.T + 1e-14 * np.eye(design.A.shape[0])
+            qn = process_noise(design.B)
             self.designs.append((design.A, design.B, gain, qn))
         self.reset()
 
@@ -411,7 +418,7 @@ class RobustLQG(_LQGController):
         qy = output_weight(layout, self.weights)[np.ix_(rows, rows)]
         self.law = LQGLaw(qy, self.weights, dt)
         self.gain = self.law.design(self.a, self.b, self._c, self._c_att)
-        self.qn = PROCESS_NOISE**2 * self.b @ self.b.T + 1e-14 * np.eye(6)
+        self.qn = process_noise(self.b)
         self.notch = _Notch(notch_hz, notch_quality, dt, rows.size)
         self.reset()
 
@@ -451,7 +458,7 @@ class OracleLQG(_LQGController):
             raise ValueError("OracleLQG needs the env's info dict with 'time'")
         sys_ = self.env.model.discrete(float(info["time"]))
         a, b = sys_.A, sys_.B
-        qn = PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(a.shape[0])
+        qn = process_noise(b)
         obs = self._observation(obs)
         x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
                          info)
@@ -558,7 +565,7 @@ class TrueModelIdentifier:
 
     def update(self, u: ArrayLike, y: ArrayLike) -> None:
         true = self._system()
-        qn = PROCESS_NOISE**2 * true.B @ true.B.T + 1e-14 * np.eye(true.A.shape[0])
+        qn = process_noise(true.B)
         y = np.asarray(y, dtype=float)
         self.kf.update(true.A, true.B, self.env.model.C[self._rows], qn, self._noise_var,
                        np.asarray(u, dtype=float), np.where(np.isfinite(y), y, np.nan))
