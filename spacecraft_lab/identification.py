@@ -36,11 +36,8 @@ from __future__ import annotations
 
 import functools
 import json
-import multiprocessing
-import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -82,6 +79,7 @@ from spacecraft_lab.plots import (
     plot_rigid_gain,
 )
 from spacecraft_lab.reporting import identification_table
+from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = [
     "BASELINES",
@@ -453,10 +451,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
         raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    workers = min((os.cpu_count() or 1) if workers is None else workers, seeds)
+    check_workers(workers)
     for name in methods:             # every value checked before any work
         _task_setup(name, scenario, None, n_modes, preset, n_samples, convergence_s)
     out = Path(out)
@@ -468,20 +463,9 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
     raw: dict[str, list[IdentificationScore]] = {name: [] for name in rows}
     task = partial(_identify_seed, scenario, n_modes, n_samples, snr_db, tuple(methods), preset,
                    convergence_s)
-    done: dict[int, tuple[dict, dict]] = {}
     with tqdm(total=seeds * len(methods), desc=f"identify {scenario}",
               disable=not progress) as bar:
-        if workers == 1:
-            for seed in range(seeds):
-                done[seed] = task(seed)
-                bar.update(len(methods))
-        else:
-            with ProcessPoolExecutor(workers,
-                                     mp_context=multiprocessing.get_context("spawn")) as pool:
-                futures = {pool.submit(task, seed): seed for seed in range(seeds)}
-                for future in as_completed(futures):
-                    done[futures[future]] = future.result()
-                    bar.update(len(methods))
+        done = map_in_order(task, range(seeds), workers, lambda: bar.update(len(methods)))
     for seed in range(seeds):
         summaries, scores = done[seed]
         for name in rows:

@@ -42,11 +42,9 @@ TensorBoard logs.
 from __future__ import annotations
 
 import json
-import multiprocessing
-import os
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +69,7 @@ from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
+from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
            "HYPERPARAMETERS", "NormalizedPolicy", "ZeroTorque", "run_training"]
@@ -204,8 +203,8 @@ COMPARATORS = (("adaptive_lqg", AdaptiveLQG), ("fixed_lqg", FixedLQG), ("oracle_
                ("zero_torque", None))
 
 
-def _score_comparator(make: Any, scenario: str, env_kwargs: dict[str, Any],
-                      eval_seeds: tuple[int, ...]) -> dict[str, Any]:
+def _score_comparator(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
+                      make: Any) -> dict[str, Any]:
     """:func:`_evaluate` of one comparator (``make`` None: zero torque), single-threaded."""
     with single_threaded_blas:
         return _evaluate(ZeroTorque() if make is None else make, scenario, "none", env_kwargs,
@@ -216,23 +215,11 @@ def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tu
                        workers: int | None, progress: bool) -> dict[str, dict[str, Any]]:
     """The comparators on the evaluation episodes, on a process pool when
     ``workers`` (default: the cores) is above 1."""
-    workers = min((os.cpu_count() or 1) if workers is None else workers, len(COMPARATORS))
-    out: dict[str, dict[str, Any]] = {}
     with tqdm(total=len(COMPARATORS), desc="controllers on the evaluation episodes",
               disable=not progress) as bar:
-        if workers == 1:
-            for key, make in COMPARATORS:
-                out[key] = _score_comparator(make, scenario, env_kwargs, eval_seeds)
-                bar.update()
-        else:
-            with ProcessPoolExecutor(workers,
-                                     mp_context=multiprocessing.get_context("spawn")) as pool:
-                futures = {pool.submit(_score_comparator, make, scenario, env_kwargs,
-                                       eval_seeds): key for key, make in COMPARATORS}
-                for future in as_completed(futures):
-                    out[futures[future]] = future.result()
-                    bar.update()
-    return {key: out[key] for key, _ in COMPARATORS}
+        scores = map_in_order(partial(_score_comparator, scenario, env_kwargs, eval_seeds),
+                              [make for _, make in COMPARATORS], workers, bar.update)
+    return {key: score for (key, _), score in zip(COMPARATORS, scores, strict=True)}
 
 
 @contextmanager
@@ -291,9 +278,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1 or first_seed < 0:
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    check_workers(workers)
     eval_seeds = tuple(int(s) for s in eval_seeds)
     if not eval_seeds or min(eval_seeds) < 0:
         raise ValueError(f"eval_seeds must be one or more seeds >= 0, got {eval_seeds}")

@@ -27,6 +27,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from functools import partial
 from typing import Any
 
 import controllers
@@ -36,7 +37,8 @@ import spacecraft_env
 import spacecraft_lab
 from spacecraft_lab.sweeps.tasks import THREAD_ENV
 
-__all__ = ["BACKENDS", "LocalBackend", "RayBackend", "SerialBackend", "make_backend"]
+__all__ = ["BACKENDS", "LocalBackend", "RayBackend", "SerialBackend", "check_workers",
+           "make_backend", "map_in_order"]
 
 
 def _top_up(pending: dict[Any, Any], source: Iterator[Any], limit: int,
@@ -95,9 +97,7 @@ class LocalBackend:
     name = "local"
 
     def __init__(self, workers: int | None = None, max_in_flight: int | None = None) -> None:
-        workers = (os.cpu_count() or 1) if workers is None else workers
-        if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-            raise ValueError(f"workers must be a positive integer, got {workers!r}")
+        workers = (os.cpu_count() or 1) if workers is None else check_workers(workers)
         self.workers = workers
         self.max_in_flight = max_in_flight or 4 * workers
         self._pool: ProcessPoolExecutor | None = None
@@ -244,6 +244,48 @@ class RayBackend:
 
 #: Backend name -> class.
 BACKENDS = {"serial": SerialBackend, "local": LocalBackend, "ray": RayBackend}
+
+
+def check_workers(workers: int | None) -> int | None:
+    """``workers`` if it is None or a positive integer.
+
+    Raises
+    ------
+    ValueError
+        For anything else (zero, a negative number, a bool, a float).
+    """
+    if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    return workers
+
+
+def map_in_order(fn: Callable[[Any], Any], items: Iterable[Any], workers: int | None = None,
+                 on_done: Callable[[], Any] | None = None) -> list[Any]:
+    """``[fn(item) for item in items]``, on a :class:`LocalBackend` of ``workers``
+    processes (default: one per core, at most one per item), or in this process
+    (:class:`SerialBackend`) for one. ``fn`` must be picklable (a module-level
+    function or a :func:`functools.partial` of one). ``on_done`` is called as each
+    item finishes (a progress bar). The first exception an item met is raised.
+    """
+    items = list(items)
+    workers = min((os.cpu_count() or 1) if check_workers(workers) is None else workers,
+                  max(len(items), 1))
+    out: list[Any] = [None] * len(items)
+    with (SerialBackend() if workers == 1 else LocalBackend(workers)) as backend:
+        for i, outcome in backend.imap_unordered(partial(_apply_at, fn, items),
+                                                 range(len(items))):
+            if isinstance(outcome, BaseException):
+                raise outcome
+            out[i] = outcome
+            if on_done is not None:
+                on_done()
+    return out
+
+
+def _apply_at(fn: Callable[[Any], Any], items: list[Any], i: int) -> Any:
+    """``fn(items[i])`` (positions keep equal items apart)."""
+    return fn(items[i])
 
 
 def make_backend(name: str, workers: int | None = None, address: str | None = None,
