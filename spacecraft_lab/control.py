@@ -52,6 +52,7 @@ from spacecraft_env import (
 )
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
+from spacecraft_lab.sweeps.backends import check_workers
 
 __all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE", "SAME_LAW",
            "SCENARIO_NAMES",
@@ -317,6 +318,7 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         if unknown:
             raise ValueError(f"unknown controllers {unknown}; expected {sorted(CONTROLLER_KEYS)}")
         factories = {CONTROLLER_KEYS[k]: factories[CONTROLLER_KEYS[k]] for k in controllers}
+    check_workers(workers)           # before anything is written
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 

@@ -38,3 +38,11 @@ def test_the_family_takes_no_scenario_variants():
     assert "scenario" not in env_kwargs_for("family")
     with pytest.raises(ValueError, match="module_mass does not apply"):
         env_kwargs_for("family", module_mass=900.0)
+
+
+def test_a_refused_workers_value_writes_nothing(tmp_path):
+    from spacecraft_lab.control import run_control
+
+    with pytest.raises(ValueError, match="workers must be a positive integer"):
+        run_control("docking", 1, tmp_path / "out", workers=0)
+    assert not (tmp_path / "out").exists()
