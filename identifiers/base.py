@@ -20,7 +20,6 @@ validation, sizes inferred from the first sample, the past window
 from __future__ import annotations
 
 import copy
-import warnings
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Mapping
@@ -30,12 +29,14 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identifiers.data_monitor import SKIP_SHARE, WINDOW, DataMonitor
 from identifiers.health import (
     HEALTH_EVERY,
     MAX_ROLLBACKS,
     IdentifierHealth,
-    IdentifierHealthWarning,
+    degenerate,
     state_problem,
+    warn_health,
 )
 from identifiers.model import ModelSequence, StateSpaceModel
 from identifiers.rls import RecursiveLeastSquares
@@ -59,8 +60,9 @@ OUTLIER_RUN = 5
 #: Attributes that a rollback keeps at their current values: the counters,
 #: the health record itself and the sample clock.
 _KEPT_ON_ROLLBACK = ("n_samples", "n_skipped", "n_outliers", "n_idle", "n_rollbacks",
-                     "n_restarts",
-                     "_last_fault", "_fault_samples", "_good", "_k", "_healthy", "_warned")
+                     "n_restarts", "n_rescales",
+                     "_last_fault", "_fault_samples", "_good", "_k", "_healthy", "_warned",
+                     "_monitor", "_range_skips", "_warned_faults")
 
 
 def _positive_int(name: str, value) -> int:
@@ -199,11 +201,15 @@ class OnlineIdentifier(ABC):
         self._phi = None
         self._su = self._sy = None
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        self._monitor: DataMonitor | None = None
+        self._range_skips = 0
         self._reset_health()
 
     def _reset_health(self) -> None:
         self.n_rollbacks = 0
         self.n_restarts = 0
+        self.n_rescales = 0
+        self._warned_faults: set[tuple[str, int | None]] = set()
         self._last_fault: str | None = None
         self._fault_samples: deque[int] = deque(maxlen=MAX_ROLLBACKS + 1)
         self._good: tuple[int, dict] | None = None     # (n_samples, copy of the state)
@@ -241,7 +247,17 @@ class OnlineIdentifier(ABC):
         self.n_inputs, self.n_outputs = r, m
         self._zr = r + m
         self._phi = np.zeros(self.p * self._zr)
+        self._monitor = DataMonitor(r, m, self._memory(), self._output_names(m))
         self._allocate(r, m)
+
+    def _memory(self) -> float:
+        """The estimator's memory in samples, ``1 / (1 - forgetting)`` (inf without
+        forgetting): an input constant for longer is reported ``unexcited``."""
+        return np.inf if self.forgetting >= 1.0 else 1.0 / (1.0 - self.forgetting)
+
+    def _output_names(self, m: int) -> tuple[str, ...]:
+        """A label per output for the health messages (default ``y[i]``)."""
+        return tuple(f"y[{i}]" for i in range(m))
 
     @abstractmethod
     def _allocate(self, r: int, m: int) -> None:
@@ -353,8 +369,12 @@ class OnlineIdentifier(ABC):
             self.n_idle += 1
             return
         self._last_y = y
+        received_u, received_y = u, y
         usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
         usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs)
+        if not (usable_u.all() and usable_y.all()) and (
+                np.any(np.isfinite(u) & ~usable_u) or np.any(np.isfinite(y) & ~usable_y)):
+            self._range_skips += 1
         if usable_u.all() and usable_y.all():
             verdict = self._admissible(u, y)
             if np.all(verdict):
@@ -384,6 +404,10 @@ class OnlineIdentifier(ABC):
             self._skip_run += 1
             if self._skip_run > 1:
                 self._quiet = self.p + 1
+        if self._monitor.observe(received_u, received_y, skipped=self._skip_run > 0):
+            self._assess_data()
+            if self._monitor is None:          # re-scaled: the estimator starts again
+                return
         self._k += 1
         state = self._state_vector()
         if self._k % HEALTH_EVERY == 0 or (state is not None and not np.all(np.isfinite(state))):
@@ -393,6 +417,33 @@ class OnlineIdentifier(ABC):
     def _accept_outlier_run(self, u: np.ndarray, y: np.ndarray) -> None:  # noqa: B027
         """Hook: a sample beyond the outlier guard is learned from, because the run of
         rejections exceeded :data:`OUTLIER_RUN` (default: nothing to update)."""
+
+    def _assess_data(self) -> None:
+        """After each monitor window: re-scale if the automatic scales froze on a level
+        the data left, and warn once of each new data fault."""
+        range_skips, self._range_skips = self._range_skips, 0
+        auto = [s is None for s in self._user_scales]
+        if any(auto) and range_skips >= SKIP_SHARE * WINDOW:
+            self._rescale(range_skips)
+            return
+        for key, message in self._monitor.faults.items():
+            if key not in self._warned_faults:
+                self._warned_faults.add(key)
+                warn_health(f"{type(self).__name__}: {message} (see .health)")
+
+    def _rescale(self, range_skips: int) -> None:
+        """Start again with automatic scales taken from the next ``p`` samples: the
+        data left the level the first samples set by more than ``max_abs``."""
+        kept = {k: getattr(self, k) for k in _KEPT_ON_ROLLBACK if k != "_monitor"}
+        self.reset()
+        vars(self).update(kept)
+        self.n_rescales += 1
+        self._good = None
+        self._healthy = False
+        self._last_fault = (f"rescaled: {range_skips} of the last {WINDOW} samples were beyond "
+                            f"max_abs = {self.max_abs:g} times the automatic scales, which are "
+                            f"taken again from the next p = {self.p} samples")
+        warn_health(f"{type(self).__name__} {self._last_fault}")
 
     def _state_vector(self) -> np.ndarray | None:
         """The estimator's own state vector, checked for finiteness every sample
@@ -461,10 +512,15 @@ class OnlineIdentifier(ABC):
     def health(self) -> IdentifierHealth:
         """The identifier's report on itself (:class:`~identifiers.health.IdentifierHealth`)."""
         good = None if self._good is None else self._good[0]
+        faults = () if self._monitor is None else tuple(self._monitor.faults.values())
+        if self._healthy and self.ready:
+            nothing = degenerate(self._matrices())
+            faults = faults if nothing is None else (nothing, *faults)
         return IdentifierHealth(
-            healthy=self._healthy, samples=self.n_samples, skipped=self.n_skipped,
-            outliers=self.n_outliers, idle=self.n_idle, rollbacks=self.n_rollbacks,
-            restarts=self.n_restarts,
+            healthy=self._healthy and not faults, samples=self.n_samples,
+            skipped=self.n_skipped, outliers=self.n_outliers, idle=self.n_idle,
+            rollbacks=self.n_rollbacks, restarts=self.n_restarts, rescales=self.n_rescales,
+            faults=faults,
             last_fault=self._last_fault, last_good_sample=good,
             last_good_time_s=None if good is None else good * self.dt)
 
@@ -510,10 +566,12 @@ class OnlineIdentifier(ABC):
         valid = np.zeros(N, dtype=bool)
         for k in range(N):
             self.update(u[k], y[k])
-            if self.n_samples >= self.warmup and self._su is not None:
-                cur = self._matrices()
-                x = self._current_state()
-                if cur is not None and x is not None:
+            if self.ready and self._exportable():
+                # as quiet as update: a broken state is the health checks' to find
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    cur = self._matrices()
+                    x = self._current_state()
+                if cur is not None and x is not None and not degenerate(cur):
                     if not mats:       # the model order is known once there is a model
                         mats = [np.full((N, *mat.shape), np.nan) for mat in cur]
                         states = np.full((N, x.shape[0]), np.nan)
@@ -534,22 +592,31 @@ class OnlineIdentifier(ABC):
         """True once warmed up."""
         return self.n_samples >= self.warmup and self._su is not None
 
+    def _exportable(self) -> bool:
+        """False (with one :class:`~identifiers.health.IdentifierHealthWarning`) while
+        the estimator is restarting after a fault; :attr:`model` and :meth:`fit` alike."""
+        if not self._healthy:
+            if not self._warned:
+                self._warned = True
+                warn_health(f"{type(self).__name__} restarted its estimator after a fault "
+                            f"({self._last_fault}); no model until it is healthy again "
+                            "(see .health)")
+            return False
+        return True
+
     @property
     def model(self) -> StateSpaceModel | None:
         """Current identified model, or None until warmed up (and, with an
         :class:`~identifiers.health.IdentifierHealthWarning`, while the
         estimator is restarting after a fault: see :attr:`health`)."""
-        if not self._healthy:
-            if not self._warned:
-                self._warned = True
-                warnings.warn(f"{type(self).__name__} restarted its estimator after a fault "
-                              f"({self._last_fault}); no model until it is healthy again "
-                              "(see .health)", IdentifierHealthWarning, stacklevel=2)
+        if not self._exportable():
             return None
         if not self.ready:
             return None
         mats = self._matrices()
-        return None if mats is None else StateSpaceModel(*self._physical(mats), dt=self.dt)
+        if mats is None or degenerate(mats):
+            return None
+        return StateSpaceModel(*self._physical(mats), dt=self.dt)
 
     @property
     def state(self) -> np.ndarray | None:

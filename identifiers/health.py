@@ -17,22 +17,30 @@ What a check looks at (:func:`state_problem`): every recursive-least-squares
 estimate and Kalman-filter state (finite), every covariance (finite,
 positive definite by a Cholesky factorization for an RLS, positive
 semi-definite for a Kalman filter, whose covariance is singular along states
-a model leaves inert) and the exported model matrices and state (finite).
+a model leaves inert) and the exported model matrices and state (finite). A
+finite model learnt from nothing (:func:`degenerate`: a zero A or C) is not a
+broken state but no model either: it is not exported, and the health report
+says so. What the *data* show (a stuck sensor, most samples skipped) is the
+:class:`~identifiers.data_monitor.DataMonitor`'s part.
 """
 
 from __future__ import annotations
 
+import sys
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+import spacecraft_conventions
 from identifiers.kalman import KalmanPredictor
 from identifiers.rls import RecursiveLeastSquares
 
 __all__ = ["HEALTH_EVERY", "MAX_ROLLBACKS", "IdentifierHealth", "IdentifierHealthWarning",
-           "state_problem"]
+           "degenerate", "state_problem", "warn_health"]
 
 #: Samples between full health checks (Cholesky of every covariance; 10 s at
 #: dt = 0.1 s). The rollback copy is taken at each passing check.
@@ -46,6 +54,19 @@ class IdentifierHealthWarning(UserWarning):
     """A streaming identifier found its internal state broken and could not roll back."""
 
 
+#: Source folders whose frames a health warning skips, so that it points at the caller.
+_INTERNAL = (str(Path(__file__).parent), str(Path(spacecraft_conventions.__file__).parent))
+
+
+def warn_health(message: str) -> None:
+    """Issue an :class:`IdentifierHealthWarning` attributed to the first caller outside
+    the identifiers package (the user's ``update``, ``fit`` or ``model`` line)."""
+    frame, level = sys._getframe(1), 2
+    while frame is not None and frame.f_code.co_filename.startswith(_INTERNAL):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, IdentifierHealthWarning, stacklevel=level)
+
+
 @dataclass(frozen=True)
 class IdentifierHealth:
     """What an identifier reports about itself (``identifier.health``).
@@ -54,8 +75,10 @@ class IdentifierHealth:
     ----------
     healthy : bool
         False after the estimator had to be restarted (no good state to
-        return to, or repeated faults), until its next check passes; the
-        identifier's ``model`` is None meanwhile.
+        return to, repeated faults, or automatic scales taken again), until
+        its next check passes (the identifier's ``model`` is None
+        meanwhile), and while the data show a fault (``faults``; the model
+        is still returned then: it is what the data allow).
     samples : int
         Samples received.
     skipped : int
@@ -70,6 +93,13 @@ class IdentifierHealth:
         good copy.
     restarts : int
         Faults that restarted the estimator.
+    rescales : int
+        Restarts because the data left the level the automatic scales were
+        taken at by more than ``max_abs`` (the scales are taken again).
+    faults : tuple of str
+        What the data show now (:class:`~identifiers.data_monitor.DataMonitor`:
+        a stuck, clipped or noisier output, most samples skipped, an input
+        that stopped exciting), one message each; empty when none.
     last_fault : str or None
         What the last failed check found (e.g. ``"covariance 2 not positive
         definite"``), None if none has failed.
@@ -87,6 +117,8 @@ class IdentifierHealth:
     idle: int
     rollbacks: int
     restarts: int
+    rescales: int
+    faults: tuple[str, ...]
     last_fault: str | None
     last_good_sample: int | None
     last_good_time_s: float | None
@@ -128,6 +160,16 @@ def _positive_semidefinite(p: np.ndarray) -> bool:
     if np.abs(p - p.T).max(initial=0.0) > 1e-9 * scale:
         return False
     return bool(np.linalg.eigvalsh(0.5 * (p + p.T)).min(initial=0.0) >= -1e-9 * scale)
+
+
+def degenerate(matrices: tuple | None) -> str | None:
+    """Why a finite model ``(A, B, C, D, K)`` is no model at all (A or C zero), or None."""
+    if matrices is None:
+        return None
+    for name, index in (("A", 0), ("C", 2)):
+        if not np.any(matrices[index]):
+            return f"degenerate: the model's {name} is zero (nothing learnt)"
+    return None
 
 
 def state_problem(identifier: Any, matrices: tuple | None, state: np.ndarray | None) -> str | None:

@@ -347,6 +347,14 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
             raise ValueError(f"y must have {self.layout.size} entries as the layout "
                              f"{self.layout.names} says, got {m}")
 
+    def _memory(self) -> float:
+        # the modal tracker forgets; the rigid gains do not (without rigid_drift)
+        return 1.0 / (1.0 - self.tracking_memory) if self.track_modes else np.inf
+
+    def _output_names(self, m: int) -> tuple[str, ...]:
+        return tuple(f"{name}[{j}]" for name, sl in self.layout
+                     for j in range(sl.stop - sl.start))
+
     def _allocate(self, r: int, m: int) -> None:
         s = self.layout.scales() if self._user_scales[1] is None else self._user_scales[1]
         rate, att = self.layout.slice("rate"), self.layout.slice("attitude")
