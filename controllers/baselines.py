@@ -105,10 +105,17 @@ class _EnvController(Controller):
 
         Raises
         ------
+        TypeError
+            For non-numeric data (strings, objects): a numeric string is not
+            an observation.
         ValueError
             For any other shape.
         """
-        obs = np.asarray(obs, dtype=float)
+        obs = np.asarray(obs)
+        if obs.dtype.kind not in "fiu":
+            raise TypeError(f"observation must be a real numeric array of shape "
+                            f"{self.env.observation_space.shape}, got dtype {obs.dtype}")
+        obs = obs.astype(float, copy=False)
         if obs.shape != self.env.observation_space.shape:
             raise ValueError(f"observation must have shape {self.env.observation_space.shape}, "
                              f"got {obs.shape}")

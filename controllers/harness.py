@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import zipfile
+import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -124,22 +126,78 @@ class Trajectory:
 
     @classmethod
     def load(cls, path: str | Path) -> Trajectory:
-        """A trajectory written by :meth:`save`."""
-        with np.load(path, allow_pickle=False) as data:
-            kwargs: dict[str, Any] = {}
-            for f in fields(cls):
-                if f.name not in data:
-                    continue
-                value = data[f.name]
-                if f.name == "controller_stats":
-                    kwargs[f.name] = json.loads(str(value))
-                elif f.name == "terminated":
-                    kwargs[f.name] = bool(value)
-                elif f.name == "events":
-                    kwargs[f.name] = tuple(float(v) for v in value)
-                else:
-                    kwargs[f.name] = np.array(value)
-        return cls(**kwargs)
+        """A trajectory written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            The file is not a trajectory :meth:`save` wrote (truncated, empty,
+            corrupt, another format, fields missing), or its arrays disagree on
+            the episode length; the message names the file and what is wrong.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no trajectory file {path}")
+        try:
+            data = np.load(path, allow_pickle=False)
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise ValueError("a single .npy array, not an .npz archive")
+            with data:
+                kwargs: dict[str, Any] = {}
+                for f in fields(cls):
+                    if f.name not in data:
+                        continue
+                    value = data[f.name]
+                    if f.name == "controller_stats":
+                        kwargs[f.name] = json.loads(str(value))
+                    elif f.name == "terminated":
+                        kwargs[f.name] = bool(value)
+                    elif f.name == "events":
+                        kwargs[f.name] = tuple(float(v) for v in value)
+                    else:
+                        kwargs[f.name] = np.array(value)
+        except (OSError, ValueError, EOFError, TypeError, KeyError, zipfile.BadZipFile,
+                zlib.error) as exc:
+            raise ValueError(f"{path} is not a trajectory written by Trajectory.save "
+                             f"({type(exc).__name__}: {exc})") from None
+        required = [f.name for f in fields(cls) if f.default is MISSING
+                    and f.default_factory is MISSING]
+        missing = [name for name in required if name not in kwargs]
+        if missing:
+            raise ValueError(f"{path} is not a trajectory written by Trajectory.save "
+                             f"(missing {', '.join(missing)})")
+        trajectory = cls(**kwargs)
+        problem = trajectory.inconsistency()
+        if problem:
+            raise ValueError(f"{path}: {problem}")
+        return trajectory
+
+    def inconsistency(self) -> str | None:
+        """What makes the arrays disagree on the episode length N (``len(time)``), or None.
+
+        ``observations``, ``states`` and ``reference`` hold N + 1 rows, ``actions``,
+        ``torque``, ``rewards`` and ``excitation`` N; the sampled series agree
+        with their own time axis.
+        """
+        n = len(self.time)
+        expected = {"observations": n + 1, "states": n + 1, "reference": n + 1,
+                    "actions": n, "torque": n, "rewards": n, "excitation": n}
+        if self.frequency_time is not None:
+            k = len(self.frequency_time)
+            expected.update(identified_frequencies=k, true_frequencies=k, gain_error=k,
+                            gain_covered=k)
+        if self.radius_time is not None:
+            expected["true_radius"] = len(self.radius_time)
+        wrong = [f"{name} has shape {np.shape(value)}" for name, expected_rows in expected.items()
+                 if (value := getattr(self, name)) is not None and (
+                     np.ndim(value) == 0 or len(value) != expected_rows)]
+        if wrong:
+            return (f"arrays of different lengths: time has {n} rows (N), but "
+                    + ", ".join(wrong) + " (expected N + 1 for observations, states and "
+                    "reference, N for actions, torque and rewards)")
+        return None
 
 
 def _first(freqs: np.ndarray, count: int) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Time-varying flexible spacecraft (ETS-VIII) truth model and Gymnasium environments.
 
-Importing the package registers four environments (250 s episodes,
+Importing the package registers five environments (250 s episodes,
 ``max_episode_steps=2500`` at dt = 0.1 s):
 
 * ``FlexibleSpacecraft-v1``: constant (LTI) plant,
@@ -22,6 +22,7 @@ from spacecraft_conventions import __version__
 from spacecraft_env.dynamics import FlexibleSpacecraftModel, StateSpaceMatrices
 from spacecraft_env.env import REWARDS, FlexibleSpacecraftEnv, RewardWeights
 from spacecraft_env.family import PlantDraw, TaskFamily
+from spacecraft_env.limits import PARAMETER_LIMITS, Limit, check_parameter
 from spacecraft_env.parameters import (
     ANTENNA_FREQUENCIES_HZ,
     PADDLE_FREQUENCIES_HZ,
@@ -49,6 +50,7 @@ __all__ = [
     "ENV_IDS",
     "MAX_EPISODE_STEPS",
     "PADDLE_FREQUENCIES_HZ",
+    "PARAMETER_LIMITS",
     "REWARDS",
     "SCENARIOS",
     "ActionRepeat",
@@ -60,6 +62,7 @@ __all__ = [
     "DockingScenario",
     "FlexibleSpacecraftEnv",
     "FlexibleSpacecraftModel",
+    "Limit",
     "PaddleRotationScenario",
     "PlantDraw",
     "RewardWeights",
@@ -69,6 +72,7 @@ __all__ = [
     "StateSpaceMatrices",
     "TaskFamily",
     "__version__",
+    "check_parameter",
     "env_id",
     "ets8_parameters",
     "make_scenario",

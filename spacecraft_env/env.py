@@ -28,6 +28,7 @@ from spacecraft_conventions import (
 )
 from spacecraft_env.dynamics import FlexibleSpacecraftModel
 from spacecraft_env.family import PlantDraw, TaskFamily
+from spacecraft_env.limits import PARAMETER_LIMITS, check_parameter
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
@@ -41,9 +42,9 @@ __all__ = ["REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
 REWARDS = ("cost", "bounded", "log")
 
 #: Accepted range of ``snr_db``: from noise 100x the nominal level to 1e-15 of it.
-SNR_RANGE_DB = (-40.0, 300.0)
+SNR_RANGE_DB = (PARAMETER_LIMITS["snr_db"].low, PARAMETER_LIMITS["snr_db"].high)
 #: Largest ``max_torque``, N m (large thrusters; reaction wheels give < 1 N m).
-MAX_TORQUE_LIMIT = 1e4
+MAX_TORQUE_LIMIT = PARAMETER_LIMITS["max_torque"].high
 #: Largest initial body rate per axis, deg/s (the model assumes slow rotation).
 MAX_INITIAL_RATE_DEG_S = 10.0
 
@@ -290,24 +291,13 @@ class FlexibleSpacecraftEnv(gym.Env):
             raise ValueError(f"outputs must be distinct names from {OBSERVATION_GROUPS}, "
                              f"got {outputs}")
         self.outputs = outputs
-        if snr_db is not None:
-            snr_db = float(snr_db)
-            if not SNR_RANGE_DB[0] <= snr_db <= SNR_RANGE_DB[1]:
-                raise ValueError(f"snr_db must be in [{SNR_RANGE_DB[0]:g}, {SNR_RANGE_DB[1]:g}] "
-                                 f"dB or None (noiseless), got {snr_db}")
-        self.snr_db = snr_db
-        self.max_torque = float(max_torque)
-        if not 0 < self.max_torque <= MAX_TORQUE_LIMIT:
-            raise ValueError(f"max_torque must be in (0, {MAX_TORQUE_LIMIT:g}] N m, "
-                             f"got {max_torque}")
+        self.snr_db = None if snr_db is None else check_parameter("snr_db", snr_db)
+        self.max_torque = check_parameter("max_torque", max_torque)
         if task not in ("regulation", "slew"):
             raise ValueError(f"task must be 'regulation' or 'slew', got {task!r}")
         self.task = task
-        for name, value in (("initial_attitude_deg", initial_attitude_deg),
-                            ("slew_range_deg", slew_range_deg),
-                            ("disturbance_std", disturbance_std)):
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        initial_attitude_deg = check_parameter("initial_attitude_deg", initial_attitude_deg)
+        slew_range_deg = check_parameter("slew_range_deg", slew_range_deg)
         if not 0 < max_attitude_deg <= 90:
             raise ValueError(f"max_attitude_deg must be in (0, 90], got {max_attitude_deg}")
         drawn = initial_attitude_deg if task == "regulation" else slew_range_deg
@@ -318,18 +308,12 @@ class FlexibleSpacecraftEnv(gym.Env):
         self.slew_range = float(slew_range_deg) * RAD_PER_DEG
         self.max_attitude = float(max_attitude_deg) * RAD_PER_DEG
         self.disturbance_torque = _vector3("disturbance_torque", disturbance_torque)
-        self.disturbance_std = float(disturbance_std)
-        if (not isinstance(actuator_delay_steps, int | np.integer)
-                or isinstance(actuator_delay_steps, bool) or actuator_delay_steps < 0):
-            raise ValueError(f"actuator_delay_steps must be an integer >= 0, "
-                             f"got {actuator_delay_steps!r}")
-        self.actuator_delay_steps = int(actuator_delay_steps)
-        if torque_rate_limit is not None:
-            torque_rate_limit = float(torque_rate_limit)
-            if not (np.isfinite(torque_rate_limit) and torque_rate_limit > 0):
-                raise ValueError(f"torque_rate_limit must be > 0 N m/s or None, "
-                                 f"got {torque_rate_limit}")
-        self.torque_rate_limit = torque_rate_limit
+        for value in self.disturbance_torque:
+            check_parameter("disturbance_torque", value)
+        self.disturbance_std = check_parameter("disturbance_std", disturbance_std)
+        self.actuator_delay_steps = check_parameter("actuator_delay_steps", actuator_delay_steps)
+        self.torque_rate_limit = (None if torque_rate_limit is None
+                                  else check_parameter("torque_rate_limit", torque_rate_limit))
         if reward not in REWARDS:
             raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
         self.reward = reward

@@ -15,21 +15,34 @@ back as ``reset(options={"plant": {...}})``.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from spacecraft_env.limits import check_parameter
 from spacecraft_env.parameters import DockingModule, SpacecraftParameters
 from spacecraft_env.scenarios import CombinedScenario, DockingScenario, SolarRotationScenario
 
 __all__ = ["PlantDraw", "TaskFamily"]
 
 
-def _range(name: str, value: Any, low: float = -np.inf) -> tuple[float, float]:
-    lo, hi = (float(v) for v in value)
-    if not (np.isfinite(lo) and np.isfinite(hi) and low <= lo <= hi):
-        raise ValueError(f"{name} must be (low, high) with {low:g} <= low <= high, got {value}")
+#: The parameter (:data:`~spacecraft_env.limits.PARAMETER_LIMITS`) each range of
+#: :class:`TaskFamily` draws.
+_LIMIT_OF = {"inertia_scale": "inertia_scale", "stiffness_scale": "stiffness_scale",
+             "actuator_gain": "actuator_gain", "module_mass_kg": "module_mass",
+             "first_docking_s": "docking_time", "second_docking_s": "docking_time",
+             "paddle_angle_deg": "paddle_angle", "paddle_rate_deg_s": "rotation_rate"}
+
+
+def _range(name: str, value: Any, key: str) -> tuple[float, float]:
+    """``(low, high)`` with both ends in ``key``'s limits and ``low <= high``."""
+    if not isinstance(value, tuple | list) or len(value) != 2:
+        raise ValueError(f"{name} must be (low, high), got {value!r}")
+    lo, hi = (check_parameter(key, v, name) for v in value)
+    if lo > hi:
+        raise ValueError(f"{name} must be (low, high) with low <= high, got {value!r}")
     return lo, hi
 
 
@@ -64,23 +77,15 @@ class PlantDraw:
 
     def __post_init__(self) -> None:
         for name in ("inertia_scale", "stiffness_scale", "actuator_gain"):
-            value = float(getattr(self, name))
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive factor, got {value}")
-            object.__setattr__(self, name, value)
-        masses = tuple(float(m) for m in self.module_masses_kg)
-        times = tuple(float(t) for t in self.docking_times_s)
-        if len(masses) != 2 or len(times) != 2 or min(masses) < 0 \
-                or not all(np.isfinite([*masses, *times])):
-            raise ValueError("module_masses_kg (>= 0) and docking_times_s need two finite "
-                             f"entries each, got {self.module_masses_kg}, {self.docking_times_s}")
-        object.__setattr__(self, "module_masses_kg", masses)
-        object.__setattr__(self, "docking_times_s", times)
-        for name in ("paddle_angle_deg", "paddle_rate_deg_s"):
-            value = float(getattr(self, name))
-            if not np.isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value}")
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, check_parameter(name, getattr(self, name)))
+        for name, key in (("module_masses_kg", "module_mass"), ("docking_times_s", "docking_time")):
+            pair = getattr(self, name)
+            if not isinstance(pair, tuple | list) or len(pair) != 2:
+                raise ValueError(f"{name} must be two numbers, got {pair!r}")
+            object.__setattr__(self, name, tuple(check_parameter(key, v, name) for v in pair))
+        for name, key in (("paddle_angle_deg", "paddle_angle"),
+                          ("paddle_rate_deg_s", "rotation_rate")):
+            object.__setattr__(self, name, check_parameter(key, getattr(self, name), name))
 
     def parameters(self, base: SpacecraftParameters) -> SpacecraftParameters:
         """``base`` with the hub inertia and the modal stiffness of this draw."""
@@ -115,6 +120,9 @@ class PlantDraw:
             For an unknown key or a bad value.
         """
         known = {f.name for f in dataclasses.fields(cls)}
+        if not isinstance(values, Mapping):
+            raise ValueError(f"plant must be a mapping with keys from {sorted(known)}, "
+                             f"got {type(values).__name__} {values!r}")
         unknown = set(values) - known
         if unknown:
             raise ValueError(f"unknown plant keys {sorted(unknown)}; expected {sorted(known)}")
@@ -154,10 +162,8 @@ class TaskFamily:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            low = 0.0 if f.name in ("module_mass_kg", "first_docking_s", "second_docking_s") \
-                else (1e-6 if f.name in ("inertia_scale", "stiffness_scale", "actuator_gain")
-                      else -np.inf)
-            object.__setattr__(self, f.name, _range(f.name, getattr(self, f.name), low))
+            object.__setattr__(self, f.name, _range(f.name, getattr(self, f.name),
+                                                    _LIMIT_OF[f.name]))
 
     def draw(self, rng: np.random.Generator) -> PlantDraw:
         """One plant, from ``rng`` (its draws in a fixed order: reproducible)."""

@@ -32,6 +32,8 @@ from functools import cached_property
 
 import numpy as np
 
+from spacecraft_env.limits import check_parameter
+
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
     "MAX_MODES",
@@ -232,19 +234,19 @@ class DockingModule:
     angular_momentum: tuple | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "mass", _positive("mass", self.mass))
+        object.__setattr__(self, "mass", check_parameter(
+            "module_mass", _positive("mass", self.mass), "mass"))
         dims = _vector("dimensions", self.dimensions)
         if min(dims) <= 0:
             raise ValueError("dimensions must be positive")
         object.__setattr__(self, "dimensions", dims)
         object.__setattr__(self, "position", _vector("position", self.position))
-        t = float(self.time)
-        if not np.isfinite(t) or t < 0:
-            raise ValueError(f"time must be a finite non-negative number, got {t}")
-        object.__setattr__(self, "time", t)
+        object.__setattr__(self, "time", check_parameter("docking_time", self.time, "time"))
         if self.angular_momentum is not None:
-            object.__setattr__(self, "angular_momentum",
-                               _vector("angular_momentum", self.angular_momentum))
+            momentum = _vector("angular_momentum", self.angular_momentum)
+            for value in momentum:
+                check_parameter("capture_momentum", value, "angular_momentum")
+            object.__setattr__(self, "angular_momentum", momentum)
 
     def inertia_about_system_centre(self) -> np.ndarray:
         """Own cuboid inertia plus the parallel-axis term, (3, 3), kg m^2."""

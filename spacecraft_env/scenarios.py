@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from spacecraft_env.limits import check_parameter
 from spacecraft_env.parameters import DockingModule
 
 __all__ = [
@@ -123,8 +124,8 @@ class ConstantScenario(Scenario):
     name = "constant"
 
     def __post_init__(self) -> None:
-        if not np.isfinite(self.paddle_angle_deg):
-            raise ValueError("paddle_angle_deg must be finite")
+        object.__setattr__(self, "paddle_angle_deg", check_parameter(
+            "paddle_angle", self.paddle_angle_deg, "paddle_angle_deg"))
 
     def configuration(self, t: float) -> Configuration:
         return Configuration(paddle_angle=self.paddle_angle(t))
@@ -245,8 +246,10 @@ class SolarRotationScenario(Scenario):
     piecewise_constant = False
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.rate_deg_s) and np.isfinite(self.initial_angle_deg)):
-            raise ValueError("rate_deg_s and initial_angle_deg must be finite")
+        object.__setattr__(self, "rate_deg_s", check_parameter(
+            "rotation_rate", self.rate_deg_s, "rate_deg_s"))
+        object.__setattr__(self, "initial_angle_deg", check_parameter(
+            "paddle_angle", self.initial_angle_deg, "initial_angle_deg"))
         lo, hi = self.rate_range
         if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
             raise ValueError("rate_range must be (low, high) with low <= high")

@@ -32,15 +32,16 @@ import json
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from controllers import LQRWeights
 from spacecraft_conventions import __version__
-from spacecraft_env import REWARDS, SCENARIOS
+from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
-from spacecraft_lab.demo import demo_summary, run_demo
+from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.plots import plot_rl_comparison
 from spacecraft_lab.reporting import control_summary, pooled_training_runs, rl_table
@@ -60,14 +61,16 @@ __all__ = ["build_parser", "main", "synopsis"]
 
 
 # ----------------------------------------------------------------- value checks
-def _integer(low: int) -> Callable[[str], int]:
+def _integer(low: int, high: int | None = None) -> Callable[[str], int]:
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        if value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(
+                f"must be >= {low}, got {value}" if high is None
+                else f"must be an integer in [{low}, {high}], got {value}")
         return value
 
     parse.__name__ = f"integer >= {low}"
@@ -92,10 +95,34 @@ def _number(low: float, high: float = math.inf, *, low_open: bool = False,
     return parse
 
 
+def _limited(key: str) -> Callable[[str], float | int]:
+    """A physical parameter, checked against its one range
+    (:data:`spacecraft_env.PARAMETER_LIMITS`)."""
+    limit = PARAMETER_LIMITS[key]
+
+    def parse(text: str) -> float | int:
+        try:
+            value = int(text) if limit.integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {limit.describe().split(' in ')[0]}, got {text!r}") from None
+        try:
+            return limit.check(key, value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {limit.describe()}, got {text}") from None
+
+    parse.__name__ = key
+    return parse
+
+
+#: Longest episode or record, steps.
+_MAX_STEPS = int(PARAMETER_LIMITS["max_steps"].high)
+
+
 def _snr(text: str) -> float | None:
     if text.lower() == "none":
         return None
-    return _number(-40.0, 300.0, unit=" dB")(text)
+    return _limited("snr_db")(text)
 
 
 def _forgetting(text: str) -> float:
@@ -141,28 +168,36 @@ def _output_directory(text: str) -> Path:
     return path
 
 
-def _prepare_outputs(args: argparse.Namespace) -> None:
-    """Create every output directory of the command and write a probe file in it, before
-    any work: a directory that cannot hold the results fails now, not after the run.
+def _probe_outputs(args: argparse.Namespace) -> None:
+    """Check, before any work and without creating anything, that every output of the
+    command can be written: a probe file is made and removed in the output directory,
+    or in its nearest existing parent when it does not exist yet (the command creates
+    it when it writes). A sweep's ``results.jsonl``, if present, must be a writable file.
 
     Raises
     ------
     ValueError
-        If a directory cannot be created or written.
+        If an output cannot be written, with the option and the reason.
     """
     for key in ("out", "tensorboard"):
         path = getattr(args, key, None)
         if path is None or (key == "out" and args.command in ("rl-table", "sweep-summary")):
             continue
         path = Path(path)
+        option = f"--{key.replace('_', '-')} {path}"
+        existing = path
+        while not existing.exists() and existing.parent != existing:
+            existing = existing.parent
+        if not existing.is_dir():
+            raise ValueError(f"cannot write to {option}: {existing} is not a directory")
         try:
-            path.mkdir(parents=True, exist_ok=True)
-            probe = path / f".write-probe-{os.getpid()}"
-            probe.write_bytes(b"")
-            probe.unlink()
+            fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=existing)
+            os.close(fd)
+            os.unlink(probe)
         except OSError as exc:
-            raise ValueError(f"cannot write to --{key.replace('_', '-')} {path}: "
-                             f"{exc.strerror or exc}") from None
+            raise ValueError(f"cannot write to {option}: {exc.strerror or exc}") from None
+        if args.command == "sweep":
+            ResultStore(path / "results.jsonl").check_writable()
 
 
 # ----------------------------------------------------------------- the parser
@@ -262,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", type=_output_directory, default="results/demo",
                       help="output directory")
     demo.add_argument("--seed", type=_integer(0), default=0, help="environment seed")
-    demo.add_argument("--steps", type=_integer(1), default=2500,
+    demo.add_argument("--steps", type=_integer(1, MAX_DEMO_STEPS), default=2500,
                       help="episode length, steps of 0.1 s")
     demo.add_argument("--save-trajectories", action="store_true",
                       help="also write the rollout as trajectory.npz")
@@ -283,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
     ident.add_argument("--modes", type=_integer(1), default=2,
                        help="modes per appendage, 1..8 (order n = 6 + 8 k)")
-    ident.add_argument("--samples", type=_integer(200), default=2500,
+    ident.add_argument("--samples", type=_integer(200, _MAX_STEPS), default=2500,
                        help="record length, samples of 0.1 s (paper: 2500)")
     ident.add_argument("--convergence", type=_number(0.0), default=150.0,
                        help="start of the scored window, s")
@@ -303,34 +338,34 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "
                           "+-2 deg")
-    ctl.add_argument("--steps", type=_integer(100), default=None,
+    ctl.add_argument("--steps", type=_integer(100, _MAX_STEPS), default=None,
                      help="episode length, steps of 0.1 s (default: the registered 2500)")
-    ctl.add_argument("--module-mass", type=_number(0.0, low_open=True, unit=" kg"),
+    ctl.add_argument("--module-mass", type=_limited("module_mass"),
                      default=None, help="mass of each docking module, kg (paper: 600)")
     ctl.add_argument("--mass-centre-shift", action="store_true",
                      help="docking: the modules move the system mass centre (the paper "
                           "keeps it fixed)")
-    ctl.add_argument("--capture-momentum", type=_number(-1e4, 1e4, unit=" N m s"), nargs=3,
+    ctl.add_argument("--capture-momentum", type=_limited("capture_momentum"), nargs=3,
                      default=None, metavar=("HX", "HY", "HZ"),
                      help="docking: angular momentum each module brings at capture, N m s "
                           "(conserved; default: modules arrive co-rotating)")
-    ctl.add_argument("--rotation-rate", type=_number(-10.0, 10.0, unit=" deg/s"), default=None,
+    ctl.add_argument("--rotation-rate", type=_limited("rotation_rate"), default=None,
                      help="paddle rotation rate, deg/s (solar_rotation: 0.2, "
                           "paddle_rotation: 0.36)")
-    ctl.add_argument("--paddle-angle", type=_number(-360.0, 360.0, unit=" deg"), default=None,
+    ctl.add_argument("--paddle-angle", type=_limited("paddle_angle"), default=None,
                      help="paddle angle at t = 0, deg (constant and rotation scenarios)")
     ctl.add_argument("--snr-db", type=_snr, default=40.0,
                      help="measurement SNR per channel in dB, or 'none'")
-    ctl.add_argument("--torque-weight", type=_number(0.0, low_open=True), default=None,
+    ctl.add_argument("--torque-weight", type=_limited("torque_weight"), default=None,
                      help="LQR torque weight per (N m)^2; smaller = more aggressive "
                           "(default: LQRWeights')")
-    ctl.add_argument("--max-torque", type=_number(0.0, 1e4, low_open=True, unit=" N m"),
+    ctl.add_argument("--max-torque", type=_limited("max_torque"),
                      default=None, help="N m per unit action (default: the env's 10)")
-    ctl.add_argument("--actuator-delay", type=_integer(0), default=0,
+    ctl.add_argument("--actuator-delay", type=_limited("actuator_delay_steps"), default=0,
                      help="actuator transport delay, steps of 0.1 s")
-    ctl.add_argument("--torque-rate-limit", type=_number(0.0, low_open=True, unit=" N m/s"),
+    ctl.add_argument("--torque-rate-limit", type=_limited("torque_rate_limit"),
                      default=None, help="actuator slew-rate limit, N m/s (default: none)")
-    ctl.add_argument("--disturbance-torque", type=_number(-100.0, 100.0, unit=" N m"),
+    ctl.add_argument("--disturbance-torque", type=_limited("disturbance_torque"),
                      default=0.0, help="constant external torque on every axis, N m")
     ctl.add_argument("--save-trajectories", action="store_true",
                      help="also write every episode to OUT/trajectories/ (npz)")
@@ -534,10 +569,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        _prepare_outputs(args)
+        _probe_outputs(args)
         return COMMANDS[args.command](args)
     except (ValueError, FileNotFoundError, PermissionError, SweepLockedError) as exc:
         parser.exit(2, f"spacecraft {args.command}: error: {exc}\n")
+    except OSError as exc:        # the machine's, not the user's nor a bug: disk full, I/O
+        kept = (f"; the records written so far are kept in {args.out}/results.jsonl: run the "
+                "same command again to resume" if args.command == "sweep" else "")
+        parser.exit(2, f"spacecraft {args.command}: error: {exc.strerror or exc}"
+                       f"{f': {exc.filename}' if exc.filename else ''}{kept}\n")
     except KeyboardInterrupt:
         done = (f"; wrote what the completed seeds give to {args.out}"
                 if args.command == "control" and (Path(args.out) / "table.md").exists()

@@ -48,6 +48,7 @@ from spacecraft_env import (
     DockingModule,
     DockingScenario,
     SolarRotationScenario,
+    check_parameter,
     env_id,
 )
 from spacecraft_lab.plots import plot_control_comparison
@@ -144,12 +145,20 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
-    kwargs: dict[str, Any] = {"task": task, "snr_db": snr_db,
-                              "actuator_delay_steps": int(actuator_delay_steps),
-                              "torque_rate_limit": torque_rate_limit,
-                              "disturbance_torque": disturbance_torque}
+    given = {"snr_db": snr_db, "max_torque": max_torque,
+             "actuator_delay_steps": actuator_delay_steps,
+             "torque_rate_limit": torque_rate_limit, "disturbance_torque": disturbance_torque,
+             "module_mass": module_mass, "rotation_rate": rotation_rate,
+             "paddle_angle": paddle_angle}
+    checked = {k: None if v is None else check_parameter(k, v) for k, v in given.items()}
+    for value in capture_momentum or ():
+        check_parameter("capture_momentum", value)
+    kwargs: dict[str, Any] = {"task": task, "snr_db": checked["snr_db"],
+                              "actuator_delay_steps": checked["actuator_delay_steps"],
+                              "torque_rate_limit": checked["torque_rate_limit"],
+                              "disturbance_torque": checked["disturbance_torque"]}
     if max_torque is not None:
-        kwargs["max_torque"] = float(max_torque)
+        kwargs["max_torque"] = checked["max_torque"]
     if scenario not in SCENARIOS:
         # the task family draws its own plant every episode: no scenario variants
         variants = {"module_mass": module_mass, "rotation_rate": rotation_rate,
@@ -214,10 +223,10 @@ def _check_control(*, controller: str, seed: int | None = None,
                          f"got {controller!r}")
     if task not in ("slew", "regulation"):
         raise ValueError(f"task must be 'slew' or 'regulation', got {task!r}")
-    if torque_weight is not None and not float(torque_weight) > 0:
-        raise ValueError(f"torque_weight must be > 0, got {torque_weight!r}")
-    if max_steps is not None and int(max_steps) < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps!r}")
+    if torque_weight is not None:
+        check_parameter("torque_weight", torque_weight)
+    if max_steps is not None:
+        check_parameter("max_steps", max_steps)
     return env_kwargs_for(scenario, task=task, module_mass=module_mass,
                           rotation_rate=rotation_rate, paddle_angle=paddle_angle,
                           snr_db=snr_db, max_torque=max_torque)

@@ -24,7 +24,14 @@ from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftEnv
 from spacecraft_lab.plots import plot_demo_response
 
-__all__ = ["demo_summary", "run_demo"]
+__all__ = ["MAX_DEMO_STEPS", "MAX_GIF_FRAMES", "demo_summary", "run_demo"]
+
+#: Frames the GIF keeps at most: a longer rollout keeps every k-th frame with k grown to
+#: fit, so the demo's memory does not grow with ``steps`` (each frame is held as a
+#: palette image, one byte per pixel, until the GIF is written).
+MAX_GIF_FRAMES = 250
+#: Longest demo rollout, steps (about 2.8 h of flight).
+MAX_DEMO_STEPS = 100_000
 
 
 def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: int = 0,
@@ -42,7 +49,8 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
     steps : int
         Episode length in steps (dt = 0.1 s).
     gif_every : int
-        Keep every ``gif_every``-th frame in the GIF.
+        Keep every ``gif_every``-th frame in the GIF (more apart when the
+        rollout has over :data:`MAX_GIF_FRAMES` of them).
     save_trajectory : bool
         Also write the rollout as ``trajectory.npz`` (:class:`controllers.Trajectory`).
 
@@ -50,7 +58,18 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
     -------
     dict
         The summary written to ``summary.json``.
+
+    Raises
+    ------
+    ValueError
+        ``steps`` or ``gif_every`` not an integer in range.
     """
+    if isinstance(steps, bool) or not isinstance(steps, int) \
+            or not 1 <= steps <= MAX_DEMO_STEPS:
+        raise ValueError(f"steps must be an integer in [1, {MAX_DEMO_STEPS}], got {steps!r}")
+    if isinstance(gif_every, bool) or not isinstance(gif_every, int) or gif_every < 1:
+        raise ValueError(f"gif_every must be an integer >= 1, got {gif_every!r}")
+    gif_every = max(gif_every, -(-steps // MAX_GIF_FRAMES))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     env = FlexibleSpacecraftEnv(scenario, render_mode="rgb_array", initial_attitude_deg=3.0)
@@ -62,24 +81,27 @@ def run_demo(scenario: str = "docking", out: str | Path = "results/demo", seed: 
     c_defl = env.model.C[layout.slice("deflection")]
     initial_attitude = c_att @ info["state"]
     times, att, defl, torque, inertia, freqs, frames = [], [], [], [], [], [], []
+    # the full record is kept only when it is saved
     observations, actions, states, refs, rewards = [obs], [], [info["state"]], \
         [info["reference"]], []
+    keep = save_trajectory
     total_reward = 0.0
     for k in tqdm(range(steps), desc=f"{scenario} rollout", unit="step"):
         action = pd.act(obs, info)
         obs, reward, terminated, truncated, info = env.step(action)
         total_reward += reward
-        observations.append(obs)
-        actions.append(action)
-        states.append(info["state"])
-        refs.append(info["reference"])
-        rewards.append(reward)
+        if keep:
+            observations.append(obs)
+            actions.append(action)
+            states.append(info["state"])
+            refs.append(info["reference"])
+            rewards.append(reward)
         times.append(info["time"])
         att.append(c_att @ info["state"] * DEG_PER_RAD)
         defl.append(c_defl @ info["state"])
         torque.append(info["torque"])
         if k % gif_every == 0:
-            frames.append(Image.fromarray(env.render()))
+            frames.append(Image.fromarray(env.render()).quantize(256))
             inertia.append(np.diag(env.model.inertia(env.time)))
             freqs.append(env.model.modal(env.time)[0][:3])
         if terminated or truncated:

@@ -70,7 +70,7 @@ from identifiers import (
     vaf,
 )
 from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
-from spacecraft_env import SCENARIOS, FlexibleSpacecraftModel, ets8_parameters
+from spacecraft_env import SCENARIOS, FlexibleSpacecraftModel, check_parameter, ets8_parameters
 from spacecraft_lab.paper import PAPER_TABLES
 from spacecraft_lab.plots import (
     plot_identification_modal,
@@ -578,6 +578,9 @@ def _check_identify(*, method: str, seed: int | None = None, scenario: str = "do
                     convergence_s: float = 150.0, baselines: bool = False) -> None:
     """:func:`identify_task`'s values checked without running it (a sweep file is checked
     with it before any task runs)."""
+    if snr_db is not None:
+        check_parameter("snr_db", snr_db)
+    check_parameter("max_steps", n_samples, "n_samples")
     _task_setup(method, scenario, order, n_modes, preset, n_samples, convergence_s)
 
 

@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_summary", "control_table", "identification_table", "paired_cost_ratio",
-           "pooled_training_runs", "rl_table"]
+__all__ = ["control_summary", "control_table", "identification_table",
+           "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
+           "training_metrics_problem"]
 
 
 def _median(cell: dict[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -153,6 +154,74 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
     return "\n".join(lines) + "\n"
 
 
+def _is_number(value: Any, optional: bool = True) -> bool:
+    return (value is None and optional) or (
+        isinstance(value, int | float) and not isinstance(value, bool))
+
+
+#: Comparators a ``metrics.json`` may hold: each a table of episode figures.
+_COMPARATORS = ("oracle_lqg", "adaptive_lqg", "fixed_lqg", "zero_torque")
+
+
+def training_metrics_problem(m: Any) -> str | None:
+    """What makes ``m`` not the ``metrics.json`` of a ``spacecraft train`` run (the
+    fields :func:`rl_table` and the RL plots read, with their types), or None."""
+    if not isinstance(m, dict):
+        return f"not a JSON object but {type(m).__name__}"
+    for key in ("algo", "features", "scenario"):
+        if not isinstance(m.get(key), str):
+            return f"{key!r} missing or not a string"
+    if not isinstance(m.get("timesteps"), int) or isinstance(m.get("timesteps"), bool):
+        return "'timesteps' missing or not an integer"
+    if not _is_number(m.get("target_attitude_rms_deg"), optional=False):
+        return "'target_attitude_rms_deg' missing or not a number"
+    runs = m.get("runs")
+    if not isinstance(runs, list) or not runs:
+        return "'runs' missing or not a non-empty list"
+    for i, run in enumerate(runs):
+        final = run.get("final") if isinstance(run, dict) else None
+        if not isinstance(final, dict) or not _is_number(final.get("attitude_rms_deg"),
+                                                          optional=False):
+            return f"runs[{i}]['final'] missing or without a numeric 'attitude_rms_deg'"
+        if not isinstance(run.get("curve"), list) or not all(
+                isinstance(c, dict) and isinstance(c.get("timesteps"), int)
+                for c in run["curve"]):
+            return f"runs[{i}]['curve'] is not a list of points with integer 'timesteps'"
+        reached = run.get("steps_to_2x_adaptive")
+        if reached is not None and (not isinstance(reached, int) or isinstance(reached, bool)):
+            return f"runs[{i}]['steps_to_2x_adaptive'] is neither an integer nor null"
+        bad = [k for k in ("cost_after_100s", "cost_after_100s_mean", "vibration_rms_mm",
+                           "return") if not _is_number(final.get(k))]
+        if bad:
+            return f"runs[{i}]['final'] has non-numeric {bad}"
+    for key in _COMPARATORS:
+        if key in m and not (isinstance(m[key], dict)
+                             and _is_number(m[key].get("attitude_rms_deg"), optional=False)):
+            return f"{key!r} is not a table with a numeric 'attitude_rms_deg'"
+    return None
+
+
+def load_training_metrics(directory: str | Path) -> dict[str, Any]:
+    """The ``metrics.json`` of a ``spacecraft train`` directory, checked.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read or parsed, or is not a training run's metrics
+        (:func:`training_metrics_problem`); the message names the file.
+    """
+    path = Path(directory) / "metrics.json"
+    try:
+        m = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ValueError(f"{path}: cannot read a training run's metrics ({reason})") from None
+    problem = training_metrics_problem(m)
+    if problem:
+        raise ValueError(f"{path}: not the metrics of a 'spacecraft train' run: {problem}")
+    return m
+
+
 def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, Any]]:
     """The ``metrics.json`` of ``spacecraft train`` directories, one per setting.
 
@@ -163,7 +232,7 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     """
     settings: dict[tuple, dict[str, Any]] = {}
     for directory in directories:
-        m = json.loads((Path(directory) / "metrics.json").read_text())
+        m = load_training_metrics(directory)
         key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), m["timesteps"],
                m.get("repeat", 1), m.get("reward", "cost"))
         if key in settings:

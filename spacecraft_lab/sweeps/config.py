@@ -45,6 +45,7 @@ import inspect
 import itertools
 import json
 import math
+import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -408,6 +409,48 @@ class SweepConfig:
                 "cases": list(self.cases), "summary": self.summary.to_dict()}
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the
+    last one silently; TOML refuses it)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+# YAML 1.1 (PyYAML) reads ``1.0e9`` and ``1e9`` as strings; YAML 1.2, TOML and JSON as
+# numbers. Sweep files follow the latter.
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                |[-+]?\.(?:inf|Inf|INF)
+                |\.(?:nan|NaN|NAN))$""", re.VERBOSE),
+    list("-+0123456789."))
+
+
+def _yaml_unique(text: str) -> Any:
+    return yaml.load(text, Loader=_UniqueKeyLoader)
+
+
+def _json_unique(text: str) -> Any:
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        keys = [k for k, _ in items]
+        twice = sorted({k for k in keys if keys.count(k) > 1})
+        if twice:
+            raise ValueError(f"duplicate key(s) {twice}")
+        return dict(items)
+
+    return json.loads(text, object_pairs_hook=pairs)
+
+
 def load_config(path: str | Path, *, allow_custom_tasks: bool = False,
                 max_tasks: int = MAX_TASKS) -> SweepConfig:
     """Read a sweep file (``.toml``, ``.yaml``/``.yml`` or ``.json``).
@@ -428,11 +471,11 @@ def load_config(path: str | Path, *, allow_custom_tasks: bool = False,
     if suffix not in (".toml", ".yaml", ".yml", ".json"):
         raise ValueError(f"sweep file must be .toml, .yaml, .yml or .json, got {path.name}")
     text = path.read_text()
-    parse = {".toml": tomllib.loads, ".json": json.loads}.get(suffix, yaml.safe_load)
+    parse = {".toml": tomllib.loads, ".json": _json_unique}.get(suffix, _yaml_unique)
     try:
         data = parse(text)
     except Exception as exc:  # TOMLDecodeError, JSONDecodeError, yaml.YAMLError
-        raise ValueError(f"{path}: cannot parse: {exc}") from exc
+        raise ValueError(f"{path}: cannot parse: {' '.join(str(exc).split())}") from None
     try:
         return SweepConfig.from_dict(data, name=path.stem, allow_custom_tasks=allow_custom_tasks,
                                      max_tasks=max_tasks)

@@ -168,8 +168,9 @@ def run_sweep(config: SweepConfig | str | Path, out: str | Path, backend: str = 
 def _run_locked(config: SweepConfig, out: Path, backend: str, workers: int | None,
                 address: str | None, retry_errors: bool, ship_code: bool, summarize: bool,
                 progress: bool) -> SweepReport:
-    (out / "sweep.json").write_text(json.dumps(config.to_dict(), indent=2))
     store = ResultStore(out / "results.jsonl")
+    store.check_writable()              # before any work: no result is computed to be lost
+    (out / "sweep.json").write_text(json.dumps(config.to_dict(), indent=2))
     store.repair()
     tasks = config.tasks()
     todo = pending_tasks(tasks, store, retry_errors)

@@ -116,9 +116,29 @@ class ResultStore:
         #: Lines the last read skipped (not complete records).
         self.n_skipped = 0
 
+    def check_writable(self) -> None:
+        """Fail now, in one line, if the file cannot take records (it is a directory or
+        another non-file, or it cannot be opened for appending); nothing is created.
+
+        Raises
+        ------
+        ValueError
+            Naming the file and the reason.
+        """
+        if self.path.exists() and not self.path.is_file():
+            raise ValueError(f"{self.path} is not a file (a results file is expected there)")
+        if self.path.exists() or self.path.is_symlink():
+            try:
+                with open(self.path, "ab"):
+                    pass
+            except OSError as exc:
+                raise ValueError(f"cannot write to {self.path}: {exc.strerror or exc}") from None
+
     def _lines(self) -> Iterator[tuple[int, bytes]]:
         if not self.path.exists():
             return
+        if not self.path.is_file():
+            raise ValueError(f"{self.path} is not a file (a results file is expected there)")
         with open(self.path, "rb") as fh:
             for lineno, line in enumerate(fh, 1):
                 if line.strip():
