@@ -571,7 +571,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         _probe_outputs(args)
         return COMMANDS[args.command](args)
-    except (ValueError, FileNotFoundError, PermissionError, SweepLockedError) as exc:
+    except (ValueError, FileNotFoundError, PermissionError, SweepLockedError,
+            ImportError) as exc:
         parser.exit(2, f"spacecraft {args.command}: error: {exc}\n")
     except OSError as exc:        # the machine's, not the user's nor a bug: disk full, I/O
         kept = (f"; the records written so far are kept in {args.out}/results.jsonl: run the "

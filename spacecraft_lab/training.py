@@ -41,6 +41,7 @@ TensorBoard logs.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -261,7 +262,19 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ``workers``: processes that score the four comparators side by side
     before training (default: one per core, at most four); every episode is
     built from its seed, so the scores do not depend on it.
+
+    Raises
+    ------
+    ImportError
+        Before any work, when the ``rl`` extra (torch, stable-baselines3) is
+        not installed; the message says how to install it.
     """
+    missing = [name for name in ("torch", "stable_baselines3")
+               if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ImportError(f"training needs the 'rl' extra ({' and '.join(missing)} not "
+                          "installed): run `make test`, or `pip install -c constraints.txt "
+                          "\"torch==2.13.0\" && pip install -c constraints.txt -e \".[rl]\"`")
     # optional dependency (the "rl" extra): imported where it is needed
     import torch
     from stable_baselines3 import PPO, SAC

@@ -233,3 +233,14 @@ def test_a_bad_trajectory_file_is_named_with_what_is_wrong(tmp_path, saved_traje
     assert str(path) in str(exc.value) and expected in str(exc.value)
     assert len(Trajectory.load(saved_trajectory).time) == 50
     assert json.loads(json.dumps(Trajectory.load(saved_trajectory).controller_stats)) is not None
+
+
+def test_training_without_the_rl_extra_names_it_before_any_work(tmp_path, capsys, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "torch" else real(name, *a))
+    line = _error_line(capsys, ["train", "--timesteps", "10", "--out", str(tmp_path / "t")])
+    assert "the 'rl' extra (torch not installed)" in line and "make test" in line
+    assert not (tmp_path / "t").exists()
