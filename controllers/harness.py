@@ -207,6 +207,10 @@ def _first(freqs: np.ndarray, count: int) -> np.ndarray:
     return out
 
 
+def _positive_int(value: Any) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1
+
+
 def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 options: dict[str, Any] | None = None, max_steps: int | None = None,
                 freq_every: int = 25, n_freq: int = 4, radius_every: int = 10) -> Trajectory:
@@ -235,13 +239,28 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
 
     Raises
     ------
+    TypeError
+        If ``env`` is not a Gymnasium env or ``controller`` has no ``act``.
     ValueError
-        If ``max_steps`` is given and is not an integer >= 1.
+        If ``max_steps`` is given and is not an integer >= 1, or a sampling
+        period or count is not, or ``seed`` is not an integer >= 0 or None.
     """
+    if not isinstance(env, gym.Env):
+        raise TypeError(f"env must be a gymnasium.Env, got {type(env).__name__}")
+    if not callable(getattr(controller, "act", None)) or not callable(
+            getattr(controller, "reset", None)):
+        raise TypeError(f"controller must have act(obs, info) and reset(seed), got "
+                        f"{type(controller).__name__}")
     base = env.unwrapped
-    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(
-            max_steps, (int, np.integer)) or max_steps < 1):
+    if max_steps is not None and not _positive_int(max_steps):
         raise ValueError(f"max_steps must be an integer >= 1 (or None), got {max_steps!r}")
+    for name, value in (("freq_every", freq_every), ("n_freq", n_freq),
+                        ("radius_every", radius_every)):
+        if not _positive_int(value):
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    if seed is not None and not (_positive_int(seed) or (
+            isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed == 0)):
+        raise ValueError(f"seed must be an integer >= 0 or None, got {seed!r}")
     if max_steps is None:
         spec = getattr(env, "spec", None)
         max_steps = (spec.max_episode_steps if spec is not None and spec.max_episode_steps

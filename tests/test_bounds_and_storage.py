@@ -244,3 +244,18 @@ def test_training_without_the_rl_extra_names_it_before_any_work(tmp_path, capsys
     line = _error_line(capsys, ["train", "--timesteps", "10", "--out", str(tmp_path / "t")])
     assert "the 'rl' extra (torch not installed)" in line and "make test" in line
     assert not (tmp_path / "t").exists()
+
+
+@pytest.mark.parametrize(("kwargs", "error", "expected"), [
+    ({"max_steps": 0}, ValueError, "max_steps must be an integer >= 1"),
+    ({"max_steps": 10.5}, ValueError, "max_steps must be an integer >= 1"),
+    ({"radius_every": 0}, ValueError, "radius_every must be an integer >= 1"),
+    ({"seed": -1}, ValueError, "seed must be an integer >= 0"),
+    ({"seed": "0"}, ValueError, "seed must be an integer >= 0"),
+    ({"controller": object()}, TypeError, "controller must have act"),
+    ({"env": "FlexibleSpacecraft-v1"}, TypeError, "env must be a gymnasium.Env")])
+def test_run_episode_checks_its_arguments(kwargs, error, expected):
+    env = gym.make("FlexibleSpacecraft-v1")
+    args = {"env": env, "controller": PD(env), **kwargs}
+    with pytest.raises(error, match=expected):
+        run_episode(**args)
