@@ -117,7 +117,7 @@ def score(scenario: str, seed: int, snr_db: float | None, rms: float) -> dict:
             f_true = model.modal_residues(t)[0][TRACKED[scenario]]
             mode_frozen.append(np.min(np.abs(f_frozen / f_true - 1.0)))
             if seq.valid[k]:
-                f_id, z_id = seq[k].modal()
+                f_id, z_id = seq[k].modal(unique=False)
                 ok = (z_id > -0.05) & (z_id < 0.5)
                 mode.append(np.min(np.abs(f_id[ok] / f_true - 1.0)) if ok.any() else np.nan)
             band = bands.get(k - k % 10)

@@ -201,7 +201,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         if self._modes_of is None or not np.array_equal(model.A, self._modes_of):
             # the model's A changes only when the identifier exports (every few
             # samples), while its eigenvalues cost as much as an update
-            self._modes_of, self._modes = model.A, model.modal()
+            self._modes_of, self._modes = model.A, model.modal(unique=False)
         _put_modes(out[n + 6:n + 6 + 2 * k], *self._modes)
         pred = model.C @ x
         out[n + 6 + 2 * k:-1] = (y - pred) / self._meas_scale   # NaN where y is missing

@@ -302,7 +302,7 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 freq_t.append(info["time"])
                 model = ident.model
                 freq_id.append(np.full(n_freq, np.nan) if model is None
-                               else _first(model.modal()[0], n_freq))
+                               else _first(model.modal(unique=False)[0], n_freq))
                 freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
                 true_gain = np.linalg.inv(base.model.inertia(info["time"]))
                 gain_err.append(np.nan if model is None or rate_rows is None else

@@ -50,7 +50,7 @@ from identifiers.improved import ImprovedRPBSID
 from identifiers.kalman import KalmanPredictor, steady_state_gain
 from identifiers.modal_basis import ModalFilterBank, Resonator
 from identifiers.modal_discovery import discover_resonators, merge_resonators
-from identifiers.model import ModelSequence, StateSpaceModel, observability_basis
+from identifiers.model import ModelSequence, Modes, StateSpaceModel, observability_basis
 from identifiers.moment_refit import MomentRefitRPBSID
 from identifiers.predictor import PredictorRPBSID
 from identifiers.rigid_flexible import RigidFlexibleIdentifier
@@ -72,6 +72,7 @@ __all__ = [
     "KalmanPredictor",
     "ModalFilterBank",
     "ModelSequence",
+    "Modes",
     "MomentRefitRPBSID",
     "OnlineIdentifier",
     "PBSIDResult",

@@ -227,7 +227,7 @@ def modal_errors(model: StateSpaceModel, true_frequencies_hz: ArrayLike,
     """
     f_true = np.asarray(true_frequencies_hz, dtype=float)
     z_true = np.asarray(true_damping, dtype=float)
-    f_id, z_id = model.modal()
+    f_id, z_id = model.modal(unique=False)
     keep = (z_id >= -0.05) & (z_id <= max_damping) & np.isfinite(f_id)
     f_id, z_id = f_id[keep], z_id[keep]
     if f_id.size == 0:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:  # python-control is imported only by to_control()
     import control
 
-__all__ = ["ModelSequence", "StateSpaceModel", "observability_basis"]
+__all__ = ["ModelSequence", "Modes", "StateSpaceModel", "observability_basis"]
 
 
 def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -47,7 +47,22 @@ def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.vstack(rows)[:n]
 
 
-@dataclass(frozen=True, eq=False)
+class Modes(NamedTuple):
+    """Oscillatory modes of a model (:meth:`StateSpaceModel.modal`).
+
+    Attributes
+    ----------
+    frequency_hz : (k,) ndarray
+        Natural frequencies, Hz, ascending.
+    damping : (k,) ndarray
+        Damping ratios.
+    """
+
+    frequency_hz: np.ndarray
+    damping: np.ndarray
+
+
+@dataclass(frozen=True, eq=False, repr=False)
 class StateSpaceModel:
     """Discrete-time innovation-form model ``(A, B, C, D, K)``.
 
@@ -112,18 +127,60 @@ class StateSpaceModel:
         """Eigenvalues of A (discrete)."""
         return np.linalg.eigvals(self.A)
 
-    def modal(self) -> tuple[np.ndarray, np.ndarray]:
+    def modal(self, unique: bool = True) -> Modes:
         """Natural frequencies (Hz) and damping ratios of the oscillatory poles.
 
         Continuous equivalents ``s = log(z) / dt`` of the eigenvalues with
         positive imaginary part, sorted by frequency.
+
+        Parameters
+        ----------
+        unique : bool
+            Report a repeated pole once (default). An identifier that gives a
+            resonator more than one input-output direction (the rigid-flexible
+            identifier's rank-2 couplings) repeats its pole exactly; ``False``
+            lists every pole with its multiplicity.
+
+        Returns
+        -------
+        Modes
+            ``(frequency_hz, damping)``, two ``(k,)`` arrays; unpacks as a
+            pair.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> w, zeta, dt = 2 * np.pi * 0.5, 0.02, 0.1
+        >>> s = complex(-zeta * w, w * np.sqrt(1 - zeta**2))
+        >>> z = np.exp(s * dt)
+        >>> a = np.array([[z.real, -z.imag], [z.imag, z.real]])
+        >>> m = StateSpaceModel(a, np.ones((2, 1)), np.ones((1, 2)), np.zeros((1, 1)),
+        ...                     np.zeros((2, 1)), dt)
+        >>> f, d = m.modal()
+        >>> print(f"{f[0]:.3f} Hz, damping {d[0]:.3f}")
+        0.500 Hz, damping 0.020
         """
         z = self.poles()
         z = z[z.imag > 1e-12]
+        if unique and z.size:
+            z = np.sort_complex(z)
+            keep = np.ones(z.size, dtype=bool)
+            keep[1:] = np.abs(np.diff(z)) > 1e-9 * np.maximum(np.abs(z[1:]), 1.0)
+            z = z[keep]
         s = np.log(z) / self.dt
         wn = np.abs(s)
-        order = np.argsort(wn)
-        return wn[order] / (2 * np.pi), -s.real[order] / wn[order]
+        order = np.argsort(wn, kind="stable")
+        return Modes(wn[order] / (2 * np.pi), -s.real[order] / wn[order])
+
+    def __repr__(self) -> str:
+        f, zeta = self.modal()
+        radius = float(np.abs(self.poles()).max(initial=0.0))
+        shown = ", ".join(f"{fi:.4g} Hz ({zi:.2g})" for fi, zi in zip(f[:4], zeta[:4],
+                                                                        strict=True))
+        more = f", ... {f.size - 4} more" if f.size > 4 else ""
+        return (f"StateSpaceModel(n={self.n}, inputs={self.n_inputs}, "
+                f"outputs={self.n_outputs}, dt={self.dt:g} s, spectral radius "
+                f"{radius:.6f}, modes (damping): {shown or 'none'}{more})")
 
     def transform(self, t: np.ndarray) -> StateSpaceModel:
         """Same model in coordinates ``x' = T x``."""
@@ -314,7 +371,7 @@ class ModelSequence(Sequence):
         n_half = self.A.shape[1] // 2 if n_freq is None else n_freq
         out = np.full((len(self), n_half), np.nan)
         for k in np.flatnonzero(self.valid):
-            f, _ = self[k].modal()
+            f, _ = self[k].modal(unique=False)
             f = f[:n_half]
             out[k, :f.size] = f
         return out
