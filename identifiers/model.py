@@ -47,8 +47,10 @@ def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.vstack(rows)[:n]
 
 
-class Modes(NamedTuple):
-    """Oscillatory modes of a model (:meth:`StateSpaceModel.modal`).
+# the functional form keeps real types in the annotations (this module postpones its own,
+# which the API reference cannot resolve inside a named tuple's generated __new__)
+Modes = NamedTuple("Modes", [("frequency_hz", np.ndarray), ("damping", np.ndarray)])  # noqa: UP014
+Modes.__doc__ = """Oscillatory modes of a model (:meth:`StateSpaceModel.modal`).
 
     Attributes
     ----------
@@ -57,9 +59,6 @@ class Modes(NamedTuple):
     damping : (k,) ndarray
         Damping ratios.
     """
-
-    frequency_hz: np.ndarray
-    damping: np.ndarray
 
 
 @dataclass(frozen=True, eq=False, repr=False)

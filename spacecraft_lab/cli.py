@@ -44,7 +44,12 @@ from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_f
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.plots import plot_rl_comparison
-from spacecraft_lab.reporting import control_summary, pooled_training_runs, rl_table
+from spacecraft_lab.reporting import (
+    control_brief,
+    control_summary,
+    pooled_training_runs,
+    rl_table,
+)
 from spacecraft_lab.sweeps import (
     BACKENDS,
     MAX_TASKS,
@@ -486,9 +491,10 @@ def _control(args: argparse.Namespace) -> int:
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,
                           save_trajectories=args.save_trajectories, workers=args.workers)
-    print((Path(args.out) / "table.md").read_text())
+    print(control_brief(metrics["controllers"]))
     print(control_summary(metrics["controllers"], args.scenario, args.out))
-    print(f"wrote {args.out}/metrics.json, results.csv, table.md, comparison.png")
+    print(f"wrote {args.out}/metrics.json, results.csv, table.md (the full table), "
+          "comparison.png")
     return 0
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_summary", "control_table", "identification_table",
+__all__ = ["control_brief", "control_summary", "control_table", "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
            "training_metrics_problem"]
 
@@ -152,6 +152,29 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
                  f"({100 * med['fallback_share']:.0f} %)"]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def control_brief(table: dict[str, dict], oracle: str | None = "oracle LQG",
+                  baseline: str | None = "robust LQG") -> str:
+    """The terminal's short form of :func:`control_table`: per controller the cost from
+    100 s (median over seeds), its paired ratios to ``oracle`` and ``baseline``, the
+    verdicts and the fallback's share from 60 s, aligned in plain text (the full
+    table is written to ``table.md``)."""
+    rows = [("controller", "cost t>=100 s", "/ oracle", "/ robust", "verdicts",
+             "fallback t>=60 s")]
+    for name, row in table.items():
+        ratios = [None if ref is None else paired_cost_ratio(table, name, ref)
+                  for ref in (oracle, baseline)]
+        fallback = row["median"]["fallback_share_after_60s"]
+        rows.append((name, f"{row['median']['cost_after_100s']:.3g}",
+                     *("-" if r is None else f"{r:.2f}" for r in ratios),
+                     ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items()),
+                     "-" if not np.isfinite(fallback) or name != "adaptive LQG"
+                     else f"{100 * fallback:.0f} %"))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.ljust(w) if i == 0 or i == 4 else c.rjust(w)
+                               for i, (c, w) in enumerate(zip(r, widths, strict=True))).rstrip()
+                     for r in rows) + "\n"
 
 
 def _is_number(value: Any, optional: bool = True) -> bool:
@@ -343,10 +366,20 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
             parts.append(f"{to_robust:.2f} times the robust fixed design's")
         verdicts = table[adaptive]["verdicts"]
         stable = verdicts.get("stable", 0)
+        fallback = table[adaptive]["median"].get("fallback_share_after_60s", np.nan)
+        flew = ("" if not np.isfinite(fallback) else
+                f"; its robust fallback flew {100 * fallback:.0f} % of the steps from 60 s")
         if parts:
             lines.append(f"On {scenario} over {seeds} seeds, the adaptive LQG's quadratic cost "
                          f"from 100 s was {' and '.join(parts)} (median of paired seeds; lower "
-                         f"is better); it was judged stable on {stable} of {seeds}.")
+                         f"is better); it was judged stable on {stable} of {seeds}{flew}.")
+    others = [(name, paired_cost_ratio(table, name, "robust LQG"))
+              for name in ("scheduled LQG", "fixed LQG", "PD") if name in table]
+    others = [f"the {name} {r:.2f}" for name, r in others if r is not None]
+    if others and "robust LQG" in table:
+        lines.append(f"Beside it, in the same cost over the robust design's: "
+                     f"{', '.join(others)} (the scheduled LQG knows the plant's "
+                     "schedule: a reference, not a competitor).")
     fixed = table.get("fixed LQG")
     if fixed is not None:
         bad = sum(c for v, c in fixed["verdicts"].items() if v != "stable")
