@@ -166,9 +166,10 @@ def demo_summary(summary: dict, out: str | Path) -> str:
         f"torque at {summary['peak_torque_Nm']:.2f} N m.",
     ]
     if events:
+        change = ", ".join(f"{axis} {a:,.0f} -> {b:,.0f} kg m^2 ({100 * (b / a - 1):+.0f} %)"
+                           for axis, a, b in zip(("roll", "pitch", "yaw"), j0, j1, strict=True))
         lines.append("Events at " + ", ".join(f"{t:.0f} s" for t in events) + " changed the "
-                     f"plant: yaw inertia {j0[2]:,.0f} -> {j1[2]:,.0f} kg m^2, first "
-                     f"frequencies {_hz(f0)} -> {_hz(f1)} Hz.")
+                     f"plant: inertia {change}; first frequencies {_hz(f0)} -> {_hz(f1)} Hz.")
     else:
         lines.append(f"The plant's first frequencies went {_hz(f0)} -> {_hz(f1)} Hz.")
     out = Path(out)
