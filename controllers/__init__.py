@@ -22,7 +22,7 @@
 """
 
 from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
-from controllers.adaptive import AdaptiveLQG
+from controllers.adaptive import AdaptiveLQG, FallbackWarning
 from controllers.base import Controller, PolicyController
 from controllers.baselines import (
     PD,
@@ -61,6 +61,7 @@ __all__ = [
     "BinaryExcitation",
     "ComparisonInterrupted",
     "Controller",
+    "FallbackWarning",
     "FixedLQG",
     "GainAcceptance",
     "IdentifiedModelFeatures",

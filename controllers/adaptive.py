@@ -51,6 +51,7 @@ RMS torque.
 from __future__ import annotations
 
 import logging
+import warnings
 from collections import deque
 from typing import Any
 
@@ -67,7 +68,7 @@ from controllers.lqg import LQRWeights, equilibrium_state
 from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
 from spacecraft_conventions import single_threaded_blas
 
-__all__ = ["AdaptiveLQG"]
+__all__ = ["FALLBACK_WARNING_S", "AdaptiveLQG", "FallbackWarning"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,14 @@ SUPERVISOR_WINDOW_S = 10.0
 #: given by the controller from its sensors, while the loop is still small.
 SUPERVISOR_WINDOWS = 10
 SUPERVISOR_HOLD_S = 60.0
+#: Seconds after :data:`~controllers.harness.JUDGED_FROM_S` without a single step of the
+#: identified design after which the loop warns (:class:`FallbackWarning`), once.
+FALLBACK_WARNING_S = 60.0
+
+
+class FallbackWarning(UserWarning):
+    """The adaptive loop has flown only its fallback for a long time: the identified
+    models were all rejected (the identifier may not suit the loop)."""
 
 
 class AdaptiveLQG(_LQGController):
@@ -218,6 +227,7 @@ class AdaptiveLQG(_LQGController):
         self._peaks: deque = deque(maxlen=SUPERVISOR_WINDOWS)
         self._peak = 0.0
         self._hold_until = 0
+        self._fallback_warned = False
         self.last_excitation = np.zeros(3)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
@@ -376,6 +386,22 @@ class AdaptiveLQG(_LQGController):
         if callable(shape) and self._k % 50 == 0:
             self.excitation.shape(shape())
 
+    def _warn_if_never_flown(self) -> None:
+        """One :class:`FallbackWarning` when the identified design has not flown a single
+        step in the :data:`FALLBACK_WARNING_S` seconds after the warm-up's judging start."""
+        after = self.stats["steps_after_60s"]
+        if (not self._fallback_warned and after * self.dt >= FALLBACK_WARNING_S
+                and self.stats["fallback_steps_after_60s"] == after):
+            self._fallback_warned = True
+            reasons = ", ".join(f"{reason} {count}" for reason, count in sorted(
+                self.stats["rejected_by"].items(), key=lambda item: -item[1])) or "none"
+            model = "no model yet" if self.identifier.model is None else "models rejected"
+            warnings.warn(
+                f"AdaptiveLQG has flown only its fallback from {JUDGED_FROM_S:g} s to "
+                f"{self._k * self.dt:.0f} s ({type(self.identifier).__name__}: {model}; "
+                f"rejections by reason: {reasons}); the identifier may not suit the loop "
+                "(see stats['rejected_by'])", FallbackWarning, stacklevel=3)
+
     def _supervise(self, y: np.ndarray, ref: np.ndarray) -> None:
         """Take the identified design off when the measured envelope grows.
 
@@ -458,6 +484,7 @@ class AdaptiveLQG(_LQGController):
         if not fly:
             self.stats["fallback_steps"] += 1
             self.stats["fallback_steps_after_60s"] += judged
+            self._warn_if_never_flown()
             torque = fallback_action.astype(float) * self.max_torque
             if np.all(np.isfinite(obs[self._att])):
                 self.law.integrate(obs[self._att] - ref, saturated=True)   # hold the integral

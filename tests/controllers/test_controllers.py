@@ -419,3 +419,23 @@ def test_batched_evaluate_policy_equals_per_env_evaluation_to_1e9():
             done = terminated or truncated
         per_env.append(total)
     np.testing.assert_allclose(sorted(batched), sorted(per_env), rtol=1e-9, atol=0)
+
+
+def test_a_loop_that_never_flies_its_identified_design_says_so():
+    # AdaptiveLQG(env, identifier=ImprovedRPBSID(22)) flew the fallback on 100 % of its
+    # steps without a word; the default identifier's loop flies and stays silent
+    import warnings
+
+    from controllers import FallbackWarning
+    from identifiers import ImprovedRPBSID
+
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
+    for identifier, expected in ((ImprovedRPBSID(22), 1), (None, 0)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ctrl = AdaptiveLQG(env, identifier=identifier)
+            run_episode(env, ctrl, seed=0, max_steps=1300)
+        said = [str(w.message) for w in caught if issubclass(w.category, FallbackWarning)]
+        assert len(said) == expected, said
+        if expected:
+            assert "rejections by reason: prediction" in said[0]
