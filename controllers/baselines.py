@@ -55,7 +55,21 @@ def process_noise(b: np.ndarray) -> np.ndarray:
 def nominal_model(model: Any, paddle_angle_deg: float = 0.0) -> Any:
     """The design model of a fixed controller: ``model``'s spacecraft (an env's truth
     model, :class:`spacecraft_env.FlexibleSpacecraftModel`) with nothing docked and
-    the paddles at ``paddle_angle_deg`` (0: the nominal configuration)."""
+    the paddles at ``paddle_angle_deg`` (0: the nominal configuration).
+
+    Parameters
+    ----------
+    model : FlexibleSpacecraftModel
+        The truth model (``env.unwrapped.model``).
+    paddle_angle_deg : float
+        Paddle angle of the design configuration, deg.
+
+    Returns
+    -------
+    FlexibleSpacecraftModel
+        ``model.nominal(paddle_angle_deg)``: a constant model of the same
+        spacecraft.
+    """
     return model.nominal(paddle_angle_deg)
 
 
@@ -451,6 +465,14 @@ class OracleLQG(_LQGController):
     measurements, the model known instead of identified).
 
     It reads ``info["time"]`` for the current true model.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        The environment it flies (wrappers allowed; its ``unwrapped`` truth
+        model, observation layout and ``max_torque`` are read).
+    weights : LQRWeights, optional
+        Weights of the design (default :class:`LQRWeights`'s defaults).
     """
 
     name = "oracle LQG"
@@ -481,6 +503,15 @@ class OracleLQR(_EnvController):
     An upper bound no measured loop reaches: it reads ``info["state"]`` and
     ``info["time"]``. Re-designs are warm-started
     (:class:`~controllers.riccati.RiccatiTracker`).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        The environment it flies (wrappers allowed; its ``unwrapped`` truth
+        model, observation layout and ``max_torque`` are read).
+    weights : LQRWeights, optional
+        Weights of the design (default :class:`LQRWeights`'s defaults; the
+        integral weight is not used: there is no integral action).
     """
 
     name = "full-state oracle"

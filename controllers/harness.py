@@ -83,6 +83,25 @@ class Trajectory:
         Spectral radius of the closed loop of the controller's current design
         with the *true* plant frozen at ``radius_time`` (controllers with a
         ``closed_loop_radius``).
+
+    Examples
+    --------
+    :func:`run_episode` returns one; :meth:`save` and :meth:`load` keep it:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import gymnasium as gym
+    >>> from controllers import PD, Trajectory, run_episode
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> traj = run_episode(env, PD(env), seed=0, max_steps=20)
+    >>> len(traj.time), traj.states.shape, traj.terminated
+    (20, (21, 22), False)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = traj.save(Path(tmp) / "episode")
+    ...     again = Trajectory.load(path)
+    >>> path.name, bool((again.torque == traj.torque).all())
+    ('episode.npz', True)
+    >>> env.close()
     """
 
     time: np.ndarray
@@ -244,6 +263,25 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     ValueError
         If ``max_steps`` is given and is not an integer >= 1, or a sampling
         period or count is not, or ``seed`` is not an integer >= 0 or None.
+
+    Returns
+    -------
+    Trajectory
+        The N steps flown (N <= ``max_steps``; fewer if the env terminated or
+        truncated the episode): observations, actions, applied torques (N m),
+        true states, reference attitudes (rad), rewards, and what the
+        controller reports (identified frequencies, gain errors, stats,
+        excitation, closed-loop radius).
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import PD, run_episode
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> traj = run_episode(env, PD(env), seed=0, max_steps=20)
+    >>> float(traj.time[-1]), traj.torque.shape, traj.observations.shape
+    (2.0, (20, 3), (21, 10))
+    >>> env.close()
     """
     if not isinstance(env, gym.Env):
         raise TypeError(f"env must be a gymnasium.Env, got {type(env).__name__}")
@@ -364,7 +402,24 @@ def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
     """Excitation RMS torque (N m) and the shares of steps with a rejected gain and
     flown by a fallback (all steps, and from :data:`JUDGED_FROM_S` on: after the
     identifier's warm-up), from a controller's ``stats`` (0 for controllers
-    without them)."""
+    without them).
+
+    Parameters
+    ----------
+    stats : dict
+        A controller's ``stats`` (:attr:`Trajectory.controller_stats`); the
+        keys read are ``steps``, ``steps_after_60s``, ``excitation_rms_Nm``,
+        ``rejected``, ``fallback_steps`` and ``fallback_steps_after_60s``
+        (as :class:`~controllers.adaptive.AdaptiveLQG` keeps them), each
+        missing one taken as 0.
+
+    Returns
+    -------
+    dict
+        ``excitation_rms_Nm`` (N m), and ``rejected_share``,
+        ``fallback_share`` and ``fallback_share_after_60s``: shares of the
+        steps (of those from :data:`JUDGED_FROM_S` on for the last).
+    """
     steps = max(1, int(stats.get("steps", 0)))
     late = max(1, int(stats.get("steps_after_60s", 0)))
     return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
@@ -403,6 +458,23 @@ def stage_costs(traj: Trajectory, model: Any,
     torque term due to the controller's excitation (``torque * |u_exc|^2``,
     0 without one; it is included in the torque column, not added to it).
     The weights are those every LQG design here minimizes.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The episode (its ``states``, ``reference``, ``torque`` and
+        ``excitation``).
+    model : FlexibleSpacecraftModel
+        The truth model the episode ran on (``env.unwrapped.model``), whose
+        ``C`` and ``output_layout`` read attitude, rates and deflections from
+        the true states.
+    weights : LQRWeights
+        The cost's weights (default :data:`COST_WEIGHTS`).
+
+    Returns
+    -------
+    (N, 5) ndarray
+        One row per step, the columns of :data:`COST_PARTS`, dimensionless.
     """
     layout = model.output_layout
     states = traj.states[1:]

@@ -48,6 +48,24 @@ class LQRWeights:
     ``R = torque * I`` per (N m)^2. The defaults give a closed-loop attitude
     bandwidth of roughly 0.1 rad/s, below the first flexible mode
     (0.48 rad/s), and an integral time constant of about 50 s.
+
+    Attributes
+    ----------
+    attitude : float
+        Weight of the squared attitude outputs in units of 1 deg (default 1).
+    rate : float
+        Weight of the squared body-rate outputs in units of 0.1 deg/s (default 1).
+    deflection : float
+        Weight of each squared tip deflection in units of 1 cm (default 0.1).
+    torque : float
+        ``R = torque * I``, per (N m)^2 (default 0.3); must be > 0.
+    integral : float
+        Weight of the squared attitude-error integral in units of 1 deg s
+        (default 4e-4).
+    eps : float
+        Added to the diagonal of ``Q`` so it is positive definite (default 1e-6).
+
+    All must be finite and >= 0 (``torque`` > 0); ``ValueError`` otherwise.
     """
 
     attitude: float = 1.0
@@ -70,6 +88,20 @@ def output_weight(layout, weights: LQRWeights) -> np.ndarray:
 
     Each channel's weight is its group's weight divided by the square of the
     group's nominal level (:meth:`OutputLayout.scales`).
+
+    Parameters
+    ----------
+    layout : OutputLayout
+        The output groups, in order; only its sensor groups (``"attitude"``,
+        ``"rate"``, ``"deflection"``, via ``layout.sensors()``) are weighted.
+    weights : LQRWeights
+        The per-group weights (``attitude``, ``rate``, ``deflection``).
+
+    Returns
+    -------
+    (m, m) ndarray
+        Diagonal ``Q_y`` for the m sensor channels: per rad^2, per (rad/s)^2
+        and per m^2 for the three groups.
     """
     per_group = {"attitude": weights.attitude, "rate": weights.rate,
                  "deflection": weights.deflection}
@@ -83,6 +115,20 @@ def equilibrium_state(a: np.ndarray, c_att: np.ndarray, reference: np.ndarray) -
 
     Least-squares solution (exact for the rigid-body equilibria of the true
     model; the closest one for an identified model).
+
+    Parameters
+    ----------
+    a : (n, n) ndarray
+        Discrete-time state matrix.
+    c_att : (3, n) ndarray
+        Rows of the output matrix giving the attitude (rad).
+    reference : (3,) ndarray
+        Reference attitude, rad.
+
+    Returns
+    -------
+    (n,) ndarray
+        The state ``x`` (in the model's coordinates).
     """
     n = a.shape[0]
     lhs = np.vstack([a - np.eye(n), c_att])

@@ -28,6 +28,22 @@ def check_weights(q: ArrayLike, r: ArrayLike, n: int | None = None,
                   m: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Validate LQR weights: Q symmetric positive semidefinite, R positive definite.
 
+    Parameters
+    ----------
+    q : (n, n) array_like
+        State weight ``Q`` (a scalar is taken as a 1 x 1 matrix).
+    r : (m, m) array_like
+        Input weight ``R`` (a scalar is taken as a 1 x 1 matrix).
+    n, m : int, optional
+        The expected sizes of ``Q`` and ``R`` (default: not checked).
+
+    Returns
+    -------
+    q : (n, n) ndarray
+        ``Q`` as a float array.
+    r : (m, m) ndarray
+        ``R`` as a float array.
+
     Raises
     ------
     ValueError
@@ -73,7 +89,18 @@ def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 def spectral_radius(a: np.ndarray) -> float:
-    """Largest eigenvalue modulus."""
+    """Largest eigenvalue modulus.
+
+    Parameters
+    ----------
+    a : (n, n) ndarray
+        A square matrix (e.g. a discrete-time closed loop).
+
+    Returns
+    -------
+    float
+        ``max |eig(a)|`` (< 1: a stable discrete-time system).
+    """
     return float(np.abs(np.linalg.eigvals(a)).max())
 
 

@@ -69,5 +69,17 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
     Returns
     -------
     OnlineIdentifier
+        A new :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier`.
+
+    Examples
+    --------
+    >>> from identifiers import CLOSED_LOOP_SETTINGS, default_identifier
+    >>> ident = default_identifier()
+    >>> type(ident).__name__, ident.n, ident.dt, ident.warmup
+    ('RigidFlexibleIdentifier', 22, 0.1, 500)
+    >>> ident.model is None          # no model before the warm-up: 500 samples, 50 s
+    True
+    >>> default_identifier(**CLOSED_LOOP_SETTINGS).warmup
+    300
     """
     return RigidFlexibleIdentifier(layout, n=n, dt=dt, **options)

@@ -52,7 +52,21 @@ HORIZONS: tuple[int, ...] = (1, 10, 50, 100)
 
 
 def paper_test_inputs(n_samples: int, dt: float = 0.1) -> np.ndarray:
-    """The paper's test torques (Fig. 5), (N, 3), N m, at t = k dt."""
+    """The paper's test torques (Fig. 5), (N, 3), N m, at t = k dt.
+
+    Parameters
+    ----------
+    n_samples : int
+        N, the number of samples.
+    dt : float
+        Sample time, s.
+
+    Returns
+    -------
+    (N, 3) ndarray
+        ``[sin(0.1 t), sin(0.05 t), -sin(0.08 t)]`` N m (t in s) at ``t = k dt``,
+        ``k = 0..N-1``.
+    """
     t = np.arange(n_samples) * dt
     return np.column_stack([np.sin(0.1 * t), np.sin(0.05 * t), -np.sin(0.08 * t)])
 
@@ -67,9 +81,25 @@ def identification_inputs(n_samples: int, rng: np.random.Generator, dt: float = 
     flexible modes), equal amplitudes, scaled to ``rms`` N m. Zero mean over
     the record, persistently exciting, and reproducible from ``rng``.
 
+    Parameters
+    ----------
+    n_samples : int
+        Samples of the record.
+    rng : numpy.random.Generator
+        Source of the random phases (3 x ``n_tones`` uniform draws).
+    dt : float
+        Sample time, s.
+    rms : float
+        RMS torque of every axis over the record, N m.
+    band_hz : (float, float)
+        Lowest and highest tone frequency, Hz.
+    n_tones : int
+        Tones per axis.
+
     Returns
     -------
     (n_samples, 3) ndarray
+        Torques, N m, one column per body axis.
     """
     t = np.arange(n_samples) * dt
     freqs = np.geomspace(band_hz[0], band_hz[1], n_tones)
@@ -81,7 +111,24 @@ def identification_inputs(n_samples: int, rng: np.random.Generator, dt: float = 
 
 def add_measurement_noise(y: np.ndarray, snr_db: float | None,
                           rng: np.random.Generator) -> np.ndarray:
-    """White Gaussian noise per channel at ``snr_db`` relative to the channel's RMS."""
+    """White Gaussian noise per channel at ``snr_db`` relative to the channel's RMS.
+
+    Parameters
+    ----------
+    y : (N, m) ndarray
+        Noise-free outputs, one column per channel (any units).
+    snr_db : float or None
+        Signal-to-noise ratio, dB: the noise standard deviation of a channel
+        is its RMS over the record times ``10^(-snr_db / 20)``. None: no noise.
+    rng : numpy.random.Generator
+        Source of the noise.
+
+    Returns
+    -------
+    (N, m) ndarray
+        A new array: ``y`` plus the noise (a copy of ``y`` for ``snr_db=None``),
+        in ``y``'s units.
+    """
     if snr_db is None:
         return y.copy()
     rms = np.sqrt(np.mean(y**2, axis=0))
@@ -89,12 +136,38 @@ def add_measurement_noise(y: np.ndarray, snr_db: float | None,
 
 
 def normalized_error(y_id: np.ndarray, y_true: np.ndarray) -> np.ndarray:
-    """Per-channel ``100 ||y_id - y_true||_2 / ||y_true||_2`` (%)."""
+    """Per-channel ``100 ||y_id - y_true||_2 / ||y_true||_2`` (%).
+
+    Parameters
+    ----------
+    y_id : (N, m) ndarray
+        Identified (or predicted) outputs.
+    y_true : (N, m) ndarray
+        True outputs, same units.
+
+    Returns
+    -------
+    (m,) ndarray
+        The error of each channel over the record, %.
+    """
     return 100 * np.linalg.norm(y_id - y_true, axis=0) / np.linalg.norm(y_true, axis=0)
 
 
 def vaf(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-    """Per-channel variance accounted for, ``100 (1 - var(y - yhat) / var(y))`` (%)."""
+    """Per-channel variance accounted for, ``100 (1 - var(y - yhat) / var(y))`` (%).
+
+    Parameters
+    ----------
+    y : (N, m) ndarray
+        Measured (or true) outputs.
+    yhat : (N, m) ndarray
+        Predicted outputs, same units.
+
+    Returns
+    -------
+    (m,) ndarray
+        VAF of each channel, % (100: perfect; unbounded below).
+    """
     return 100 * (1 - np.var(y - yhat, axis=0) / np.var(y, axis=0))
 
 
@@ -103,6 +176,21 @@ def one_step_predictions(models: ModelSequence, inputs: np.ndarray,
     """One-step-ahead predictions of a record with the time-varying predictor.
 
     Thin wrapper of :meth:`ModelSequence.predict`.
+
+    Parameters
+    ----------
+    models : ModelSequence
+        The identified sequence, one model (or warm-up gap) per sample.
+    inputs : (N, r) ndarray
+        Inputs of the record (torques, N m, for the spacecraft).
+    outputs : (N, m) ndarray
+        Measured outputs of the record.
+
+    Returns
+    -------
+    (N, m) ndarray
+        Row k is ``yhat_{k|k-1}``, in the units of ``outputs``; steps before
+        the first valid model (and invalid ones) use the first valid model.
     """
     return models.predict(inputs, outputs)
 
@@ -166,7 +254,21 @@ def h_step_predictions(models: ModelSequence, inputs: ArrayLike,
 
 def persistence_predictions(outputs: ArrayLike, horizons: Sequence[int] = HORIZONS
                             ) -> dict[int, np.ndarray]:
-    """The trivial baseline: ``yhat_{t|t-h} = y_{t-h}`` (NaN for ``t < h``)."""
+    """The trivial baseline: ``yhat_{t|t-h} = y_{t-h}`` (NaN for ``t < h``).
+
+    Parameters
+    ----------
+    outputs : (N, m) array_like
+        The measured outputs.
+    horizons : sequence of int
+        Prediction horizons h >= 1, in samples (default :data:`HORIZONS`).
+
+    Returns
+    -------
+    dict
+        h -> (N, m) array whose row t is ``y_{t-h}`` (NaN for ``t < h``), for
+        each distinct horizon in increasing order.
+    """
     y = np.asarray(outputs, dtype=float)
     out = {}
     for h in sorted({int(h) for h in horizons}):
@@ -182,6 +284,22 @@ def prediction_vaf(target: ArrayLike, predictions: dict[int, np.ndarray], start:
 
     Rows where a prediction is missing (NaN) are left out; a channel whose
     prediction diverged scores ``-inf``.
+
+    Parameters
+    ----------
+    target : (N, m) array_like
+        The outputs predicted.
+    predictions : dict
+        h -> (N, m) ndarray of predictions, as :func:`h_step_predictions` or
+        :func:`persistence_predictions` return them.
+    start : int
+        First sample scored.
+
+    Returns
+    -------
+    dict
+        h -> (m,) ndarray: each channel's VAF (%), NaN for a horizon with no
+        scored row.
     """
     y = np.asarray(target, dtype=float)
     out = {}
@@ -198,7 +316,24 @@ def prediction_vaf(target: ArrayLike, predictions: dict[int, np.ndarray], start:
 
 
 def unstable_share(models: ModelSequence, start: int = 0, bound: float = 1.001) -> float:
-    """Share of the valid models from sample ``start`` on with a pole ``|z| > bound``."""
+    """Share of the valid models from sample ``start`` on with a pole ``|z| > bound``.
+
+    Parameters
+    ----------
+    models : ModelSequence
+        Identified discrete-time models.
+    start : int
+        First sample counted.
+    bound : float
+        Pole modulus above which a model counts as unstable (default 1.001,
+        a margin for the rigid body's poles at ``z = 1``).
+
+    Returns
+    -------
+    float
+        Share in [0, 1] (a model with non-finite entries counts as unstable);
+        NaN if no model from ``start`` on is valid.
+    """
     idx = np.flatnonzero(models.valid)
     idx = idx[idx >= start]
     if idx.size == 0:
@@ -217,6 +352,17 @@ def modal_errors(model: StateSpaceModel, true_frequencies_hz: ArrayLike,
 
     Each true mode is matched to the identified oscillatory mode nearest in
     frequency (among those with damping ratio in ``[-0.05, max_damping]``).
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        The identified model.
+    true_frequencies_hz : (n_true,) array_like
+        Natural frequencies of the true modes, Hz.
+    true_damping : (n_true,) array_like
+        Damping ratios of the true modes.
+    max_damping : float
+        Largest damping ratio of an identified mode that may be matched.
 
     Returns
     -------
@@ -277,7 +423,22 @@ def rigid_body_gain(model: StateSpaceModel, rate_rows: ArrayLike | slice,
 
 
 def relative_gain_error(estimate: ArrayLike, truth: ArrayLike) -> float:
-    """``||G - G_true||_2 / ||G_true||_2`` (spectral norms)."""
+    """``||G - G_true||_2 / ||G_true||_2`` (spectral norms).
+
+    Parameters
+    ----------
+    estimate : (3, 3) array_like
+        Estimated rigid-body gain ``G`` (e.g. :func:`rigid_body_gain`), rad/s^2
+        per N m.
+    truth : (3, 3) array_like
+        True gain ``J^-1``, same units.
+
+    Returns
+    -------
+    float
+        The relative error (0: exact); ``inf`` if ``estimate`` has a
+        non-finite entry.
+    """
     g, g_true = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
     if not np.all(np.isfinite(g)):
         return float("inf")

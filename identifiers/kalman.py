@@ -30,6 +30,18 @@ def steady_state_gain(a: ArrayLike, c: ArrayLike, q: ArrayLike,
                       r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Steady-state Kalman filter of ``(A, C)`` with noise covariances ``Q``, ``R``.
 
+    Parameters
+    ----------
+    a : (n, n) array_like
+        Discrete-time state matrix ``A``.
+    c : (m, n) array_like
+        Output matrix ``C``.
+    q : (n, n) array_like
+        Process (state) noise covariance ``Q``, in the state's units squared.
+    r : (m, m) array_like
+        Measurement noise covariance ``R``, in the outputs' units squared
+        (positive definite); a scalar is taken as a 1 x 1 matrix.
+
     Returns
     -------
     L : (n, m) ndarray

@@ -33,9 +33,18 @@ def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
     chained (:meth:`ModelSequence.chained` uses it for sequences whose
     models do not share a basis).
 
+    Parameters
+    ----------
+    a : (n, n) ndarray
+        State matrix ``A``.
+    c : (m, n) ndarray
+        Output matrix ``C``.
+
     Returns
     -------
     (n, n) ndarray
+        ``T``; singular if the model is unobservable or its first n stacked
+        rows are dependent.
     """
     n = a.shape[0]
     rows, block = [], c

@@ -37,6 +37,18 @@ NOMINAL_TORQUE: float = 1.0
 def nominal_scale(group: str) -> float:
     """Nominal level of one group (SI units).
 
+    Parameters
+    ----------
+    group : str
+        A sensor group: ``"attitude"``, ``"rate"``, ``"deflection"``,
+        ``"attitude_error"`` or ``"reference"`` (the keys of :data:`NOMINAL_SCALE`).
+
+    Returns
+    -------
+    float
+        The group's nominal level: rad for the angles (1 deg), rad/s for
+        ``"rate"`` (0.1 deg/s), m for ``"deflection"`` (1 cm).
+
     Raises
     ------
     ValueError

@@ -67,6 +67,21 @@ class StateSpaceMatrices(NamedTuple):
 
     ``dt`` is ``None`` for the continuous-time model and the sample time (s)
     for the zero-order-hold model.
+
+    Attributes
+    ----------
+    A : (n, n) ndarray
+        State matrix (continuous time) or the zero-order-hold transition
+        matrix over one step (discrete time).
+    B : (n, 3) ndarray
+        Input matrix of the three body torques (N m).
+    C : (m, n) ndarray
+        Output matrix of the plant outputs (attitude, rad; rate, rad/s; tip
+        deflections, m; in the model's output order).
+    D : (m, 3) ndarray
+        Feedthrough (zero).
+    dt : float or None
+        Sample time, s, or None for the continuous-time model.
     """
 
     A: np.ndarray

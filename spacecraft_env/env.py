@@ -71,6 +71,23 @@ class RewardWeights:
     (``reward="log"``: ``1 - log(1 + cost / precision) / log(1 + saturation /
     precision)``, clipped at 0); the default, 3e-4, is a 0.01 deg error on
     all three axes, the attitude an LQG holds.
+
+    Attributes
+    ----------
+    attitude : float
+        Weight of the squared attitude error in units of 1 deg (default 1).
+    rate : float
+        Weight of the squared body rates in units of 0.1 deg/s (default 1).
+    vibration : float
+        Weight of the squared tip deflections in units of 1 cm (default 0.1).
+    torque : float
+        Weight of the squared normalized action (default 0.01).
+    saturation : float
+        Cost at which the bounded reward reaches 0 (default 300); > 0.
+    precision : float
+        Cost the log-scaled reward resolves down to (default 3e-4); > 0.
+
+    All are finite and >= 0 (``ValueError`` otherwise) and stored as floats.
     """
 
     attitude: float = 1.0

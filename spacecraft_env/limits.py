@@ -111,11 +111,38 @@ def check_parameter(key: str, value: Any, name: str | None = None) -> float | in
     """``value`` checked against ``PARAMETER_LIMITS[key]``; the message says ``name``
     (default ``key``), the field the user set.
 
+    Parameters
+    ----------
+    key : str
+        The parameter's name in :data:`PARAMETER_LIMITS` (e.g. ``"rotation_rate"``).
+    value : Any
+        The value to check, in the unit of ``PARAMETER_LIMITS[key]`` (e.g.
+        deg/s for ``"rotation_rate"``, N m for ``"max_torque"``).
+    name : str, optional
+        The name the error message uses (default: ``key``).
+
+    Returns
+    -------
+    float or int
+        ``value`` as a float, or as an int for the integer parameters.
+
     Raises
     ------
     KeyError
         ``key`` is not in :data:`PARAMETER_LIMITS` (a programming error).
     ValueError
         The value is refused (see :meth:`Limit.check`).
+
+    Examples
+    --------
+    >>> from spacecraft_env import check_parameter
+    >>> check_parameter("rotation_rate", 0.36)
+    0.36
+    >>> check_parameter("actuator_delay_steps", 3.0)
+    3
+    >>> check_parameter("rotation_rate", 1e9, "rate_deg_s")
+    Traceback (most recent call last):
+    ...
+    ValueError: rate_deg_s must be a number in [-10, 10] deg/s, got 1000000000.0
     """
     return PARAMETER_LIMITS[key].check(key if name is None else name, value)

@@ -383,6 +383,19 @@ def ets8_parameters(n_modes: int = 2, *, coupling: bool = True, damping: float =
     sensor_positions : sequence of float
         Span fractions of the deflection sensors on every appendage (Fig. 3);
         default: one sensor at each tip.
+
+    Returns
+    -------
+    SpacecraftParameters
+        Hub of 2400 kg and inertia diag(11858.5, 11762.5, 2305) kg m^2 and the
+        four appendages s1, s2, a1, a2, in that (output) order.
+
+    Raises
+    ------
+    TypeError
+        ``n_modes`` is not an int (a bool is refused).
+    ValueError
+        ``n_modes`` is outside 1..8.
     """
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)):
         raise TypeError(f"n_modes must be an int in [1, {MAX_MODES}], got {n_modes!r}")

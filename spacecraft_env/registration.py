@@ -30,6 +30,18 @@ MAX_EPISODE_STEPS = 2500
 def env_id(scenario: str) -> str:
     """The registered id (with the ``spacecraft_env:`` module prefix) of a scenario.
 
+    Parameters
+    ----------
+    scenario : str
+        A scenario name of :data:`ENV_IDS`'s values (``"constant"``,
+        ``"docking"``, ``"solar_rotation"``, ``"paddle_rotation"``, ``"family"``).
+
+    Returns
+    -------
+    str
+        ``"spacecraft_env:<id>"``, e.g. ``"spacecraft_env:FlexibleSpacecraftDocking-v1"``
+        for ``"docking"``, which ``gymnasium.make`` accepts.
+
     Raises
     ------
     ValueError

@@ -296,7 +296,17 @@ class PaddleRotationScenario(SolarRotationScenario):
 
 @dataclass(frozen=True)
 class CombinedScenario(Scenario):
-    """Docking and paddle rotation at the same time."""
+    """Docking and paddle rotation at the same time.
+
+    Parameters
+    ----------
+    docking : DockingScenario
+        The docking events (modules, times, ``mass_centre_shift``); default:
+        the paper's Case 1.
+    rotation : SolarRotationScenario
+        The paddle rotation (rate, deg/s, and initial angle, deg); default:
+        the paper's Case 2, 0.2 deg/s from 0 deg.
+    """
 
     docking: DockingScenario = field(default_factory=DockingScenario)
     rotation: SolarRotationScenario = field(default_factory=SolarRotationScenario)
@@ -335,6 +345,19 @@ SCENARIOS: dict[str, type[Scenario]] = {
 
 def make_scenario(scenario: str | Scenario) -> Scenario:
     """Return a scenario instance from its name (or pass one through).
+
+    Parameters
+    ----------
+    scenario : str or Scenario
+        A key of :data:`SCENARIOS` (``"constant"``, ``"docking"``,
+        ``"solar_rotation"``, ``"paddle_rotation"``,
+        ``"docking_solar_rotation"``), built with its defaults, or a
+        :class:`Scenario` instance.
+
+    Returns
+    -------
+    Scenario
+        A new instance for a name; ``scenario`` itself for an instance.
 
     Raises
     ------

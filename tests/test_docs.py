@@ -130,3 +130,88 @@ def test_the_api_reference_builds_without_warnings(tmp_path):
     # one page per package: its public API (``__all__``), numpydoc sections rendered
     page = (tmp_path / "controllers.html").read_text()
     assert "PhysicalFeatures" in page and "Parameters" in page
+
+
+# --------------------------------------------------------------------------
+# The API reference: every public object says what it takes and what it gives
+# --------------------------------------------------------------------------
+
+#: The packages of the API reference (``make docs``), each read through its ``__all__``.
+API_PACKAGES = ("spacecraft_conventions", "spacecraft_env", "identifiers", "controllers",
+                "spacecraft_lab", "spacecraft_lab.sweeps")
+SECTION = re.compile(r"^(\w[\w ]*)\n-{3,}\s*$", re.M)
+
+
+def _sections(doc: str | None) -> set[str]:
+    """The numpydoc section titles of a docstring (``Parameters``, ``Returns``, ...)."""
+    return set(SECTION.findall(doc or ""))
+
+
+def _public_objects():
+    """(qualified name, object) of every class and function of the packages' ``__all__``,
+    each object once (under the first package that exports it)."""
+    import importlib
+    import inspect
+
+    seen = set()
+    for package in API_PACKAGES:
+        module = importlib.import_module(package)
+        for name in module.__all__:
+            obj = getattr(module, name)
+            if (inspect.isclass(obj) or inspect.isfunction(obj)) and id(obj) not in seen:
+                seen.add(id(obj))
+                yield f"{package}.{name}", obj
+
+
+def _undocumented(obj) -> list[str]:
+    """The sections ``obj`` lacks: ``Parameters`` if it takes arguments (for a class:
+    Parameters or Attributes, in its docstring or ``__init__``'s), ``Returns`` (or
+    ``Yields``) if a function returns something."""
+    import inspect
+
+    sections = _sections(inspect.getdoc(obj))
+    if inspect.isclass(obj):
+        init_doc = obj.__init__.__doc__ if "__init__" in vars(obj) else None
+        sections |= _sections(inspect.cleandoc(init_doc) if init_doc else "")
+        try:
+            takes = bool(inspect.signature(obj).parameters)
+        except (ValueError, TypeError):
+            takes = False
+    else:
+        takes = bool(inspect.signature(obj).parameters)
+    missing = []
+    if takes and not sections & {"Parameters", "Attributes", "Other Parameters"}:
+        missing.append("Parameters")
+    if inspect.isfunction(obj) and not sections & {"Returns", "Yields"}:
+        returns = inspect.signature(obj).return_annotation
+        if returns not in (None, "None", inspect.Signature.empty):
+            missing.append("Returns")
+    return missing
+
+
+def test_every_public_object_documents_its_parameters_and_returns():
+    objects = list(_public_objects())
+    assert len(objects) > 100
+    offenders = [f"{name}: {missing}" for name, obj in objects
+                 if (missing := _undocumented(obj))]
+    assert not offenders, "public objects without the numpydoc sections:\n" + \
+        "\n".join(offenders)
+
+
+def test_entry_point_examples_run():
+    """The ``Examples`` of the main entry points are doctests, and they pass."""
+    import doctest
+
+    from controllers import Trajectory, run_episode
+    from identifiers import default_identifier
+    from spacecraft_env import check_parameter
+
+    finder = doctest.DocTestFinder(recurse=False)
+    runner = doctest.DocTestRunner()
+    failed, report = 0, []
+    for obj in (default_identifier, run_episode, Trajectory, check_parameter):
+        tests = [t for t in finder.find(obj) if t.examples]
+        assert tests, f"{obj.__qualname__} has no doctest examples"
+        for test in tests:
+            failed += runner.run(test, out=report.append).failed
+    assert not failed, "".join(report)

@@ -291,7 +291,32 @@ def _apply_at(fn: Callable[[Any], Any], items: list[Any], i: int) -> Any:
 def make_backend(name: str, workers: int | None = None, address: str | None = None,
                  ship_code: bool = False) -> SerialBackend | LocalBackend | RayBackend:
     """A backend by name: ``"serial"``, ``"local"`` (``workers`` processes) or
-    ``"ray"`` (``address``; ``workers`` CPUs of a local instance)."""
+    ``"ray"`` (``address``; ``workers`` CPUs of a local instance).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`BACKENDS`: ``"serial"``, ``"local"`` or ``"ray"``.
+    workers : int, optional
+        Worker processes of ``"local"`` (default: one per core), or CPUs of
+        a local Ray instance (default: all); ignored by ``"serial"``.
+    address : str, optional
+        ``ray.init`` address of a cluster (``"ray"`` only; None: a local
+        instance).
+    ship_code : bool
+        Upload this project's packages with the Ray job (``"ray"`` only).
+
+    Returns
+    -------
+    SerialBackend or LocalBackend or RayBackend
+        A new backend, to be used as a context manager (a process pool or Ray
+        starts on entry).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or a ``workers`` that is not a positive integer.
+    """
     if name == "serial":
         return SerialBackend()
     if name == "local":

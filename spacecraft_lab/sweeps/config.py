@@ -458,6 +458,21 @@ def load_config(path: str | Path, *, allow_custom_tasks: bool = False,
     A sweep file is trusted input: with ``allow_custom_tasks`` it may name
     any importable ``"module:function"``, whose module is imported here.
 
+    Parameters
+    ----------
+    path : str or Path
+        The sweep file; its stem is the sweep's name.
+    allow_custom_tasks : bool
+        Permit custom ``"module:function"`` task kinds.
+    max_tasks : int
+        Largest number of tasks the grid may expand to (default
+        :data:`MAX_TASKS`).
+
+    Returns
+    -------
+    SweepConfig
+        The parsed and validated sweep.
+
     Raises
     ------
     FileNotFoundError

@@ -103,7 +103,22 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 def pending_tasks(tasks: list[Task], store: ResultStore,
                   retry_errors: bool = False) -> list[Task]:
-    """The tasks without a record (or with an error record, if ``retry_errors``)."""
+    """The tasks without a record (or with an error record, if ``retry_errors``).
+
+    Parameters
+    ----------
+    tasks : list of Task
+        The sweep's tasks.
+    store : ResultStore
+        The sweep's results (read once; the last record of a task counts).
+    retry_errors : bool
+        Count tasks whose last record is not ``"ok"`` as pending too.
+
+    Returns
+    -------
+    list of Task
+        The pending tasks, in the order of ``tasks``.
+    """
     done = store.load()
     return [t for t in tasks if t.task_id not in done
             or (retry_errors and done[t.task_id].get("status") != "ok")]

@@ -94,6 +94,16 @@ def parse_record(line: bytes) -> dict[str, Any] | None:
     :func:`record_problem`. Anything else (a line torn by an interrupted
     write, a bad byte, a hand-edited or wrong-typed entry) is not a finished
     task.
+
+    Parameters
+    ----------
+    line : bytes
+        One line of the file, with or without its newline.
+
+    Returns
+    -------
+    dict or None
+        The record, or None.
     """
     try:
         record = json.loads(line.decode("utf-8"))

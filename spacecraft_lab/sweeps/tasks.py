@@ -73,9 +73,17 @@ def resolve_task(kind: str, allow_custom: bool = False) -> Callable[..., dict]:
     Parameters
     ----------
     kind : str
+        A built-in kind (``"identify"``, ``"control"``) or
+        ``"package.module:function"``.
     allow_custom : bool
         Permit ``"module:function"`` kinds, whose import runs code named by
         the sweep file (see the module docstring).
+
+    Returns
+    -------
+    callable
+        The task function: keyword arguments (the task's ``params``) ->
+        ``{"metrics": {...}, "timings": {...}}``.
 
     Raises
     ------
@@ -159,6 +167,20 @@ def execute(task: dict[str, Any]) -> dict[str, Any]:
     ``"ok"`` with ``metrics`` and ``timings``, or ``"error"`` with ``error``
     (type and message) and ``traceback``; ``wall_s``, ``host``, ``pid``,
     ``started`` and ``finished`` (UTC).
+
+    Parameters
+    ----------
+    task : dict
+        ``task_id``, ``kind`` and ``params`` (required), ``label`` and
+        ``timeout_s`` (s; None: no limit) (optional). Custom
+        ``"module:function"`` kinds are run without a permission check here:
+        the driver checked the kind.
+
+    Returns
+    -------
+    dict
+        The record (JSON-ready: metrics and timings through :func:`jsonable`),
+        ``wall_s`` in s, ``started`` and ``finished`` ISO 8601 strings.
     """
     record = {**identity(task), "host": platform.node(), "pid": os.getpid(), "started": _now()}
     start = time.perf_counter()
