@@ -533,7 +533,7 @@ class OracleLQR(_EnvController):
 
     @single_threaded_blas
     def act(self, obs: ArrayLike, info: dict[str, Any] | None = None) -> np.ndarray:
-        if info is None or "state" not in info:
+        if info is None or "state" not in info or "time" not in info:
             raise ValueError("OracleLQR needs the env's info dict with 'state' and 'time'")
         model = self.env.model
         sys_ = model.discrete(float(info["time"]))

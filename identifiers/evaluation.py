@@ -268,8 +268,18 @@ def persistence_predictions(outputs: ArrayLike, horizons: Sequence[int] = HORIZO
     dict
         h -> (N, m) array whose row t is ``y_{t-h}`` (NaN for ``t < h``), for
         each distinct horizon in increasing order.
+
+    Raises
+    ------
+    ValueError
+        ``outputs`` not 2-D, or a horizon that is not an integer >= 1.
     """
     y = np.asarray(outputs, dtype=float)
+    if y.ndim != 2:
+        raise ValueError(f"outputs must be (N, m), got shape {y.shape}")
+    bad = [h for h in horizons if isinstance(h, bool) or int(h) != h or h < 1]
+    if bad:
+        raise ValueError(f"horizons must be integers >= 1, got {bad}")
     out = {}
     for h in sorted({int(h) for h in horizons}):
         pred = np.full_like(y, np.nan)
@@ -282,8 +292,11 @@ def prediction_vaf(target: ArrayLike, predictions: dict[int, np.ndarray], start:
                    ) -> dict[int, np.ndarray]:
     """Per-channel VAF (%) of each horizon's predictions over ``t >= start``.
 
-    Rows where a prediction is missing (NaN) are left out; a channel whose
-    prediction diverged scores ``-inf``.
+    Rows where every prediction is missing (all NaN: the model did not
+    exist yet) are left out. A row with some non-finite predictions is a
+    broken model's and is kept: its channels score ``-inf``, as does a
+    channel whose prediction diverged or whose target has no variance (VAF
+    undefined).
 
     Parameters
     ----------
@@ -305,7 +318,7 @@ def prediction_vaf(target: ArrayLike, predictions: dict[int, np.ndarray], start:
     out = {}
     for h, pred in predictions.items():
         rows = np.arange(y.shape[0]) >= start
-        rows &= np.all(np.isfinite(pred), axis=1) | ~np.all(np.isnan(pred), axis=1)
+        rows &= ~np.all(np.isnan(pred), axis=1)
         if not rows.any():
             out[h] = np.full(y.shape[1], np.nan)
             continue

@@ -45,8 +45,16 @@ def observability_basis(a: np.ndarray, c: np.ndarray) -> np.ndarray:
     (n, n) ndarray
         ``T``; singular if the model is unobservable or its first n stacked
         rows are dependent.
+
+    Raises
+    ------
+    ValueError
+        ``a`` not square, or ``c`` without rows or of another width.
     """
     n = a.shape[0]
+    if c.ndim != 2 or c.shape[0] < 1 or c.shape[1] != n or a.shape != (n, n):
+        raise ValueError(f"a must be (n, n) and c (m, n) with m >= 1, got {a.shape} and "
+                         f"{c.shape}")
     rows, block = [], c
     total = 0
     while total < n:

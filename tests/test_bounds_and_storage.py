@@ -259,3 +259,29 @@ def test_run_episode_checks_its_arguments(kwargs, error, expected):
     args = {"env": env, "controller": PD(env), **kwargs}
     with pytest.raises(error, match=expected):
         run_episode(**args)
+
+
+def test_small_api_faults_found_while_documenting():
+    from controllers import OracleLQR
+    from identifiers import observability_basis, persistence_predictions, prediction_vaf
+    from spacecraft_lab.sweeps import execute
+    from spacecraft_lab.sweeps.backends import RayBackend
+
+    with pytest.raises(ValueError, match="horizons must be integers >= 1"):
+        persistence_predictions(np.zeros((5, 2)), [0])
+    y = np.arange(10.0).reshape(5, 2)
+    pred = y.copy()
+    pred[:2] = np.nan                                   # the model did not exist yet
+    assert np.all(prediction_vaf(y, {1: pred})[1] == 100.0)
+    pred[3, 0] = np.nan                                 # a broken model's row is kept
+    assert prediction_vaf(y, {1: pred})[1][0] == -np.inf
+    with pytest.raises(ValueError, match="a task needs 'task_id'"):
+        execute({"kind": "control", "params": {}})
+    env = gym.make("FlexibleSpacecraft-v1")
+    _, info = env.reset(seed=0)
+    with pytest.raises(ValueError, match="'state' and 'time'"):
+        OracleLQR(env).act(np.zeros(10), {"state": info["state"]})
+    with pytest.raises(ValueError, match="num_cpus must be a positive integer"):
+        RayBackend(num_cpus=True)
+    with pytest.raises(ValueError, match="c \\(m, n\\) with m >= 1"):
+        observability_basis(np.eye(2), np.zeros((0, 2)))

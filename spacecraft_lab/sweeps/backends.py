@@ -180,7 +180,8 @@ class RayBackend:
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None,
                  max_in_flight: int | None = None, ship_code: bool = False) -> None:
-        if num_cpus is not None and (not isinstance(num_cpus, int) or num_cpus < 1):
+        if num_cpus is not None and (isinstance(num_cpus, bool) or not isinstance(num_cpus, int)
+                                     or num_cpus < 1):
             raise ValueError(f"num_cpus must be a positive integer, got {num_cpus!r}")
         self.address = address
         self.num_cpus = num_cpus

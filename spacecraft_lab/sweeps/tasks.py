@@ -180,8 +180,20 @@ def execute(task: dict[str, Any]) -> dict[str, Any]:
     -------
     dict
         The record (JSON-ready: metrics and timings through :func:`jsonable`),
-        ``wall_s`` in s, ``started`` and ``finished`` ISO 8601 strings.
+        ``wall_s`` in s, ``started`` and ``finished`` ISO 8601 strings. A
+        failing task is a record with ``status`` ``"error"``, never an
+        exception.
+
+    Raises
+    ------
+    ValueError
+        ``task`` is not a task dict (the driver's error, not the task's).
     """
+    missing = [key for key in ("task_id", "kind", "params")
+               if not isinstance(task, dict) or key not in task]
+    if missing or not isinstance(task["params"], dict):
+        raise ValueError(f"a task needs 'task_id', 'kind' and a 'params' dict; "
+                         f"missing or wrong: {missing or ['params']}")
     record = {**identity(task), "host": platform.node(), "pid": os.getpid(), "started": _now()}
     start = time.perf_counter()
     try:
