@@ -289,6 +289,8 @@ class OnlineIdentifier(ABC):
         phi[self.n_inputs:zr] = y
 
     def _validate(self, u, y) -> tuple[np.ndarray, np.ndarray]:
+        """``u`` and ``y`` as 1-D float arrays (the caller's own arrays when they are
+        already that: a sample is only read, and :meth:`update` copies what it keeps)."""
         arrays = []
         for name, value in (("u", u), ("y", y)):
             arr = np.asarray(value)
@@ -297,7 +299,7 @@ class OnlineIdentifier(ABC):
             if arr.ndim != 1 or arr.size == 0:
                 raise ValueError(f"{name} must be a non-empty 1-D array of one sample, "
                                  f"got shape {arr.shape}")
-            arrays.append(arr.astype(float))
+            arrays.append(arr if arr.dtype == np.float64 else arr.astype(float))
         u, y = arrays
         if self.n_inputs is None:
             self._init_sizes(u.size, y.size)
@@ -340,7 +342,7 @@ class OnlineIdentifier(ABC):
             if su is not None and sy is not None:
                 self._su, self._sy = su, sy
             else:
-                self._pending.append((u, y))
+                self._pending.append((u.copy(), y.copy()))
                 if len(self._pending) < self.p:
                     return
                 pending_u = np.array([pu for pu, _ in self._pending])
@@ -362,7 +364,7 @@ class OnlineIdentifier(ABC):
     def _process_sample(self, u: np.ndarray, y: np.ndarray) -> None:
         u = u / self._su
         y = y / self._sy
-        if self._last_y is not None and not np.any(u) and np.array_equal(y, self._last_y):
+        if self._last_y is not None and not u.any() and np.array_equal(y, self._last_y):
             # zero input and the same output bit for bit: a plant at rest or a frozen
             # sensor. No information; processing it would only let forgetting erase what
             # was learnt (and a warm-up end on nothing). Skipped without moving the clock.
@@ -370,23 +372,27 @@ class OnlineIdentifier(ABC):
             return
         self._last_y = y
         received_u, received_y = u, y
-        usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
-        usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs)
-        if not (usable_u.all() and usable_y.all()) and (
-                np.any(np.isfinite(u) & ~usable_u) or np.any(np.isfinite(y) & ~usable_y)):
+        # every entry finite and within max_abs (a NaN fails the comparison too); the
+        # per-entry masks are only needed for a sample that is not
+        usable = bool(np.abs(u).max() <= self.max_abs and np.abs(y).max() <= self.max_abs)
+        if not usable and (np.any(np.isfinite(u) & (np.abs(u) > self.max_abs))
+                           or np.any(np.isfinite(y) & (np.abs(y) > self.max_abs))):
             self._range_skips += 1
-        if usable_u.all() and usable_y.all():
+        verdict: bool | np.ndarray = True
+        if usable:
             verdict = self._admissible(u, y)
-            if np.all(verdict):
+            if verdict is True or np.all(verdict):
+                verdict = True
                 self._outlier_run = 0
             else:
                 self._outlier_run += 1
                 if self._outlier_run <= OUTLIER_RUN:
                     self.n_outliers += 1
-                    usable_y &= verdict              # an outlier: predict those outputs
+                    usable = False                   # an outlier: predict those outputs
                 else:
+                    verdict = True
                     self._accept_outlier_run(u, y)   # the guard's reference is stale
-        if usable_u.all() and usable_y.all():
+        if usable:
             learn = self._quiet == 0 and self._k >= self.p
             self._step(u, y, learn)
             if self._quiet:
@@ -394,6 +400,8 @@ class OnlineIdentifier(ABC):
             self._skip_run = 0
         else:
             self.n_skipped += 1
+            usable_u = np.isfinite(u) & (np.abs(u) <= self.max_abs)
+            usable_y = np.isfinite(y) & (np.abs(y) <= self.max_abs) & verdict
             u = np.where(usable_u, u, 0.0)
             fill = self._fill_output()           # a broken estimator predicts NaN: 0 then
             y = np.where(usable_y, y, np.where(np.isfinite(fill), fill, 0.0))
@@ -410,7 +418,7 @@ class OnlineIdentifier(ABC):
                 return
         self._k += 1
         state = self._state_vector()
-        if self._k % HEALTH_EVERY == 0 or (state is not None and not np.all(np.isfinite(state))):
+        if self._k % HEALTH_EVERY == 0 or (state is not None and not np.isfinite(state).all()):
             self._check_health()
 
     # ------------------------------------------------------------ health

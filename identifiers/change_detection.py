@@ -32,6 +32,7 @@ the change (the last time ``g`` was zero).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -242,7 +243,7 @@ class RegressionGLR:
             self._r = np.zeros((phi.size, phi.size))
         level = _glr_level(self._c, self._r, phi, error,
                            np.maximum(np.asarray(variance, dtype=float), 1e-30), lam)
-        if not np.isfinite(level):
+        if not math.isfinite(level):
             return None
         if k < self.holdoff:                       # initial calibration, settled half only
             if k >= self.holdoff // 2:

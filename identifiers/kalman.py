@@ -15,6 +15,8 @@ fixed model (the fixed LQG of the controllers).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike
@@ -88,6 +90,31 @@ def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     return a @ xf + b @ u, pn, a @ gain, e, s, True
 
 
+@njit(cache=True, nogil=True)
+def _within(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.ndarray,
+            sigmas: float) -> np.ndarray:
+    """``|y - C x| <= sigmas sqrt(max(diag(C P C^T) + r, 1e-30))`` per output, compiled
+    (zero entries of ``C`` skipped; a non-finite prediction or spread is outside)."""
+    n, m = x.shape[0], c.shape[0]
+    inside = np.empty(m, dtype=np.bool_)
+    for j in range(m):
+        prediction = 0.0
+        variance = 0.0
+        for k in range(n):
+            cjk = c[j, k]
+            if cjk != 0.0:
+                prediction += cjk * x[k]
+                pc = 0.0
+                for i in range(n):
+                    pc += p[k, i] * c[j, i]
+                variance += cjk * pc
+        variance += r[j]
+        if variance < 1e-30:
+            variance = 1e-30
+        inside[j] = abs(y[j] - prediction) <= sigmas * math.sqrt(variance)
+    return inside
+
+
 class KalmanPredictor:
     """Time-varying Kalman filter in one-step predictor form.
 
@@ -145,7 +172,7 @@ class KalmanPredictor:
         (n,) ndarray
             ``x_{k+1|k}``.
         """
-        if y is not None and y.shape[0] == c.shape[0] and np.all(np.isfinite(y)):
+        if y is not None and y.shape[0] == c.shape[0] and np.isfinite(y).all():
             x, p, gain, e, s, ok = _full_update(self.x, self.P, a, b, c, q,
                                                 np.asarray(r, dtype=float), u, y)
             if ok:
@@ -154,6 +181,19 @@ class KalmanPredictor:
                 return self.x
         self.correct(c, r, y, a=a)
         return self.predict(a, b, q, u)
+
+    def within(self, c: np.ndarray, r: np.ndarray, y: np.ndarray, sigmas: float) -> np.ndarray:
+        """Which outputs of ``y`` lie within ``sigmas`` predicted standard deviations
+        of their prediction: ``|y - C x| <= sigmas sqrt(diag(C P C^T) + r)`` (an outlier
+        guard; the filter is not changed).
+
+        Returns
+        -------
+        (m,) ndarray of bool
+            False also where the prediction or its spread is not finite.
+        """
+        return _within(self.x, self.P, np.ascontiguousarray(c, dtype=float),
+                       np.asarray(r, dtype=float), np.asarray(y, dtype=float), float(sigmas))
 
     def filtered(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> np.ndarray:
         """``x_{k|k}``: the prediction corrected by ``y_k``, without changing the filter."""

@@ -28,7 +28,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from identifiers.modal_kernels import bank_step, highpass_step, oscillator_zoh_derivatives
+from identifiers.modal_kernels import (
+    bank_highpassed,
+    bank_regressor,
+    bank_run,
+    bank_step,
+    highpass_run,
+    highpass_step,
+    oscillator_zoh_derivatives,
+)
 
 __all__ = ["MAX_DAMPING", "MIN_DAMPING", "HighPass", "ModalFilterBank", "Resonator", "mode_zoh"]
 
@@ -104,6 +112,11 @@ class HighPass:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Filter one sample of every signal (the filter advances)."""
         return highpass_step(self._last, self._out, np.asarray(x, dtype=float), self.rho)
+
+    def run(self, xs: np.ndarray) -> np.ndarray:
+        """Filter a record, one sample per row of ``xs`` (N, size), as N calls would."""
+        return highpass_run(self._last, self._out, np.ascontiguousarray(xs, dtype=float),
+                            self.rho)
 
 
 class ModalFilterBank:
@@ -196,13 +209,7 @@ class ModalFilterBank:
     def regressor(self) -> np.ndarray:
         """The regressor of the current sample (states before its torque acts)."""
         out = np.empty(self.size)
-        m6 = self.n_flexible
-        out[0:3] = self._p
-        out[3:6] = self._v
-        out[6:6 + m6] = self._q.ravel()
-        out[6 + m6:self.size - 2] = self._free[:, 0, :].ravel()
-        out[self.size - 2] = 1.0
-        out[self.size - 1] = self._since * self.dt
+        bank_regressor(out, self._p, self._v, self._q, self._free, self._since, self.dt)
         return out
 
     def sensitivity(self) -> tuple[np.ndarray, np.ndarray]:
@@ -218,12 +225,61 @@ class ModalFilterBank:
         """
         return self._dq, self._dfree[:, :, 0, :]
 
+    def highpassed(self, highpass: HighPass, dq_highpass: HighPass | None = None,
+                   dfree_highpass: HighPass | None = None
+                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """:meth:`regressor` and :meth:`sensitivity` through high-passes, in one
+        compiled pass.
+
+        The same as ``highpass(regressor())`` and, if both derivative
+        high-passes are given, ``dq_highpass(dq.ravel())`` and
+        ``dfree_highpass(dfree.ravel())`` with ``dq, dfree = sensitivity()``
+        (the high-passes advance); the derivatives are None otherwise.
+        """
+        derivatives = dq_highpass is not None and dfree_highpass is not None
+        if derivatives and not self.sensitivities:
+            raise RuntimeError("derivatives need a bank built with sensitivities=True")
+        dq_hp = dq_highpass if derivatives else highpass
+        dfree_hp = dfree_highpass if derivatives else highpass
+        x, dq, dfree = bank_highpassed(
+            self._p, self._v, self._q, self._free, self._since, self.dt, self._dq, self._dfree,
+            highpass._last, highpass._out, highpass.rho, dq_hp._last, dq_hp._out, dq_hp.rho,
+            dfree_hp._last, dfree_hp._out, dfree_hp.rho, derivatives)
+        return (x, dq, dfree) if derivatives else (x, None, None)
+
     def step(self, u: np.ndarray) -> None:
         """Advance every filter by one sample under torque ``u`` (normalized, (3,))."""
         bank_step(np.asarray(u, dtype=float), self.dt, self.ratio, self._p, self._v, self._q,
                   self._free, self._a, self._b, self._dq, self._dfree, self._da, self._db,
                   self.sensitivities)
         self._since += 1
+
+    def run(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Advance the bank over a record of torques, as one :meth:`step` per row would.
+
+        Parameters
+        ----------
+        inputs : (N, 3) ndarray
+            Normalized torques.
+
+        Returns
+        -------
+        regressors : (N, size) ndarray
+            Row k: :meth:`regressor` before torque k acts.
+        dq, dfree : (N, 12 M), (N, 4 M) ndarray
+            Row k: :meth:`sensitivity` at the same time, flattened (zeros
+            without sensitivities).
+        """
+        inputs = np.ascontiguousarray(inputs, dtype=float).reshape(-1, 3)
+        n, m = inputs.shape[0], len(self.resonators)
+        regressors = np.empty((n, self.size))
+        dq = np.zeros((n, 12 * m))
+        dfree = np.zeros((n, 4 * m))
+        bank_run(inputs, self.dt, self.ratio, self._p, self._v, self._q, self._free, self._a,
+                 self._b, self._dq, self._dfree, self._da, self._db, self.sensitivities,
+                 self._since, regressors, dq, dfree)
+        self._since += n
+        return regressors, dq, dfree
 
     def recenter(self, dlogf: np.ndarray, dzeta: np.ndarray) -> None:
         """Move every resonator by ``(dlogf, dzeta)`` (log-frequency, damping ratio).

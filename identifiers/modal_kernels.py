@@ -8,7 +8,8 @@ Its sensitivities to the log-frequency and the damping ratio
 (:func:`oscillator_zoh_derivatives`) drive the derivative filters that the
 modal tracker regresses on. :func:`bank_step` advances the integrators,
 the resonators, their free responses and all the derivative filters by one
-sample in one compiled pass.
+sample in one compiled pass, and :func:`bank_run` (with :func:`highpass_run`)
+a whole record of them, for the rebuilds that replay one.
 
 Compiled with numba (``cache=True``); ``NUMBA_DISABLE_JIT=1`` runs the same
 code as plain Python.
@@ -21,7 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["bank_step", "highpass_step", "oscillator_zoh", "oscillator_zoh_derivatives"]
+__all__ = ["bank_highpassed", "bank_regressor", "bank_run", "bank_step", "highpass_run",
+           "highpass_step", "oscillator_zoh", "oscillator_zoh_derivatives"]
 
 #: Relative step of the central differences for the sensitivities.
 _STEP = 1e-5
@@ -159,6 +161,100 @@ def bank_step(u: np.ndarray, dt: float, ratio: float, pos: np.ndarray, vel: np.n
 
 
 @njit(cache=True, nogil=True)
+def bank_regressor(out: np.ndarray, pos: np.ndarray, vel: np.ndarray, q: np.ndarray,
+                   free: np.ndarray, since: int, dt: float) -> None:
+    """Write the bank's regressor (layout of
+    :meth:`~identifiers.modal_basis.ModalFilterBank.regressor`) into ``out``."""
+    m = q.shape[0]
+    for ax in range(3):
+        out[ax] = pos[ax]
+        out[3 + ax] = vel[ax]
+    j = 6
+    for i in range(m):
+        for ax in range(3):
+            out[j] = q[i, ax, 0]
+            out[j + 1] = q[i, ax, 1]
+            j += 2
+    for i in range(m):
+        out[j] = free[i, 0, 0]
+        out[j + 1] = free[i, 0, 1]
+        j += 2
+    out[j] = 1.0
+    out[j + 1] = since * dt
+
+
+@njit(cache=True, nogil=True)
+def bank_highpassed(pos: np.ndarray, vel: np.ndarray, q: np.ndarray, free: np.ndarray,
+                    since: int, dt: float, dq: np.ndarray, dfree: np.ndarray,
+                    last: np.ndarray, out: np.ndarray, rho: float, dq_last: np.ndarray,
+                    dq_out: np.ndarray, dq_rho: float, dfree_last: np.ndarray,
+                    dfree_out: np.ndarray, dfree_rho: float, sensitivities: bool
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bank's regressor and (with ``sensitivities``) its derivatives ``dq`` and
+    ``dfree[:, :, 0, :]``, flattened, each through its :func:`highpass_step` (whose
+    states advance); empty derivatives without."""
+    raw = np.empty(last.shape[1])
+    bank_regressor(raw, pos, vel, q, free, since, dt)
+    x = highpass_step(last, out, raw, rho)
+    if not sensitivities:
+        return x, np.empty(0), np.empty(0)
+    m = q.shape[0]
+    raw_dq = np.empty(12 * m)
+    raw_dfree = np.empty(4 * m)
+    j = 0
+    for i in range(m):
+        for p in range(2):
+            for ax in range(3):
+                raw_dq[j] = dq[i, p, ax, 0]
+                raw_dq[j + 1] = dq[i, p, ax, 1]
+                j += 2
+    j = 0
+    for i in range(m):
+        for p in range(2):
+            raw_dfree[j] = dfree[i, p, 0, 0]
+            raw_dfree[j + 1] = dfree[i, p, 0, 1]
+            j += 2
+    return (x, highpass_step(dq_last, dq_out, raw_dq, dq_rho),
+            highpass_step(dfree_last, dfree_out, raw_dfree, dfree_rho))
+
+
+@njit(cache=True, nogil=True)
+def bank_run(inputs: np.ndarray, dt: float, ratio: float, pos: np.ndarray, vel: np.ndarray,
+             q: np.ndarray, free: np.ndarray, a: np.ndarray, b: np.ndarray,
+             dq: np.ndarray, dfree: np.ndarray, da: np.ndarray, db: np.ndarray,
+             sensitivities: bool, since: int, regressors: np.ndarray,
+             dq_rows: np.ndarray, dfree_rows: np.ndarray) -> None:
+    """Run the bank over a record of torques ``inputs`` (N, 3), in place.
+
+    Row k of ``regressors`` (N, size) receives the regressor before torque k
+    acts, and, with ``sensitivities``, rows k of ``dq_rows`` (N, 12 M) and
+    ``dfree_rows`` (N, 4 M) its derivatives (``dq`` and ``dfree[:, :, 0, :]``
+    flattened); then the bank advances by :func:`bank_step`. The same
+    arithmetic as one :func:`bank_step` per sample; ``since`` is the ramp's
+    sample count at the first row.
+    """
+    m = q.shape[0]
+    for k in range(inputs.shape[0]):
+        bank_regressor(regressors[k], pos, vel, q, free, since + k, dt)
+        if sensitivities:
+            j = 0
+            for i in range(m):
+                for p in range(2):
+                    for ax in range(3):
+                        dq_rows[k, j] = dq[i, p, ax, 0]
+                        dq_rows[k, j + 1] = dq[i, p, ax, 1]
+                        j += 2
+            j = 0
+            for i in range(m):
+                for p in range(2):
+                    dfree_rows[k, j] = dfree[i, p, 0, 0]
+                    dfree_rows[k, j + 1] = dfree[i, p, 0, 1]
+                    j += 2
+        bank_step(inputs[k], dt, ratio, pos, vel, q, free, a, b, dq, dfree, da, db,
+                  sensitivities)
+
+
+@njit(cache=True, nogil=True)
 def highpass_step(last: np.ndarray, out: np.ndarray, x: np.ndarray, rho: float) -> np.ndarray:
     """One sample of ``((1 - z^-1) / (1 - rho z^-1))^2`` on every entry of ``x``.
 
@@ -174,3 +270,12 @@ def highpass_step(last: np.ndarray, out: np.ndarray, x: np.ndarray, rho: float) 
         last[1, i] = v
         out[1, i] = w[i]
     return w
+
+
+@njit(cache=True, nogil=True)
+def highpass_run(last: np.ndarray, out: np.ndarray, xs: np.ndarray, rho: float) -> np.ndarray:
+    """:func:`highpass_step` on every row of ``xs`` (N, size) in turn; the filtered rows."""
+    ys = np.empty_like(xs)
+    for k in range(xs.shape[0]):
+        ys[k] = highpass_step(last, out, xs[k], rho)
+    return ys

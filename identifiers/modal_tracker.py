@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.linalg import solve_triangular
+from scipy.linalg import get_lapack_funcs
 
 from identifiers.modal_basis import MAX_DAMPING, MIN_DAMPING
 
@@ -55,6 +55,31 @@ MAX_STEP = (0.005, 0.005)
 #: Smallest relative residual taken as evidence (a 60 dB signal-to-error ratio):
 #: on noise-free data the residual left is the model's structural error.
 RESOLUTION = 1e-3
+
+_TRTRS = get_lapack_funcs("trtrs", (np.zeros((1, 1)),))
+
+
+def _solve_lower(chol: np.ndarray, b: np.ndarray, transpose: bool = False) -> np.ndarray:
+    """``chol^-1 b`` (``chol^-T b`` with ``transpose``) for a lower-triangular ``chol``.
+
+    The LAPACK call of ``scipy.linalg.solve_triangular(chol, b, lower=True,
+    check_finite=False)``, made as it makes it (a row-major factor is passed
+    transposed), without its argument handling: a refinement makes fifteen.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If ``chol`` is singular.
+    """
+    if chol.flags.f_contiguous:
+        x, info = _TRTRS(chol, b, lower=1, trans=int(transpose))
+    else:
+        x, info = _TRTRS(chol.T, b, lower=0, trans=int(not transpose))
+    if info > 0:
+        raise np.linalg.LinAlgError(f"singular matrix: resolution failed at diagonal {info - 1}")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal trtrs")
+    return x
 
 
 @njit(cache=True, nogil=True)
@@ -81,6 +106,31 @@ def _moments_update(s: np.ndarray, z: np.ndarray, phi: np.ndarray, columns: np.n
         for c in range(q):
             z[j, c] += xj * y[rows[c]]
     return yy * inv
+
+
+@njit(cache=True, nogil=True)
+def _window_update(ss, zs, yy: np.ndarray, phi: np.ndarray, columns, components: np.ndarray,
+                   dphi: np.ndarray, dfree: np.ndarray, y: np.ndarray, rows,
+                   inv: float) -> None:
+    """:func:`_moments_update` of every group (tuples ``ss``, ``zs``, ``columns``,
+    ``rows``; ``yy`` accumulates in place) with its derivative regressors: resonator
+    by resonator and parameter by parameter, the three axes' ``dphi[..., component]``
+    and the two ``dfree``."""
+    m = dphi.shape[0]
+    derivs = np.empty((2, 10 * m))
+    for component in range(2):
+        j = 0
+        for i in range(m):
+            for p in range(2):
+                for a in range(3):
+                    derivs[component, j] = dphi[i, p, a, component]
+                    j += 1
+                for c in range(2):
+                    derivs[component, j] = dfree[i, p, c]
+                    j += 1
+    for g in range(len(ss)):
+        yy[g] += _moments_update(ss[g], zs[g], phi, columns[g], derivs[components[g]], y,
+                                 rows[g], inv)
 
 
 @dataclass
@@ -154,6 +204,10 @@ class ModalTracker:
         self.n_steps = 0
         self.n_rejected = 0
         self._derivs = 10 * self.m           # per group: (resonator, parameter, column)
+        self._columns = tuple(np.ascontiguousarray(g.columns, dtype=np.int64)
+                              for g in self.groups)
+        self._rows = tuple(np.ascontiguousarray(g.rows, dtype=np.int64) for g in self.groups)
+        self._components = np.array([g.component for g in self.groups], dtype=np.int64)
         self.reset()
 
     def reset(self) -> None:
@@ -161,7 +215,7 @@ class ModalTracker:
         self._s = [np.zeros((g.columns.size + self._derivs,) * 2, order="F")
                    for g in self.groups]
         self._z = [np.zeros((g.columns.size + self._derivs, g.rows.size)) for g in self.groups]
-        self._yy = [0.0 for _ in self.groups]
+        self._yy = np.zeros(len(self.groups))
         self._scale = 1.0
         self._count = 0.0                     # effective number of samples in the window
 
@@ -184,11 +238,11 @@ class ModalTracker:
         lam = self.forgetting
         new = self._scale * lam
         inv = 1.0 / new
-        derivs = [np.concatenate((dphi[:, :, :, component], dfree), axis=2).ravel()
-                  for component in (0, 1)]
-        for gi, g in enumerate(self.groups):
-            self._yy[gi] += _moments_update(self._s[gi], self._z[gi], phi, g.columns,
-                                            derivs[g.component], y, g.rows, inv)
+        _window_update(tuple(self._s), tuple(self._z), self._yy,
+                       np.ascontiguousarray(phi, dtype=float), self._columns, self._components,
+                       np.ascontiguousarray(dphi, dtype=float),
+                       np.ascontiguousarray(dfree, dtype=float),
+                       np.ascontiguousarray(y, dtype=float), self._rows, inv)
         self._scale = new
         self._count = lam * self._count + 1.0
         if self._scale < 1e-8:
@@ -232,7 +286,7 @@ class ModalTracker:
         rows = x.reshape(self.m, 2, 5, -1)
         moved = np.einsum("ip,ipcn->icn", delta, rows)
         out = np.zeros((g.columns.size, x.shape[1]))
-        np.add.at(out, g.positions.ravel(), moved.reshape(self.m * 5, -1))
+        out[g.positions.ravel()] = moved.reshape(self.m * 5, -1)     # distinct positions
         return out
 
     @staticmethod
@@ -240,9 +294,7 @@ class ModalTracker:
                yy: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         ridge = 1e-9 * np.trace(sff) / max(sff.shape[0], 1) + 1e-12
         chol = np.linalg.cholesky(sff + ridge * np.eye(sff.shape[0]))
-        theta = solve_triangular(chol, solve_triangular(chol, zf, lower=True,
-                                                        check_finite=False),
-                                 lower=True, trans="T", check_finite=False)
+        theta = _solve_lower(chol, _solve_lower(chol, zf), transpose=True)
         v = yy - float(np.sum(zf * theta))
         return v, theta, zd - sfd.T @ theta, chol
 
@@ -266,7 +318,7 @@ class ModalTracker:
                 v0 += v
                 yy += yy_g
                 # derivative Gram with the gains' columns projected out (Kaufman)
-                w = solve_triangular(chol, sfd, lower=True, check_finite=False)
+                w = _solve_lower(chol, sfd)
                 sp = (sdd - w.T @ w).reshape(m, 2, 5, m, 2, 5)
                 coef = theta[g.positions]                        # (M, 5, r)
                 # d V / d delta_(i,p) = -2 sum_(c, o) Theta[(i, c), o] resid[(i, p, c), o]

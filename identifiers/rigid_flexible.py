@@ -57,6 +57,7 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 from identifiers.base import OnlineIdentifier, _positive_float, _positive_int
@@ -76,6 +77,8 @@ __all__ = ["ATTITUDE_STATES", "FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIAN
 #: the body rate (the next three); the flexible modes follow.
 ATTITUDE_STATES = slice(0, 3)
 RATE_STATES = slice(3, 6)
+#: The diagonal of the attitude block of the state covariance.
+_ATTITUDE_DIAGONAL = np.diag_indices(3)
 
 #: Initial covariance of every gain (unit-RMS regressors, units of the output
 #: noise variance): a vague prior.
@@ -121,6 +124,14 @@ def _same_modes(a: Sequence[Resonator], b: Sequence[Resonator],
         return False
     return all(x.rank == y.rank and abs(x.frequency_hz / y.frequency_hz - 1.0) <= tolerance
                for x, y in zip(a, b, strict=True))
+
+
+@njit(cache=True, nogil=True)
+def _mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
+    """``level <- keep * level + weight * x**2`` in place: one step of an exponentially
+    weighted mean square (the arithmetic of the NumPy expression)."""
+    for i in range(x.shape[0]):
+        level[i] = keep * level[i] + weight * (x[i] * x[i])
 
 
 def _highpass_noise_gain(rho: float) -> float:
@@ -239,6 +250,8 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         if missing:
             raise ValueError(f"the rigid-flexible identifier needs the sensor groups {missing}; "
                              f"the layout holds {self.layout.names}")
+        self._att_rows = self.layout.slice("attitude")
+        self._rate_rows = self.layout.slice("rate")
         n = _positive_int("n", n)
         if n < 6 or n % 2:
             raise ValueError(f"n must be an even order >= 6 (6 rigid states), got {n}")
@@ -291,7 +304,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._tracker: ModalTracker | None = None
         self.n_rediscoveries = 0
         self._mats = None
-        self._torque_noise: tuple = (None, None)
+        self._torque_noise: tuple = (None, None, None)
         self._phases: dict[tuple[int, int], np.ndarray] = {}
         self._resvar: np.ndarray | None = None
         self._sigvar: np.ndarray | None = None
@@ -357,8 +370,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _allocate(self, r: int, m: int) -> None:
         s = self.layout.scales() if self._user_scales[1] is None else self._user_scales[1]
-        rate, att = self.layout.slice("rate"), self.layout.slice("attitude")
-        self._ratio = float(np.mean(s[rate]) / np.mean(s[att]))
+        self._ratio = float(np.mean(s[self._rate_rows]) / np.mean(s[self._att_rows]))
 
     def _process(self, u: np.ndarray, y: np.ndarray) -> None:
         # the base class replaces unusable samples by a stand-in and calls _step with
@@ -371,9 +383,7 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         kf = self._kf
         if self.outlier_threshold is None or kf is None or self._mats is None:
             return True
-        c = self._mats[2]
-        spread = np.sqrt(np.maximum(np.sum((c @ kf.P) * c, axis=1) + self._r, 1e-30))
-        inside = np.abs(y - c @ kf.x) <= self.outlier_threshold * spread
+        inside = kf.within(self._mats[2], self._r, y, self.outlier_threshold)
         if not inside.all():
             # the base class counts it in n_outliers; the filter still uses the other outputs
             self._real = False
@@ -461,15 +471,12 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         n_res = len(self.resonators)
         samples = list(self._history)[-replay:]
         # the high-passed regressors (and their derivatives by the modal parameters) of
-        # the replayed samples, computed once: they set the regressor scales (unit-RMS
+        # the replayed samples, computed at once: they set the regressor scales (unit-RMS
         # columns) and are then replayed as they are, leaving the bank and its
         # high-passes where the replay ends
-        rows, sens = [], []
-        for uk, *_ in samples:
-            rows.append(self._hp_x(bank.regressor()).copy())
-            sens.append(self._sensitivity_row())
-            bank.step(uk)
-        scale = np.sqrt(np.mean(np.array(rows) ** 2, axis=0))
+        raw, raw_dq, raw_dfree = bank.run(np.array([s[0] for s in samples]))
+        rows = self._hp_x.run(raw)
+        scale = np.sqrt(np.mean(rows ** 2, axis=0))
         scale[bank.slices["free"]] = 1.0
         scale[bank.slices["step"]] = 1.0
         scale[bank.slices["ramp"]] = self.dt
@@ -509,19 +516,29 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         # its state to settle on the new model
         start_k = self._k - len(samples) + 1
         tail = len(samples) - min(len(samples), FILTER_TAIL)
+        phis = rows / self._scale
+        y_fs = self._hp_y.run(np.array([s[1] for s in samples]))
+        dphis = dfrees = None
+        if self.track_modes and n_res:
+            flex, free = self._modal_scales
+            dphis = self._hp_dq.run(raw_dq).reshape(-1, n_res, 2, 3, 2) / flex
+            dfrees = self._hp_dfree.run(raw_dfree).reshape(-1, n_res, 2, 2) / free
         for j, (uk, yk, learn, real) in enumerate(samples):
+            sensitivity = None if dphis is None else (dphis[j], dfrees[j])
             self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail,
-                         regressor=rows[j], sensitivity=sens[j])
+                         signals=(phis[j], y_fs[j], sensitivity))
 
-    def _sensitivity_row(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """High-passed derivatives of the flexible and free-response regressors by the
-        modal parameters at the current sample (advances their high-passes)."""
+    def _signals(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+        """The current sample's high-passed regressor and, with tracking, its flexible
+        and free-response columns' derivatives by the modal parameters, all scaled as
+        the regressor (:attr:`_modal_scales`); advances the high-passes."""
         if not self.track_modes or not self.resonators:
-            return None
+            return self._bank.highpassed(self._hp_x)[0] / self._scale, None
         n_res = len(self.resonators)
-        dq, dfree = self._bank.sensitivity()
-        return (self._hp_dq(dq.ravel()).reshape(n_res, 2, 3, 2).copy(),
-                self._hp_dfree(dfree.ravel()).reshape(n_res, 2, 2).copy())
+        phi, dq, dfree = self._bank.highpassed(self._hp_x, self._hp_dq, self._hp_dfree)
+        flex, free = self._modal_scales
+        return phi / self._scale, (dq.reshape(n_res, 2, 3, 2) / flex,
+                                   dfree.reshape(n_res, 2, 2) / free)
 
     def _tracker_groups(self) -> list[TrackerGroup]:
         """The sensor groups as the modal tracker sees them."""
@@ -556,35 +573,34 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _sample(self, u: np.ndarray, y: np.ndarray, learn: bool, real: bool,
                 replay_k: int | None = None, filtering: bool = True,
-                regressor: np.ndarray | None = None, seen: np.ndarray | None = None,
-                sensitivity: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                signals: tuple | None = None, seen: np.ndarray | None = None) -> None:
         """One sample: Kalman filter on the current model (if ``filtering``), the
         gains' regressions, the change test (live samples only), the modal tracker,
         the filter bank, and an export and a modal refinement every ``refresh``
-        samples (if ``filtering``). A replay passes the sample's high-passed
-        ``regressor`` and ``sensitivity``, computed when the bank was rebuilt (the
-        bank has then already run past it)."""
+        samples (if ``filtering``). A replay passes the sample's ``signals``: the
+        scaled high-passed regressor, the high-passed outputs and the scaled
+        sensitivities (or None), computed when the bank was rebuilt (the bank and the
+        high-passes have then already run past it)."""
         k = self._k if replay_k is None else replay_k
         bank = self._bank
-        if regressor is None:
-            phi = self._hp_x(bank.regressor()) / self._scale
-            sensitivity = self._sensitivity_row()
+        if signals is None:
+            phi, sensitivity = self._signals()
+            y_f = self._hp_y(y)
         else:
-            phi = regressor / self._scale
-        y_f = self._hp_y(y)
+            phi, y_f, sensitivity = signals
         if filtering and self._mats is not None:
             a, b, c, _, _ = self._mats
             # the outputs that were measured (all of them, or those a skipped sample kept)
             y_kf = y if real else (None if seen is None else np.where(seen, y, np.nan))
             self._kf.update(a, b, c, self._process_noise(), self._r, u, y_kf)
             innovation = self._kf.innovation
-            if real and innovation is not None and np.all(np.isfinite(innovation)):
+            if real and innovation is not None and np.isfinite(innovation).all():
                 self._measurement_noise(innovation)
         if learn and real:
             err = self._learn(phi, y_f)
             if (err is not None and self.detect_changes and replay_k is None
                     and self._resvar is not None):
-                rate = self.layout.slice("rate")      # a change of inertia shows here
+                rate = self._rate_rows                 # a change of inertia shows here
                 # errors below RESOLUTION of the signal are not evidence of a change
                 # (on noise-free data the a-priori error is all slow model error)
                 variance = np.maximum(self._resvar[rate], RESOLUTION**2 * self._sigvar[rate])
@@ -593,18 +609,16 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
                 if event is not None:
                     self._react(event)
             if err is not None:
-                e2, s2 = err**2, y_f**2
                 if self._resvar is None:
-                    self._resvar, self._sigvar = e2, s2
-                else:
-                    self._resvar = 0.995 * self._resvar + 0.005 * e2
-                    self._sigvar = 0.995 * self._sigvar + 0.005 * s2
+                    self._resvar, self._sigvar = err**2, y_f**2
+                else:           # running mean squares of the errors and the signals
+                    _mean_square_step(self._resvar, err, 0.995, 0.005)
+                    _mean_square_step(self._sigvar, y_f, 0.995, 0.005)
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
             if self._tracker is not None and sensitivity is not None:
-                flex, free = self._modal_scales
-                self._tracker.update(phi, sensitivity[0] / flex, sensitivity[1] / free, y_f)
-        if regressor is None:
+                self._tracker.update(phi, sensitivity[0], sensitivity[1], y_f)
+        if signals is None:
             bank.step(u)
         if replay_k is None and (k + 1) % self.refresh == 0:
             self._refine_modes()
@@ -690,9 +704,13 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
 
     def _theta(self) -> np.ndarray:
         """All groups' estimates as one ``(m, size)`` matrix (zero where excluded)."""
+        cached = self.__dict__.get("_theta_index_cache")
+        if cached is None or cached[0] is not self._fits:
+            cached = (self._fits, [np.ix_(rows, cols) for rows, cols, _ in self._fits])
+            self.__dict__["_theta_index_cache"] = cached
         theta = np.zeros((self.n_outputs, self._bank.size))
-        for rows, cols, rls in self._fits:
-            theta[np.ix_(rows, cols)] = rls.theta
+        for (_, _, rls), index in zip(self._fits, cached[1], strict=True):
+            theta[index] = rls.theta
         return theta
 
     def _measurement_noise(self, innovation: np.ndarray) -> None:
@@ -709,14 +727,16 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
         self._r = np.maximum(self._noise_var, 1e-12)
 
     def _process_noise(self) -> np.ndarray:
-        """Unmodelled torque through B, plus an attitude random walk at half the noise."""
+        """Unmodelled torque through B, plus an attitude random walk at half the noise.
+
+        The matrix is rewritten in place at every call (only its attitude diagonal
+        changes between exports): it is for the filter step at hand only."""
         if self._torque_noise[0] is not self._mats:      # B changes only at an export
             b = self._mats[1]
-            self._torque_noise = (self._mats,
-                                  (self.process_torque / self._su.mean()) ** 2 * (b @ b.T))
-        q = self._torque_noise[1].copy()
-        att = self.layout.slice("attitude")
-        q[:3, :3] += np.diag(0.25 * self._r[att])
+            q = (self.process_torque / self._su.mean()) ** 2 * (b @ b.T)
+            self._torque_noise = (self._mats, q, q[_ATTITUDE_DIAGONAL])
+        _, q, torque_diagonal = self._torque_noise
+        q[_ATTITUDE_DIAGONAL] = torque_diagonal + 0.25 * self._r[self._att_rows]
         return q
 
     def _react(self, event: ChangeEvent) -> None:
@@ -750,56 +770,118 @@ class RigidFlexibleIdentifier(OnlineIdentifier):
     # ------------------------------------------------------------ the model
     def _export(self) -> None:
         """Minimal innovation-form model from the current gains (normalized units)."""
-        theta = self._theta() / self._scale
         bank = self._bank
-        att, rate = self.layout.slice("attitude"), self.layout.slice("rate")
         m = self.n_outputs
-        order = self.n           # fixed: capacity not used by a resonator stays inert (zero)
-        a = np.zeros((order, order))
-        b = np.zeros((order, 3))
-        c = np.zeros((m, order))
-        g = theta[rate, bank.slices["rate"]]                  # normalized inverse inertia
+        theta = self._theta() / self._scale
+        # the rigid body's blocks: kinematics (fixed) and the estimated inverse inertia
+        a, c = (x.copy() for x in self._rigid_blocks())
+        b = np.zeros((self.n, 3))
+        g = theta[self._rate_rows, bank.slices["rate"]]       # normalized inverse inertia
         dt, ratio = self.dt, self._ratio
-        psi, omega = ATTITUDE_STATES, RATE_STATES
-        a[psi, psi] = np.eye(3)
-        a[psi, omega] = dt * ratio * np.eye(3)
-        a[omega, omega] = np.eye(3)
-        b[psi] = 0.5 * dt * dt * ratio * g
-        b[omega] = dt * g
-        c[att, psi] = np.eye(3)
-        c[rate, omega] = np.eye(3)
-        modes_a, modes_b = bank.mode_matrices
+        b[ATTITUDE_STATES] = 0.5 * dt * dt * ratio * g
+        b[RATE_STATES] = dt * g
         n_res = len(self.resonators)
-        flexible = theta[:, bank.slices["flexible"]].reshape(m, n_res, 3, 2)
-        j = 6
         if n_res:
-            # every resonator at once: its complex mode, the input's share of it, and the
-            # SVD of its couplings factored through that mode
-            vals, vecs = np.linalg.eig(modes_a)                               # (M, 2)
-            top = np.argmax(vals.imag, axis=1)
-            mus = vals[np.arange(n_res), top]
-            shares = np.linalg.solve(vecs, modes_b[:, :, None])[:, :, 0]       # (M, 2)
-            to_complex = vecs[np.arange(n_res), :, top] * \
-                shares[np.arange(n_res), top][:, None]                          # (M, 2)
+            # every resonator at once: its complex mode, and the SVD of its couplings
+            # factored through that mode
+            mus, to_complex = self._complex_modes()
+            flexible = theta[:, bank.slices["flexible"]].reshape(m, n_res, 3, 2)
             chats = 2.0 * np.einsum("imas,is->ima", flexible.transpose(1, 0, 2, 3),
                                     to_complex)                                 # (M, m, 3)
             lefts, svs, rights = np.linalg.svd(chats, full_matrices=False)
-        for i, res in enumerate(self.resonators):
-            mu, left, sv, right = mus[i], lefts[i], svs[i], rights[i]
-            for rank in range(res.rank):
-                c_vec, b_vec = left[:, rank] * sv[rank], right[rank].copy()
-                ref = self._phases.get((i, rank))
-                phase = b_vec[np.argmax(np.abs(b_vec))] if ref is None else np.vdot(ref, b_vec)
-                phase = phase / abs(phase) if abs(phase) > 0 else 1.0
-                b_vec, c_vec = b_vec / phase, c_vec * phase
-                self._phases[(i, rank)] = b_vec
-                a[j:j + 2, j:j + 2] = [[mu.real, -mu.imag], [mu.imag, mu.real]]
-                b[j], b[j + 1] = b_vec.real, b_vec.imag
-                c[:, j], c[:, j + 1] = c_vec.real, -c_vec.imag
-                j += 2
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.isfinite(c))):
+            # one exported mode per (resonator, rank): its singular triple, as complex
+            # output and input vectors
+            res, rank = self._export_modes()
+            c_vecs = lefts[res, :, rank] * svs[res, rank][:, None]             # (R, m)
+            b_vecs = rights[res, rank]                                          # (R, 3)
+            b_vecs, c_vecs = self._align_phases(res, rank, b_vecs, c_vecs)
+            # mode r is the real 2x2 block of mu at states 6 + 2 r and 6 + 2 r + 1
+            re = np.arange(6, 6 + 2 * res.size, 2)
+            mu = mus[res]
+            a[re, re] = a[re + 1, re + 1] = mu.real
+            a[re, re + 1] = -mu.imag
+            a[re + 1, re] = mu.imag
+            b[re], b[re + 1] = b_vecs.real, b_vecs.imag
+            c[:, re], c[:, re + 1] = c_vecs.real.T, -c_vecs.imag.T
+        if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return
         self._mats = (a, b, c, np.zeros((m, 3)), None)
+
+    def _complex_modes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every resonator's complex mode ``mu`` (M,) and the map (M, 2) from its real
+        states ``[q, q']`` to the mode's coordinate, scaled by the input's share of it.
+
+        They change only when the resonators move (a refinement, a rebuild): kept
+        until then."""
+        bank = self._bank
+        cached = self.__dict__.get("_complex_mode_cache")
+        if cached is not None and cached[0] is bank and cached[1] is bank.resonators:
+            return cached[2]
+        modes_a, modes_b = bank.mode_matrices
+        every = np.arange(len(bank.resonators))
+        vals, vecs = np.linalg.eig(modes_a)                                   # (M, 2)
+        top = np.argmax(vals.imag, axis=1)
+        mus = vals[every, top]
+        shares = np.linalg.solve(vecs, modes_b[:, :, None])[:, :, 0]           # (M, 2)
+        to_complex = vecs[every, :, top] * shares[every, top][:, None]          # (M, 2)
+        self.__dict__["_complex_mode_cache"] = (bank, bank.resonators, (mus, to_complex))
+        return mus, to_complex
+
+    def _align_phases(self, res: np.ndarray, rank: np.ndarray, b_vecs: np.ndarray,
+                      c_vecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fix the free phase of every exported mode's singular pair.
+
+        The input vector ``b`` of each mode is rotated to agree in phase with
+        its last export (its largest entry made real at the first), and the
+        output vector ``c`` by the opposite phase, so the product is unchanged
+        and the state keeps its meaning from one export to the next.
+
+        Returns
+        -------
+        b_vecs, c_vecs : ndarray
+            The rotated vectors; the new references are recorded.
+        """
+        phases = np.ones(res.size, dtype=complex)
+        for j, key in enumerate(zip(res.tolist(), rank.tolist(), strict=True)):
+            b_vec = b_vecs[j]
+            ref = self._phases.get(key)
+            phase = b_vec[np.argmax(np.abs(b_vec))] if ref is None else np.vdot(ref, b_vec)
+            if abs(phase) > 0:
+                phases[j] = phase / abs(phase)
+        b_vecs = b_vecs / phases[:, None]
+        c_vecs = c_vecs * phases[:, None]
+        self._phases.update(zip(zip(res.tolist(), rank.tolist(), strict=True), b_vecs,
+                                strict=True))
+        return b_vecs, c_vecs
+
+    def _rigid_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fixed part of the exported ``A`` and ``C`` (kinematics, sensor selection):
+        attitude integrates rate, both are measured; the modal blocks are left 0."""
+        key = (self.n, self.n_outputs, self.dt, self._ratio)
+        cached = self.__dict__.get("_rigid_block_cache")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        psi, omega = ATTITUDE_STATES, RATE_STATES
+        a = np.zeros((self.n, self.n))
+        c = np.zeros((self.n_outputs, self.n))
+        a[psi, psi] = np.eye(3)
+        a[psi, omega] = self.dt * self._ratio * np.eye(3)
+        a[omega, omega] = np.eye(3)
+        c[self._att_rows, psi] = np.eye(3)
+        c[self._rate_rows, omega] = np.eye(3)
+        self.__dict__["_rigid_block_cache"] = (key, (a, c))
+        return a, c
+
+    def _export_modes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Resonator and rank of every exported mode, in state order."""
+        ranks = [r.rank for r in self.resonators]
+        cached = self.__dict__.get("_export_mode_cache")
+        if cached is not None and cached[0] == ranks:
+            return cached[1]
+        res = np.repeat(np.arange(len(ranks)), ranks)
+        rank = np.concatenate([np.arange(r) for r in ranks]) if ranks else res
+        self.__dict__["_export_mode_cache"] = (ranks, (res, rank))
+        return res, rank
 
     def _matrices(self) -> tuple[np.ndarray, ...] | None:
         if self._mats is None:

@@ -69,6 +69,9 @@ def predictor_product(xi: np.ndarray, n_inputs: int, f: int, weighted: bool = Tr
     (f m, p (r + m)) ndarray
         Cost O(f^2 m^2 p (r + m)) when weighted.
     """
+    # row-major Xi keeps the einsum operands below contiguous: a transposed Xi (the
+    # batch VARX solve returns one) made every product about 3x slower
+    xi = np.ascontiguousarray(xi)
     m, d = xi.shape
     zr = n_inputs + m
     p = d // zr
