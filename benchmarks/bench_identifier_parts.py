@@ -1,0 +1,184 @@
+"""Where the default identifier's update spends its time: microseconds per update, by part.
+
+Runs the default (rigid-flexible) identifier over the same 2500-sample record as
+``bench_identifiers.py`` (docking, 40 dB, n = 22), once plain (best of
+``--repeats``) and once with a timer around each part, and prints, in one run:
+
+* the plain update (us) beside the bare recursive least squares of the
+  improved RPBSID's VARX size (``bench_identifiers.bare_rls_seconds``: the floor
+  any RPBSID update pays) and their ratio, and the 250 s record's multiple of
+  real time;
+* the per-part table from the timed run (each part's outermost calls only;
+  the timers add their own overhead, so the parts sum to more than the plain
+  figure): the base class's screening, the data monitor and the health checks,
+  the state filter, the filter bank's signals, the gains' regressions, the
+  modal tracker, the change test, the export, and the batch mode searches and
+  rebuilds (with their replays) amortized over the record.
+
+Usage: ``python benchmarks/bench_identifier_parts.py [--repeats 5] [--json out.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import time
+from collections import defaultdict
+from collections.abc import Callable
+
+import numpy as np
+from bench_identifiers import bare_rls_seconds
+
+import identifiers.base as base
+import identifiers.change_detection as change_detection
+import identifiers.data_monitor as data_monitor
+import identifiers.kalman as kalman
+import identifiers.modal_tracker as modal_tracker
+import identifiers.rigid_flexible as rigid_flexible
+from identifiers import add_measurement_noise, identification_inputs
+from spacecraft_conventions import single_threaded_blas
+from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
+from spacecraft_lab.identification import make_identifier
+
+N_SAMPLES = 2500
+
+
+def record(n: int = 22) -> tuple[FlexibleSpacecraftModel, np.ndarray, np.ndarray]:
+    """bench_identifiers.py's record: docking, identification inputs, 40 dB."""
+    truth = FlexibleSpacecraftModel(ets8_parameters((n // 2 - 3) // 4), scenario="docking")
+    rng = np.random.default_rng(0)
+    u = identification_inputs(N_SAMPLES, rng)
+    return truth, u, add_measurement_noise(truth.simulate(u)[1], 40.0, rng)
+
+
+def plain_seconds(truth, u, y, repeats: int) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        ident = make_identifier("rigid-flexible", truth, "default")
+        with single_threaded_blas:
+            start = time.perf_counter()
+            for k in range(N_SAMPLES):
+                ident.update(u[k], y[k])
+            best = min(best, time.perf_counter() - start)
+    return best
+
+
+class _Timers:
+    """Wall time of the outermost calls of each wrapped method, by label and by the
+    context (live sample, batch search, rebuild) it ran in."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[tuple[str, str], float] = defaultdict(float)
+        self._context = "live"
+        self._depth: dict[str, int] = defaultdict(int)
+        self._undo: list[Callable[[], None]] = []
+
+    def wrap(self, owner: type, name: str, label: str, context: str | None = None) -> None:
+        original = vars(owner)[name]
+
+        @functools.wraps(original)
+        def timed(*args, **kwargs):
+            outer = self._context
+            self._context = context or outer
+            self._depth[label] += 1
+            start = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                if self._depth[label] == 1:
+                    self.seconds[outer, label] += time.perf_counter() - start
+                self._depth[label] -= 1
+                self._context = outer
+
+        setattr(owner, name, timed)
+        self._undo.append(lambda: setattr(owner, name, original))
+
+    def restore(self) -> None:
+        for undo in reversed(self._undo):
+            undo()
+
+    def live(self, label: str) -> float:
+        return self.seconds["live", label]
+
+    def anywhere(self, label: str) -> float:
+        return sum(v for (_, lab), v in self.seconds.items() if lab == label)
+
+
+def parts(truth, u, y) -> list[tuple[str, float]]:
+    """The per-part table, us per update."""
+    rf, ob = rigid_flexible.RigidFlexibleIdentifier, base.OnlineIdentifier
+    timers = _Timers()
+    for owner, name, label, context in (
+            (ob, "update", "update", None), (ob, "_validate", "validate", None),
+            (rf, "_admissible", "guard", None), (ob, "_check_health", "health", None),
+            (data_monitor.DataMonitor, "observe", "monitor", None),
+            (rf, "_step", "step", None), (rf, "_sample", "sample", None),
+            (rf, "_find_resonators", "search", "search"), (rf, "_rebuild", "rebuild", "rebuild"),
+            (rf, "_maybe_rediscover", "rediscover", None),
+            (kalman.KalmanPredictor, "update", "filter", None),
+            (rf, "_process_noise", "filter", None), (rf, "_measurement_noise", "filter", None),
+            (rf, "_learn", "regressions", None),
+            (change_detection.RegressionGLR, "update", "change test", None),
+            (modal_tracker.ModalTracker, "update", "tracker moments", None),
+            (rf, "_refine_modes", "tracker refine", None), (rf, "_export", "export", None)):
+        if name in vars(owner):
+            timers.wrap(owner, name, label, context)
+    try:
+        with single_threaded_blas:
+            ident = make_identifier("rigid-flexible", truth, "default")
+            for k in range(N_SAMPLES):
+                ident.update(u[k], y[k])
+    finally:
+        timers.restore()
+    live = timers.live
+    inner = ("filter", "regressions", "change test", "tracker moments", "tracker refine",
+             "export")
+    rows = [
+        ("input validation", live("validate")),
+        ("outlier guard", live("guard")),
+        ("data monitor", live("monitor")),
+        ("health checks (every 100 samples)", live("health")),
+        ("base class, the rest (scaling, screening, counters)",
+         live("update") - live("step") - live("validate") - live("guard") - live("health")
+         - live("monitor")),
+        ("state filter (Kalman filter, process and sensor noise)", live("filter")),
+        ("gains' regressions (3 sensor groups)", live("regressions")),
+        ("modal tracker: moments", live("tracker moments")),
+        ("modal tracker: refine (every 10 samples)", live("tracker refine")),
+        ("change test", live("change test")),
+        ("model export (every 10 samples)", live("export")),
+        ("filter bank signals and the rest of a sample",
+         live("sample") - live("rediscover") - sum(live(p) for p in inner)),
+        ("batch mode searches (warm-up and re-searches)", timers.anywhere("search")),
+        ("rebuilds, with the replay of the kept record", timers.anywhere("rebuild")),
+    ]
+    return [(name, 1e6 * seconds / N_SAMPLES) for name, seconds in rows]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    truth, u, y = record()
+    plain = plain_seconds(truth, u, y, args.repeats)
+    bare = bare_rls_seconds(195, 10) / N_SAMPLES
+    table = parts(truth, u, y)
+    per_update = plain / N_SAMPLES
+    print(f"default identifier: {1e6 * per_update:.0f} us per update; bare RLS of the improved "
+          f"RPBSID's size (195 regressors, 10 outputs): {1e6 * bare:.1f} us; ratio "
+          f"{per_update / bare:.1f} (bar 5); a 250 s record in {plain:.2f} s = "
+          f"{250 / plain:.0f}x real time (bar 1000x)")
+    print("\nper part, us per update (timed run; the timers add overhead):")
+    width = max(len(name) for name, _ in table)
+    for name, us in table:
+        print(f"  {name:<{width}}  {us:7.1f}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"plain_us": 1e6 * per_update, "bare_us": 1e6 * bare,
+                       "parts_us": dict(table)}, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()
