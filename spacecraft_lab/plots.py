@@ -37,8 +37,10 @@ __all__ = [
 
 
 def save(fig: Figure, path: str | Path, dpi: int = 100) -> None:
-    """Lay out and write ``fig`` to ``path``."""
-    fig.tight_layout()
+    """Lay out and write ``fig`` to ``path`` (a figure made with a layout engine, such as
+    ``layout="constrained"`` for a legend outside the axes, keeps it)."""
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     fig.savefig(path, dpi=dpi)
 
 
@@ -179,7 +181,7 @@ def plot_prediction_horizons(path: str | Path, metrics: Mapping[str, Any],
 
 
 def _band(ax: Axes, t: np.ndarray, runs: Sequence[np.ndarray], label: str, color: str,
-          log: bool = False) -> None:
+          log: bool = False, ls: str = "-") -> None:
     """Median line and interquartile band over seeds (runs cut to the shortest)."""
     n = min(r.size for r in runs)
     stack = np.array([r[:n] for r in runs])
@@ -187,8 +189,22 @@ def _band(ax: Axes, t: np.ndarray, runs: Sequence[np.ndarray], label: str, color
         warnings.simplefilter("ignore", RuntimeWarning)
         lo, med, hi = np.nanpercentile(stack, [25, 50, 75], axis=0)
     plot = ax.semilogy if log else ax.plot
-    plot(t[:n], med, lw=1, color=color, label=label)
-    ax.fill_between(t[:n], lo, hi, color=color, alpha=0.2, lw=0)
+    # a dotted series is drawn as a wide pale band line, so it shows under a dashed one
+    # that it follows (the scheduled LQG under the oracle)
+    if ls == ":":
+        plot(t[:n], med, lw=4, color=color, alpha=0.45, solid_capstyle="round", label=label)
+    else:
+        plot(t[:n], med, lw=1.2, color=color, ls=ls, label=label)
+    ax.fill_between(t[:n], lo, hi, color=color, alpha=0.15, lw=0)
+
+
+#: The controllers the comparison figure draws, at most five, each with its style
+#: (colour, line): the adaptive loop, what it must beat (the robust design), its ceiling
+#: (the oracle, black dashed), the design that goes unstable and the scheduled reference.
+#: The others are in the table.
+FIGURE_SERIES = {"fixed LQG": ("C3", "-"), "robust LQG": ("C0", "-"),
+                 "scheduled LQG": ("C2", ":"), "oracle LQG": ("k", "--"),
+                 "adaptive LQG": ("C4", "-")}
 
 
 def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
@@ -204,15 +220,21 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
     zoomed on the flexible band). Dashed lines: scenario events; dotted: the
     start of the scored window.
     """
+    shown = [name for name in FIGURE_SERIES if name in runs]
+    shown += [name for name in runs if name not in shown][:max(0, 5 - len(shown))]
+    styles = {name: FIGURE_SERIES.get(name, (f"C{5 + i}", "-"))
+              for i, name in enumerate(shown)}
+    runs = {name: runs[name] for name in shown}
     adaptive = {n: r for n, r in runs.items() if r[0].gain_error is not None}
     rows = 6 if adaptive else 4
     layout = model.output_layout
     c_att = model.C[layout.slice("attitude")]
     c_defl = model.C[layout.slice("deflection")]
-    fig = Figure(figsize=(11, 2.5 * rows))
+    fig = Figure(figsize=(12, 2.5 * rows), layout="constrained")
     all_axes = fig.subplots(rows, 1, sharex=True)
     cost_ax, axes = all_axes[0], all_axes[1:]
-    colors = dict(zip(runs, [f"C{i}" for i in range(len(runs))], strict=True))
+    colors = {name: color for name, (color, _) in styles.items()}
+    lines = {name: ls for name, (_, ls) in styles.items()}
     window = max(1, round(10.0 / model.dt))
 
     def trailing_mean(values: np.ndarray) -> np.ndarray:
@@ -224,23 +246,25 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
     for name, trajs in runs.items():
         t = trajs[0].time
         costs = [trailing_mean(stage_costs(tr, model)[:, :4].sum(axis=1)) for tr in trajs]
-        _band(cost_ax, t, [np.maximum(c, 1e-8) for c in costs], name, colors[name], log=True)
+        style = {"log": True, "ls": lines[name]}
+        _band(cost_ax, t, [np.maximum(c, 1e-8) for c in costs], name, colors[name], **style)
         err = [np.abs((tr.states[1:] @ c_att.T - tr.reference[1:]) * DEG_PER_RAD).max(axis=1)
                for tr in trajs]
-        _band(axes[0], t, [np.maximum(e, 1e-5) for e in err], name, colors[name], log=True)
+        _band(axes[0], t, [np.maximum(e, 1e-5) for e in err], name, colors[name], **style)
         _band(axes[1], t, [np.abs(tr.states[1:] @ c_defl.T).max(axis=1) * 1e3 for tr in trajs],
-              name, colors[name], log=True)
+              name, colors[name], **style)
         _band(axes[2], t, [np.linalg.norm(tr.torque, axis=1) for tr in trajs], name,
-              colors[name], log=True)
+              colors[name], **style)
     for name, trajs in adaptive.items():
         tf = trajs[0].frequency_time
         _band(axes[3], tf, [100 * tr.gain_error for tr in trajs], name, colors[name])
         first = trajs[0]
         axes[4].plot(tf, first.identified_frequencies, ".", ms=2, color=colors[name])
         axes[4].plot(tf, first.true_frequencies, "k-", lw=1)
-    cost_ax.set_ylabel("stage cost, last 10 s mean")
-    cost_ax.set_title("the common quadratic cost (what every LQG here minimizes); "
-                      "tables score its mean from 100 s", fontsize=9)
+    cost_ax.set_ylabel("stage cost\n(10 s running mean)")
+    cost_ax.set_title("the common quadratic cost (what every LQG here minimizes), 10 s running "
+                      "mean\nthe tables' ratios: paired medians of its mean from 100 s "
+                      "(dotted line), which a crossing here need not contradict", fontsize=9)
     axes[0].set_ylabel("max |attitude error| (deg)")
     axes[1].set_ylabel("max |tip deflection| (mm)")
     axes[2].set_ylabel("|torque| (N m)")
@@ -261,7 +285,8 @@ def plot_control_comparison(runs: Mapping[str, Sequence[Trajectory]],
     for ax in all_axes:
         ax.axvline(scored_from_s, color="gray", ls=":", lw=0.8)
         ax.grid(alpha=0.3)
-    cost_ax.legend(fontsize=8, ncol=4)
+    fig.legend(*cost_ax.get_legend_handles_labels(), loc="outside right upper", fontsize=9,
+               title="median, 25-75 %\nband over seeds", title_fontsize=8)
     fig.suptitle(title, fontsize=10)
     save(fig, path)
 
