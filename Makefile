@@ -40,10 +40,12 @@ demo: $(MAIN_STAMP)
 	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 10 --out results/control; \
 	echo "[control stage: $$(( $$(date +%s) - start )) s]"
 
-# the API reference from the numpydoc docstrings (pdoc), into build/api
-docs: $(STAMP)
-	$(BIN)/python -W error -m pdoc -d numpy -o build/api spacecraft_conventions spacecraft_env \
-	    identifiers controllers spacecraft_lab
+# the API reference from the numpydoc docstrings (pdoc), into build/api; it needs the main
+# install and pdoc only (the RL extras are imported lazily), its landing page is docs/api/
+docs: $(MAIN_STAMP)
+	$(BIN)/pip install -q -c constraints.txt -e ".[docs]"
+	$(BIN)/python -W error -m pdoc -d numpy -t docs/api -o build/api spacecraft_conventions \
+	    spacecraft_env identifiers controllers spacecraft_lab
 
 test: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)

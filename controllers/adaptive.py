@@ -149,6 +149,24 @@ class AdaptiveLQG(_LQGController):
         attitude and rate states read from the sensors (needs an identifier
         with :attr:`~identifiers.OnlineIdentifier.rigid_states`, else as
         "filter"), which feeds the sensor noise through the rate gain.
+
+    Examples
+    --------
+    The fallback (the robust fixed design) flies while the identifier warms up
+    (30 s in closed loop); from then on every step re-designs from its model
+    once the acceptance test passes:
+
+    >>> import gymnasium as gym
+    >>> from controllers import AdaptiveLQG, run_episode
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> ctrl = AdaptiveLQG(env)
+    >>> traj = run_episode(env, ctrl, seed=0, max_steps=320)
+    >>> ctrl.identifier.warmup, ctrl.identifier.model is not None
+    (300, True)
+    >>> stats = traj.controller_stats
+    >>> stats["steps"], stats["fallback_steps"] >= ctrl.identifier.warmup
+    (320, True)
+    >>> env.close()
     """
 
     name = "adaptive LQG"

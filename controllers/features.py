@@ -123,6 +123,16 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         coordinates are the identifier's own and change when it rebuilds
         its model (e.g. when a mode search moves the modes); without it the
         features are the gain, the modes, the prediction error and the flag.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import IdentifiedModelFeatures
+    >>> env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraft-v1"))
+    >>> obs, info = env.reset(seed=0)
+    >>> env.env.observation_space.shape, env.observation_space.shape
+    ((10,), (57,))
+    >>> env.close()
     """
 
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None, n_modes: int = 4,
@@ -404,6 +414,22 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
     every : int
         Env steps between refreshes of the vector (default 10: 1 s, one
         decision of an agent under :class:`~spacecraft_env.ActionRepeat`).
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> from controllers import PhysicalFeatures
+    >>> from controllers.features import PHYSICAL_FEATURE_NAMES
+    >>> env = PhysicalFeatures(gym.make("spacecraft_env:FlexibleSpacecraftFamily-v1"))
+    >>> obs, info = env.reset(seed=0)
+    >>> env.env.observation_space.shape, env.observation_space.shape
+    ((10,), (25,))
+    >>> PHYSICAL_FEATURE_NAMES[:3], PHYSICAL_FEATURE_NAMES[-1]
+    (('log_gain_xx', 'log_gain_yy', 'log_gain_zz'), 'ready')
+    >>> float(obs[-1])                   # not ready before the identifier's warm-up
+    0.0
+    >>> env.close()
     """
 
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,

@@ -138,78 +138,120 @@ class FlexibleSpacecraftEnv(gym.Env):
     rotation).
 
     Action space
-        ``Box(-1, 1, (3,), float32)``: roll/pitch/yaw torque normalized by
-        ``max_torque``. Out-of-range actions are clipped to [-1, 1] before
-        scaling; NaN/inf, a wrong shape or a non-numeric dtype raise.
+    ------------
+    ``Box(-1, 1, (3,), float32)``, the torque normalized by ``max_torque``:
+
+    | Index | Action      | Min | Max | Physical torque        |
+    |-------|-------------|-----|-----|------------------------|
+    | 0     | roll torque | -1  | 1   | ``action[0] * max_torque`` N m |
+    | 1     | pitch torque| -1  | 1   | ``action[1] * max_torque`` N m |
+    | 2     | yaw torque  | -1  | 1   | ``action[2] * max_torque`` N m |
+
+    Out-of-range actions are clipped to [-1, 1] before scaling; NaN/inf, a wrong
+    shape or a non-numeric dtype raise.
+
     Observation space
-        ``Box(float32)`` stacking the requested ``outputs`` in the order given:
-        ``"attitude"`` psi (3, rad), ``"rate"`` omega (3, rad/s),
-        ``"deflection"`` out-of-plane sensor deflections (one per sensor, m),
-        ``"attitude_error"`` measured psi minus reference (3, rad),
-        ``"reference"`` reference attitude (3, rad). Sensor channels carry white
-        Gaussian noise with standard deviation ``scale * 10^(-snr_db / 20)``,
-        ``scale`` = 1 deg, 0.1 deg/s and 1 cm for the three groups (at 40 dB:
-        0.01 deg, 0.001 deg/s, 0.1 mm). Values are clipped to the Box bounds
-        (+-pi rad, +-pi rad/s, +-10 m), which lie far outside the model's range.
+    -----------------
+    ``Box(float32)`` stacking the requested ``outputs`` groups in the order given
+    (``env.unwrapped.observation_labels`` names every entry):
+
+    | Group              | Size             | Unit  | Noise std at 0 dB | Bound   |
+    |--------------------|------------------|-------|-------------------|---------|
+    | ``"attitude"``     | 3                | rad   | 1 deg             | +-pi    |
+    | ``"rate"``         | 3                | rad/s | 0.1 deg/s         | +-pi    |
+    | ``"deflection"``   | one per sensor (4) | m   | 1 cm              | +-10    |
+    | ``"attitude_error"`` | 3 (measured attitude minus reference) | rad | the attitude's | +-2 pi |
+    | ``"reference"``    | 3                | rad   | none              | +-pi    |
+
+    The sensor noise is white and Gaussian with standard deviation
+    ``scale * 10^(-snr_db / 20)``: at the paper's 40 dB, 0.01 deg, 0.001 deg/s and
+    0.1 mm. Values are clipped to the bounds, which lie far outside the model's
+    range.
+
     Reward
-        ``reward="cost"`` (default): the negative quadratic stage cost of the
-        true attitude error, rates, deflections and torque, see
-        :class:`RewardWeights`; the controllers' returns are compared by it.
-        ``reward="bounded"``: ``1 - min(cost / saturation, 1)`` per step, in
-        [0, 1], with no termination penalty: staying alive and on target is
-        what pays, and leaving the bound forfeits every later reward. The
-        cost form spans six decades (a crash is charged up to about 1e6
-        times a typical stage cost), which swamps the return statistics a
-        learning agent normalizes by; with the bounded form (and
-        :class:`~spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew
-        task where it did not with the cost (docs/results/rl.md).
-        ``reward="log"``: ``1 - log(1 + cost / precision) / log(1 + saturation
-        / precision)`` per step, in [0, 1], no termination penalty: the
-        bounded form's survival incentive, but an error of 0.01 deg pays
-        visibly more than one of 0.1 deg (with the bounded form both pay
-        1 - 1e-5 and 1 - 1e-3: an agent cannot tell them apart).
+    ------
+    | ``reward=``          | Per step                                | Range     | Off bounds |
+    |----------------------|-----------------------------------------|-----------|------------|
+    | ``"cost"`` (default) | ``-c``, ``c`` the quadratic stage cost  | (-inf, 0] | penalty (1) |
+    | ``"bounded"``        | ``1 - min(c / s, 1)``                   | [0, 1]    | forfeit (2) |
+    | ``"log"``            | ``1 - log(1 + c / q) / log(1 + s / q)`` | [0, 1]    | forfeit (2) |
+
+    ``s`` is ``saturation`` and ``q`` ``precision`` of :class:`RewardWeights`.
+    (1) the terminating step is charged every step left to the time limit, see
+    Episode end; (2) no penalty, but every later reward is lost.
+
+    The stage cost weighs the true attitude error, rates, deflections and torque
+    (:class:`RewardWeights`); the controllers' returns are compared by it. The
+    cost form spans six decades (a crash is charged up to about 1e6 times a
+    typical stage cost), which swamps the return statistics a learning agent
+    normalizes by; with the bounded form (and
+    :class:`~spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew task
+    where it did not with the cost (docs/results/rl.md). The log form keeps the
+    bounded form's survival incentive but pays an error of 0.01 deg visibly more
+    than one of 0.1 deg (the bounded form pays both 1 - 1e-5 and 1 - 1e-3).
+
     Episode end
-        ``terminated`` when any true attitude angle exceeds
-        ``max_attitude_deg`` (default 20 deg: beyond it the small-angle model's
-        error passes 2 %); ``truncated`` only by the registered time limit
-        (2500 steps = 250 s). With ``reward="cost"``, leaving the bound
-        costs, on the terminating step, every step left to the time limit at
-        the stage cost of an attitude error at the bound on all three axes (the ``-v1`` ids; with
-        ``-v0`` ending the episode stopped the cost, so crashing paid: full
-        torque until termination scored -2.0e5 against -2.5e5 for zero
-        torque on the slew task). No policy that stays within the bound can
-        do worse than that penalty. Stepping after ``terminated`` follows
-        Gymnasium's convention (as ``CartPole``): a warning, once; the
-        simulation goes on, but every further step returns reward 0 and
-        ``terminated=True`` (the penalty is never charged twice). ``step``
-        before the first ``reset`` raises :class:`gymnasium.error.ResetNeeded`.
+    -----------
+    | Signal         | When                                                        |
+    |----------------|-------------------------------------------------------------|
+    | ``terminated`` | a true attitude angle beyond ``max_attitude_deg`` (20 deg) |
+    | ``truncated``  | the registered time limit only (2500 steps = 250 s)        |
+
+    Beyond 20 deg the small-angle model's error passes 2 %.
+
+    With ``reward="cost"`` the terminating step is charged every step left to the
+    time limit at the stage cost of an attitude error at the bound on all three
+    axes, so no policy that stays within the bound can do worse (with the removed
+    ``-v0`` ids crashing paid: full torque until termination scored -2.0e5
+    against -2.5e5 for zero torque on the slew task). Stepping after
+    ``terminated`` follows Gymnasium's convention (as ``CartPole``): a warning,
+    once; the simulation goes on, but every further step returns reward 0 and
+    ``terminated=True``. ``step`` before the first ``reset`` raises
+    :class:`gymnasium.error.ResetNeeded`.
+
     Starting state
-        ``task="regulation"``: reference 0 and initial attitude uniform in
-        +-``initial_attitude_deg`` per axis; ``task="slew"``: initial attitude
-        0 and reference uniform in +-``slew_range_deg``. ``reset(options=...)``
-        overrides with ``"initial_attitude"`` (rad, (3,)), ``"initial_rate"``
-        (rad/s, (3,)) and ``"reference_attitude"`` (rad, (3,)).
+    --------------
+    | ``task=``                  | Initial attitude per axis             | Reference per axis  |
+    |----------------------------|---------------------------------------|---------------------|
+    | ``"regulation"`` (default) | uniform in +-``initial_attitude_deg`` | 0                   |
+    | ``"slew"``                 | 0                                     | +-``slew_range_deg`` |
+
+    Both draws are uniform.
+
+    The initial rates and deflections are zero. ``reset(options=...)`` overrides
+    with ``"initial_attitude"`` (rad, (3,)), ``"initial_rate"`` (rad/s, (3,)) and
+    ``"reference_attitude"`` (rad, (3,)), and on the family env ``"plant"``.
+
     Info
-        ``"time"`` (s), ``"state"`` (true state, float64, (n,)), ``"torque"``
-        (applied control torque, N m, after clipping, scaling, the actuator
-        delay and rate limit),
-        ``"reference"`` (rad), ``"paddle_angle"`` (rad: the solar-paddle drive
-        encoder, which a real spacecraft reads). ``reset`` adds
-        ``"scenario"``: the episode's scenario values
-        (:meth:`Scenario.parameters`: docking times, masses and positions,
-        rotation rate), so a randomized draw is on record; a policy must not
-        read it (that would be privileged knowledge).
+    ----
+    | Key                | Unit, shape     | Meaning                                      |
+    |--------------------|-----------------|----------------------------------------------|
+    | ``"time"``         | s               | time after the step                          |
+    | ``"state"``        | float64, (n,)   | the true state                               |
+    | ``"torque"``       | N m, (3,)       | the applied torque (1)                       |
+    | ``"reference"``    | rad, (3,)       | the reference attitude                       |
+    | ``"paddle_angle"`` | rad             | the solar-paddle drive encoder               |
+    | ``"scenario"``     | dict, ``reset`` | the episode's scenario values (2)            |
+    | ``"plant"``        | dict, ``reset`` | the family env's drawn plant (2)             |
+
+    (1) after clipping, scaling, the actuator delay and the rate limit; (2)
+    :meth:`Scenario.parameters` and :class:`~spacecraft_env.family.PlantDraw`,
+    so a randomized draw is on record; privileged: a policy must not read them.
+    A real spacecraft reads its paddle drive's encoder, so ``"paddle_angle"`` is
+    not privileged.
+
     Version history
-        * v1 (package 0.1.0, updated in 0.2.0): leaving the attitude bound
-          is charged every step left to the time limit (``reward="cost"``);
-          ``reward="bounded"`` added; 0.2.0 adds ``reward="log"``,
-          ``FlexibleSpacecraftFamily-v1`` (``scenario="family"``, a new plant
-          every episode) and the ``"plant"`` info and reset option, and
-          stepping after termination returns reward 0 (the penalty is
-          charged once). The ``-v1`` dynamics and the other ids' rewards are
-          unchanged.
-        * v0 (package 0.1.0 only): an episode that left the bound ended with
-          no penalty, so crashing paid; not registered any more.
+    ---------------
+    * v1 (package 0.1.0, updated in 0.2.0): leaving the attitude bound
+      is charged every step left to the time limit (``reward="cost"``);
+      ``reward="bounded"`` added; 0.2.0 adds ``reward="log"``,
+      ``FlexibleSpacecraftFamily-v1`` (``scenario="family"``, a new plant
+      every episode) and the ``"plant"`` info and reset option, and
+      stepping after termination returns reward 0 (the penalty is
+      charged once). The ``-v1`` dynamics and the other ids' rewards are
+      unchanged.
+    * v0 (package 0.1.0 only): an episode that left the bound ended with
+      no penalty, so crashing paid; not registered any more.
 
     Parameters
     ----------
@@ -267,6 +309,22 @@ class FlexibleSpacecraftEnv(gym.Env):
     max_attitude_deg : float
         Termination bound on any attitude angle, deg.
     render_mode : {"human", "rgb_array"}, optional
+
+    Examples
+    --------
+    Every scenario is a registered id (:data:`ENV_IDS`); keywords reach the
+    constructor:
+
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v1", task="slew")
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.shape, env.unwrapped.observation_labels[-3:]
+    ((13,), ('ref_x', 'ref_y', 'ref_z'))
+    >>> obs, reward, terminated, truncated, info = env.step(np.zeros(3, dtype=np.float32))
+    >>> info["time"], info["torque"].tolist(), terminated, truncated
+    (0.1, [0.0, 0.0, 0.0], False, False)
+    >>> env.close()
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}

@@ -118,18 +118,32 @@ def test_python_snippets_run(where, code, tmp_path, monkeypatch):
 
 def test_the_api_reference_builds_without_warnings(tmp_path):
     """`make docs`: pdoc over every package, numpydoc docstrings, warnings as errors."""
+    import importlib
     import subprocess
     import sys
 
     pytest.importorskip("pdoc")
-    done = subprocess.run([sys.executable, "-W", "error", "-m", "pdoc", "-d", "numpy", "-o",
-                           str(tmp_path), "spacecraft_conventions", "spacecraft_env",
-                           "identifiers", "controllers", "spacecraft_lab"],
-                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+    make = (ROOT / "Makefile").read_text()
+    command = re.search(r"^docs:.*?\n\t.*?\n\t\$\(BIN\)/python (.*?)(?<!\\)\n", make,
+                        re.S | re.M).group(1).replace("\\\n", " ").split()
+    command[command.index("build/api")] = str(tmp_path)
+    done = subprocess.run([sys.executable, *command], capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
     assert done.returncode == 0 and not done.stderr.strip(), done.stderr[-3000:]
     # one page per package: its public API (``__all__``), numpydoc sections rendered
     page = (tmp_path / "controllers.html").read_text()
     assert "PhysicalFeatures" in page and "Parameters" in page
+    # the env's Gymnasium-style sections render as tables, not as one paragraph
+    env_page = (tmp_path / "spacecraft_env.html").read_text()
+    section = env_page[env_page.index('id="FlexibleSpacecraftEnv"'):]
+    section = section[:section.index('id="FlexibleSpacecraftEnv.__init__"')]
+    assert section.count("<table>") >= 6, "Action/Observation/Reward/... tables"
+    # the landing page maps use cases to objects, and every link names a public object
+    index = (tmp_path / "index.html").read_text()
+    links = re.findall(r'href="(\w+)\.html#(\w+)"', index)
+    assert len(links) >= 30
+    for package, name in links:
+        assert name in importlib.import_module(package).__all__, f"{package}.{name}"
 
 
 # --------------------------------------------------------------------------
@@ -202,14 +216,23 @@ def test_entry_point_examples_run():
     """The ``Examples`` of the main entry points are doctests, and they pass."""
     import doctest
 
-    from controllers import Trajectory, run_episode
-    from identifiers import default_identifier
-    from spacecraft_env import check_parameter
+    from controllers import (
+        AdaptiveLQG,
+        IdentifiedModelFeatures,
+        PhysicalFeatures,
+        Trajectory,
+        compare,
+        run_episode,
+    )
+    from identifiers import ClassicalRPBSID, ImprovedRPBSID, StateSpaceModel, default_identifier
+    from spacecraft_env import FlexibleSpacecraftEnv, check_parameter
 
     finder = doctest.DocTestFinder(recurse=False)
     runner = doctest.DocTestRunner()
     failed, report = 0, []
-    for obj in (default_identifier, run_episode, Trajectory, check_parameter):
+    for obj in (FlexibleSpacecraftEnv, default_identifier, ImprovedRPBSID, ClassicalRPBSID,
+                StateSpaceModel.modal, AdaptiveLQG, run_episode, compare, Trajectory,
+                PhysicalFeatures, IdentifiedModelFeatures, check_parameter):
         tests = [t for t in finder.find(obj) if t.examples]
         assert tests, f"{obj.__qualname__} has no doctest examples"
         for test in tests:
