@@ -30,7 +30,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1500)
     args = parser.parse_args()
-    env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v1")
+    env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v2")
     ctrl = AdaptiveLQG(env.unwrapped)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)

@@ -50,7 +50,7 @@ def main() -> None:
                         help="length of the constant-plant run, s (0: skip it)")
     args = parser.parse_args()
     print("excitation RMS (N m, all axes), median [worst] over seeds")
-    for env_id in ("FlexibleSpacecraft-v1", "FlexibleSpacecraftDocking-v1"):
+    for env_id in ("FlexibleSpacecraft-v2", "FlexibleSpacecraftDocking-v2"):
         rows = []
         for seed in range(args.seeds):
             env = gym.make(env_id, task="slew")
@@ -71,7 +71,7 @@ def long_run(seeds: int, seconds: float) -> None:
     print("  seed  cost ratio  torque RMS last 100 s (N m): adaptive  oracle  bar")
     ratios, torques = [], []
     for seed in range(seeds):
-        env = gym.make("FlexibleSpacecraft-v1", task="slew", max_episode_steps=steps)
+        env = gym.make("FlexibleSpacecraft-v2", task="slew", max_episode_steps=steps)
         out = {}
         for name, make in (("adaptive", AdaptiveLQG), ("oracle", OracleLQG)):
             traj = run_episode(env, make(env.unwrapped), seed=seed)

@@ -1,6 +1,6 @@
 """Does the adaptation task need adaptation? Fixed, robust, adaptive and oracle LQG per draw.
 
-On ``FlexibleSpacecraftFamily-v1`` (slew task), each seed draws one plant
+On ``FlexibleSpacecraftFamily-v2`` (slew task), each seed draws one plant
 (:class:`spacecraft_env.TaskFamily`); every controller flies the same draw.
 Printed: per controller, the share of draws it leaves unstable (verdict not
 "stable") and the share where its common cost from 100 s is at least twice
@@ -28,7 +28,7 @@ CONTROLLERS = {"fixed LQG": FixedLQG, "robust LQG": RobustLQG, "adaptive LQG": A
 
 
 def run(draws: int, controllers: dict = CONTROLLERS) -> dict:
-    env = gym.make("spacecraft_env:FlexibleSpacecraftFamily-v1", task="slew")
+    env = gym.make("spacecraft_env:FlexibleSpacecraftFamily-v2", task="slew")
     out: dict = {"draws": [], "runs": {name: [] for name in controllers}}
     for seed in range(draws):
         for name, make in controllers.items():
@@ -62,7 +62,7 @@ def main() -> None:
     with single_threaded_blas:
         res = run(args.draws)
     table = summarize(res)
-    print(f"{args.draws} draws of FlexibleSpacecraftFamily-v1 (slew); cost from 100 s")
+    print(f"{args.draws} draws of FlexibleSpacecraftFamily-v2 (slew); cost from 100 s")
     print(f"{'controller':<14}{'unstable':>10}{'>= 2x oracle':>14}{'failed':>9}"
           f"{'median cost / oracle':>22}")
     for name, row in table.items():

@@ -5,7 +5,7 @@ default hyperparameters, one env, torch on one thread) training env steps
 per second on
 
 * Gymnasium's ``Pendulum-v1`` (the yardstick),
-* ``FlexibleSpacecraftDocking-v1`` (slew task) with no features,
+* ``FlexibleSpacecraftDocking-v2`` (slew task) with no features,
 * the same with :class:`controllers.IdentifiedModelFeatures` (the default
   identifier runs every step),
 * the same with :class:`controllers.OracleModelFeatures` (truth features),
@@ -39,16 +39,16 @@ from spacecraft_conventions import single_threaded_blas
 
 CASES = {
     "Pendulum-v1": lambda: gym.make("Pendulum-v1"),
-    "docking, no features": lambda: gym.make("FlexibleSpacecraftDocking-v1", task="slew"),
+    "docking, no features": lambda: gym.make("FlexibleSpacecraftDocking-v2", task="slew"),
     "docking, identified features": lambda: IdentifiedModelFeatures(
-        gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
+        gym.make("FlexibleSpacecraftDocking-v2", task="slew")),
     "docking, oracle features": lambda: OracleModelFeatures(
-        gym.make("FlexibleSpacecraftDocking-v1", task="slew")),
-    "family, no features": lambda: gym.make("FlexibleSpacecraftFamily-v1", task="slew"),
+        gym.make("FlexibleSpacecraftDocking-v2", task="slew")),
+    "family, no features": lambda: gym.make("FlexibleSpacecraftFamily-v2", task="slew"),
     "family, physical features": lambda: PhysicalFeatures(
-        gym.make("FlexibleSpacecraftFamily-v1", task="slew")),
+        gym.make("FlexibleSpacecraftFamily-v2", task="slew")),
     "family, privileged features": lambda: PrivilegedFeatures(
-        gym.make("FlexibleSpacecraftFamily-v1", task="slew")),
+        gym.make("FlexibleSpacecraftFamily-v2", task="slew")),
 }
 
 

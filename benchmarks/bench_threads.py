@@ -50,7 +50,7 @@ def identifier_path(steps: int) -> Callable[[], float]:
 
 def features_path(steps: int) -> Callable[[], float]:
     def run() -> float:
-        env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1"))
+        env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2"))
         env.reset(seed=0)
         action = np.full(3, 0.05, dtype=np.float32)
         start = time.perf_counter()
@@ -63,7 +63,7 @@ def features_path(steps: int) -> Callable[[], float]:
 
 def adaptive_path(steps: int) -> Callable[[], float]:
     def run() -> float:
-        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1")
+        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
         ctrl = AdaptiveLQG(env.unwrapped)
         obs, info = env.reset(seed=0)
         ctrl.reset(0)

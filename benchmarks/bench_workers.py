@@ -44,7 +44,7 @@ def main() -> None:
 
     factories = {"robust": partial(RobustLQG), "adaptive": partial(AdaptiveLQG),
                  "oracle": partial(OracleLQG)}
-    make_env = partial(gym.make, "spacecraft_env:FlexibleSpacecraftDocking-v1", task="slew")
+    make_env = partial(gym.make, "spacecraft_env:FlexibleSpacecraftDocking-v2", task="slew")
     seeds = list(range(args.control_seeds))
     times, tables = [], []
     for workers in (1, cores):

@@ -158,7 +158,7 @@ class AdaptiveLQG(_LQGController):
 
     >>> import gymnasium as gym
     >>> from controllers import AdaptiveLQG, run_episode
-    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v2")
     >>> ctrl = AdaptiveLQG(env)
     >>> traj = run_episode(env, ctrl, seed=0, max_steps=320)
     >>> ctrl.identifier.warmup, ctrl.identifier.model is not None

@@ -128,7 +128,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
     --------
     >>> import gymnasium as gym
     >>> from controllers import IdentifiedModelFeatures
-    >>> env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraft-v1"))
+    >>> env = IdentifiedModelFeatures(gym.make("spacecraft_env:FlexibleSpacecraft-v2"))
     >>> obs, info = env.reset(seed=0)
     >>> env.env.observation_space.shape, env.observation_space.shape
     ((10,), (57,))
@@ -421,7 +421,7 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
     >>> import numpy as np
     >>> from controllers import PhysicalFeatures
     >>> from controllers.features import PHYSICAL_FEATURE_NAMES
-    >>> env = PhysicalFeatures(gym.make("spacecraft_env:FlexibleSpacecraftFamily-v1"))
+    >>> env = PhysicalFeatures(gym.make("spacecraft_env:FlexibleSpacecraftFamily-v2"))
     >>> obs, info = env.reset(seed=0)
     >>> env.env.observation_space.shape, env.observation_space.shape
     ((10,), (25,))

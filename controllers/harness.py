@@ -23,18 +23,23 @@ import numpy as np
 from tqdm import tqdm
 
 from controllers.base import Controller
-from controllers.lqg import LQRWeights
 from identifiers import relative_gain_error, rigid_body_gain
-from spacecraft_conventions import DEG_PER_RAD, NOMINAL_SCALE, single_threaded_blas
+from spacecraft_conventions import (
+    COST_WEIGHTS,
+    DEG_PER_RAD,
+    NOMINAL_SCALE,
+    CostWeights,
+    single_threaded_blas,
+)
 
 __all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "ENVELOPE_FLOOR", "GROWTH_LIMIT",
            "JUDGED_FROM_S", "SCORED_FROM_S", "ComparisonInterrupted",
            "Trajectory", "compare", "controller_shares", "episode_metrics", "run_episode",
            "stage_costs"]
 
-#: The weights of the common quadratic cost every LQG here minimizes, by which every
-#: controller is scored: the LQG designs' defaults (:class:`~controllers.lqg.LQRWeights`).
-COST_WEIGHTS = LQRWeights()
+# COST_WEIGHTS (re-exported): the weights of the common quadratic cost by which every
+# controller is scored, which every LQG here minimizes and whose negative is the env's
+# reward="cost", defined once in spacecraft_conventions.cost.
 #: The parts of the common cost, in the order :func:`stage_costs` returns them.
 COST_PARTS = ("attitude", "rate", "deflection", "torque", "excitation")
 
@@ -92,7 +97,7 @@ class Trajectory:
     >>> from pathlib import Path
     >>> import gymnasium as gym
     >>> from controllers import PD, Trajectory, run_episode
-    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v2")
     >>> traj = run_episode(env, PD(env), seed=0, max_steps=20)
     >>> len(traj.time), traj.states.shape, traj.terminated
     (20, (21, 22), False)
@@ -277,7 +282,7 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     --------
     >>> import gymnasium as gym
     >>> from controllers import PD, run_episode
-    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v1")
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v2")
     >>> traj = run_episode(env, PD(env), seed=0, max_steps=20)
     >>> float(traj.time[-1]), traj.torque.shape, traj.observations.shape
     (2.0, (20, 3), (21, 10))
@@ -448,7 +453,7 @@ def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tup
 
 
 def stage_costs(traj: Trajectory, model: Any,
-                weights: LQRWeights = COST_WEIGHTS) -> np.ndarray:
+                weights: CostWeights = COST_WEIGHTS) -> np.ndarray:
     """The common quadratic cost of every step, split into its parts, (N, 5).
 
     Columns (:data:`COST_PARTS`): ``attitude * |e / 1 deg|^2``, ``rate *
@@ -457,7 +462,9 @@ def stage_costs(traj: Trajectory, model: Any,
     ``torque * |u / 1 N m|^2`` of the applied torque, and the part of that
     torque term due to the controller's excitation (``torque * |u_exc|^2``,
     0 without one; it is included in the torque column, not added to it).
-    The weights are those every LQG design here minimizes.
+    The weights are those every LQG design here minimizes, and the sum of the
+    first four columns is minus the env's ``reward="cost"`` of the same step
+    (:mod:`spacecraft_conventions.cost`).
 
     Parameters
     ----------
@@ -468,8 +475,9 @@ def stage_costs(traj: Trajectory, model: Any,
         The truth model the episode ran on (``env.unwrapped.model``), whose
         ``C`` and ``output_layout`` read attitude, rates and deflections from
         the true states.
-    weights : LQRWeights
-        The cost's weights (default :data:`COST_WEIGHTS`).
+    weights : CostWeights
+        The cost's weights (default :data:`COST_WEIGHTS`; an
+        :class:`~controllers.lqg.LQRWeights` is one).
 
     Returns
     -------
@@ -801,14 +809,13 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
     >>> import gymnasium as gym
     >>> from controllers import PD, FixedLQG, compare
     >>> def make_env():
-    ...     return gym.make("spacecraft_env:FlexibleSpacecraft-v1", max_episode_steps=200)
+    ...     return gym.make("spacecraft_env:FlexibleSpacecraft-v2", max_episode_steps=200)
     >>> table, runs = compare({"pd": PD, "lqg": FixedLQG}, make_env, seeds=[0, 1],
     ...                       progress=False)
     >>> table["lqg"]["runs"], table["lqg"]["verdicts"], len(runs["pd"])
     (2, {'stable': 2}, 2)
-    >>> lqg, pd = (table[name]["median"]["return"] for name in ("lqg", "pd"))
-    >>> bool(lqg > pd)          # returns are minus the common cost: higher is better
-    True
+    >>> sorted(table["lqg"]["median"])[:3]     # medians over seeds of episode_metrics
+    ['attitude_peak_deg', 'attitude_rms_after_100s_deg', 'attitude_rms_deg']
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be a positive integer, got {workers!r}")

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.riccati import RiccatiTracker, check_weights
-from spacecraft_conventions import NOMINAL_SCALE
+from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
 
 __all__ = ["INTEGRAL_BAND", "LQGLaw", "LQRWeights", "augment_integral", "equilibrium_state",
            "output_weight"]
@@ -39,9 +39,12 @@ INTEGRAL_BAND = np.deg2rad(0.2)
 
 
 @dataclass(frozen=True)
-class LQRWeights:
+class LQRWeights(CostWeights):
     """Output, integral and torque weights of the LQG designs.
 
+    The common stage cost's weights (:class:`spacecraft_conventions.CostWeights`,
+    whose defaults every design here shares, so each LQG minimizes the cost the
+    env rewards and the harness reports) and the design-only integral weight:
     ``Q_y = diag(attitude / (1 deg)^2 [x3], rate / (0.1 deg/s)^2 [x3],
     deflection / (1 cm)^2 [per sensor])``, ``Q = C^T Q_y C + eps I``,
     ``Q_z = integral / (1 deg s)^2 I`` on the attitude-error integral and
@@ -51,14 +54,9 @@ class LQRWeights:
 
     Attributes
     ----------
-    attitude : float
-        Weight of the squared attitude outputs in units of 1 deg (default 1).
-    rate : float
-        Weight of the squared body-rate outputs in units of 0.1 deg/s (default 1).
-    deflection : float
-        Weight of each squared tip deflection in units of 1 cm (default 0.1).
-    torque : float
-        ``R = torque * I``, per (N m)^2 (default 0.3); must be > 0.
+    attitude, rate, deflection, torque : float
+        The cost's weights (:class:`~spacecraft_conventions.CostWeights`;
+        defaults 1, 1, 0.1 and 0.3 per (N m)^2); ``torque`` must be > 0.
     integral : float
         Weight of the squared attitude-error integral in units of 1 deg s
         (default 4e-4).
@@ -68,18 +66,12 @@ class LQRWeights:
     All must be finite and >= 0 (``torque`` > 0); ``ValueError`` otherwise.
     """
 
-    attitude: float = 1.0
-    rate: float = 1.0
-    deflection: float = 0.1
-    torque: float = 0.3
     integral: float = 4e-4
     eps: float = 1e-6
 
     def __post_init__(self) -> None:
-        for name in ("attitude", "rate", "deflection", "integral", "eps"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"LQR weight {name} must be finite and >= 0")
-        if not np.isfinite(self.torque) or self.torque <= 0:
+        super().__post_init__()
+        if self.torque <= 0:
             raise ValueError("LQR torque weight must be positive (R positive definite)")
 
 
@@ -103,11 +95,7 @@ def output_weight(layout, weights: LQRWeights) -> np.ndarray:
         Diagonal ``Q_y`` for the m sensor channels: per rad^2, per (rad/s)^2
         and per m^2 for the three groups.
     """
-    per_group = {"attitude": weights.attitude, "rate": weights.rate,
-                 "deflection": weights.deflection}
-    sensors = layout.sensors()
-    w = np.concatenate([np.full(size, per_group[g]) for g, size in sensors.groups])
-    return np.diag(w / sensors.scales() ** 2)
+    return np.diag(output_cost_weights(layout, weights))
 
 
 def equilibrium_state(a: np.ndarray, c_att: np.ndarray, reference: np.ndarray) -> np.ndarray:

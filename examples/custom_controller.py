@@ -55,7 +55,7 @@ args = parser.parse_args()
 results: dict[str, list[float]] = {}
 for seed in range(args.seeds):
     for make in (IdentifiedPD, FixedLQG, OracleLQG):
-        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1", task="slew",
+        env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2", task="slew",
                        max_episode_steps=args.steps)
         ctrl = make(env.unwrapped)
         m = episode_metrics(run_episode(env, ctrl, seed=seed), env.unwrapped.model)

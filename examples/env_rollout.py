@@ -6,7 +6,7 @@
 import gymnasium as gym
 import numpy as np
 
-env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1")
+env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
 obs, info = env.reset(seed=0)
 total = 0.0
 for _ in range(1000):

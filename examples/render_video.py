@@ -19,7 +19,7 @@ parser.add_argument("--every", type=int, default=10, help="one frame per this ma
 parser.add_argument("--out", default="docking.gif")
 args = parser.parse_args()
 
-env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1", task="slew", render_mode="rgb_array")
+env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2", task="slew", render_mode="rgb_array")
 ctrl = AdaptiveLQG(env.unwrapped)
 obs, info = env.reset(seed=0)
 ctrl.reset(seed=0)

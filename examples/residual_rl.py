@@ -22,7 +22,7 @@ parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--timesteps", type=int, default=400_000, help="env steps (0.1 s each)")
 args = parser.parse_args()
 
-ENV = "spacecraft_env:FlexibleSpacecraftFamily-v1"
+ENV = "spacecraft_env:FlexibleSpacecraftFamily-v2"
 KWARGS = {"task": "slew", "reward": "bounded"}
 
 

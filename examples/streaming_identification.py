@@ -19,7 +19,7 @@ parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--steps", type=int, default=2500, help="env steps (0.1 s each)")
 args = parser.parse_args()
 
-env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v1")      # 40 dB sensor noise
+env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")      # 40 dB sensor noise
 model = env.unwrapped.model
 ident = default_identifier()                                      # the env's 10 outputs
 rng = np.random.default_rng(0)

@@ -27,7 +27,7 @@ parser.add_argument("--timesteps", type=int, default=800_000, help="env steps (0
 parser.add_argument("--episodes", type=int, default=3, help="evaluation episodes")
 args = parser.parse_args()
 
-ENV = "spacecraft_env:FlexibleSpacecraftFamily-v1"
+ENV = "spacecraft_env:FlexibleSpacecraftFamily-v2"
 KWARGS = {"task": "slew", "reward": "bounded"}
 REPEAT = 10
 

@@ -8,12 +8,15 @@ on each other.
 * :mod:`spacecraft_conventions.sensors`: nominal signal level of each
   sensor group and of the torques (what ``snr_db``, the reward, the LQR
   weights and the identifiers' normalization are relative to).
+* :mod:`spacecraft_conventions.cost`: the common quadratic stage cost's weights
+  (:class:`CostWeights`), which the reward, the harness and the LQG designs share.
 * :mod:`spacecraft_conventions.outputs`: the sensor groups, their order,
   their channel labels and :class:`OutputLayout`, which gives each group's
   rows of an output or observation vector by name.
 """
 
 from spacecraft_conventions.blas import single_threaded_blas
+from spacecraft_conventions.cost import COST_WEIGHTS, CostWeights, output_cost_weights
 from spacecraft_conventions.outputs import (
     AXES,
     LABEL_PREFIX,
@@ -31,6 +34,7 @@ from spacecraft_conventions.version import __version__
 
 __all__ = [
     "AXES",
+    "COST_WEIGHTS",
     "DEG_PER_RAD",
     "LABEL_PREFIX",
     "MEASURES",
@@ -41,9 +45,11 @@ __all__ = [
     "RAD_PER_DEG",
     "STANDARD_OUTPUTS",
     "TASK_GROUPS",
+    "CostWeights",
     "OutputLayout",
     "__version__",
     "match_groups",
     "nominal_scale",
+    "output_cost_weights",
     "single_threaded_blas",
 ]

@@ -3,16 +3,16 @@
 Importing the package registers five environments (250 s episodes,
 ``max_episode_steps=2500`` at dt = 0.1 s):
 
-* ``FlexibleSpacecraft-v1``: constant (LTI) plant,
-* ``FlexibleSpacecraftDocking-v1``: two modules dock at t = 100 s and 180 s,
-* ``FlexibleSpacecraftSolarRotation-v1``: paddles turn at 0.2 deg/s from 0 deg,
-* ``FlexibleSpacecraftPaddleRotation-v1``: paddles turn from 90 to 180 deg,
+* ``FlexibleSpacecraft-v2``: constant (LTI) plant,
+* ``FlexibleSpacecraftDocking-v2``: two modules dock at t = 100 s and 180 s,
+* ``FlexibleSpacecraftSolarRotation-v2``: paddles turn at 0.2 deg/s from 0 deg,
+* ``FlexibleSpacecraftPaddleRotation-v2``: paddles turn from 90 to 180 deg,
   where a design made at 0 deg goes unstable;
-* ``FlexibleSpacecraftFamily-v1``: the adaptation task, a new plant every
+* ``FlexibleSpacecraftFamily-v2``: the adaptation task, a new plant every
   episode (inertia, modal stiffness, actuator efficiency, docking, paddle
   angle and rate: :mod:`spacecraft_env.family`).
 
-``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v1")`` works
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v2")`` works
 without a prior import.
 """
 

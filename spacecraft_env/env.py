@@ -24,7 +24,9 @@ from spacecraft_conventions import (
     OBSERVATION_GROUPS,
     OUTPUT_GROUPS,
     RAD_PER_DEG,
+    CostWeights,
     OutputLayout,
+    output_cost_weights,
 )
 from spacecraft_env.dynamics import FlexibleSpacecraftModel
 from spacecraft_env.family import PlantDraw, TaskFamily
@@ -54,14 +56,16 @@ _BOUND = {"attitude": np.pi, "rate": np.pi, "deflection": 10.0,
 
 
 @dataclass(frozen=True)
-class RewardWeights:
-    """Weights of the quadratic stage cost; the reward is its negative.
+class RewardWeights(CostWeights):
+    """The stage cost the reward is built from, and the reward's two scales.
 
-    ``cost = attitude * |e / 1 deg|^2 + rate * |omega / 0.1 deg/s|^2
-    + vibration * |w / 1 cm|^2 + torque * |a|^2`` (the nominal levels of
-    :mod:`spacecraft_conventions.sensors`) with ``e`` the true
-    attitude error (rad), ``omega`` the true body rates (rad/s), ``w`` the
-    true tip deflections (m) and ``a`` the normalized action in [-1, 1].
+    The cost is the project's common quadratic stage cost
+    (:class:`spacecraft_conventions.CostWeights`, the one the harness reports
+    and every LQG minimizes): ``cost = attitude * |e / 1 deg|^2 + rate *
+    |omega / 0.1 deg/s|^2 + deflection * |w / 1 cm|^2 + torque * |u / 1 N m|^2``
+    with ``e`` the true attitude error (rad), ``omega`` the true body rates
+    (rad/s) and ``w`` the true tip deflections (m) of the state the step
+    produced, and ``u`` the torque applied during the step (N m, ``info["torque"]``).
 
     ``saturation`` is the cost at which the bounded reward
     (``reward="bounded"``: ``1 - min(cost / saturation, 1)``) reaches 0;
@@ -74,14 +78,9 @@ class RewardWeights:
 
     Attributes
     ----------
-    attitude : float
-        Weight of the squared attitude error in units of 1 deg (default 1).
-    rate : float
-        Weight of the squared body rates in units of 0.1 deg/s (default 1).
-    vibration : float
-        Weight of the squared tip deflections in units of 1 cm (default 0.1).
-    torque : float
-        Weight of the squared normalized action (default 0.01).
+    attitude, rate, deflection, torque : float
+        The cost's weights (:class:`~spacecraft_conventions.CostWeights`;
+        defaults 1, 1, 0.1 and 0.3 per (N m)^2).
     saturation : float
         Cost at which the bounded reward reaches 0 (default 300); > 0.
     precision : float
@@ -90,19 +89,11 @@ class RewardWeights:
     All are finite and >= 0 (``ValueError`` otherwise) and stored as floats.
     """
 
-    attitude: float = 1.0
-    rate: float = 1.0
-    vibration: float = 0.1
-    torque: float = 0.01
     saturation: float = 300.0
     precision: float = 3e-4
 
     def __post_init__(self) -> None:
-        for name in ("attitude", "rate", "vibration", "torque", "saturation", "precision"):
-            value = float(getattr(self, name))
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"reward weight {name} must be finite and >= 0, got {value}")
-            object.__setattr__(self, name, value)
+        super().__post_init__()
         if self.saturation == 0 or self.precision == 0:
             raise ValueError("reward weights saturation and precision must be > 0")
 
@@ -242,14 +233,23 @@ class FlexibleSpacecraftEnv(gym.Env):
 
     Version history
     ---------------
+    * v2 (after package 0.2.0): one cost. The reward is built from the project's
+      common stage cost (:class:`spacecraft_conventions.CostWeights`, the cost
+      the harness reports and every LQG minimizes): torque weighed 0.3 per
+      (N m)^2 of the applied torque (v1: 0.01 per normalized action squared,
+      3000x less at ``max_torque=10``), the outputs of the state the step
+      produced (v1: of the state the action acted on), and
+      ``RewardWeights.vibration`` renamed ``deflection``. ``reward="cost"`` is
+      minus the harness's stage cost at every step. Dynamics, observations,
+      the termination penalty and the bounded and log transforms are
+      unchanged; the v1 ids are not registered any more.
     * v1 (package 0.1.0, updated in 0.2.0): leaving the attitude bound
       is charged every step left to the time limit (``reward="cost"``);
       ``reward="bounded"`` added; 0.2.0 adds ``reward="log"``,
       ``FlexibleSpacecraftFamily-v1`` (``scenario="family"``, a new plant
       every episode) and the ``"plant"`` info and reset option, and
       stepping after termination returns reward 0 (the penalty is
-      charged once). The ``-v1`` dynamics and the other ids' rewards are
-      unchanged.
+      charged once).
     * v0 (package 0.1.0 only): an episode that left the bound ended with
       no penalty, so crashing paid; not registered any more.
 
@@ -317,7 +317,7 @@ class FlexibleSpacecraftEnv(gym.Env):
 
     >>> import gymnasium as gym
     >>> import numpy as np
-    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v1", task="slew")
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v2", task="slew")
     >>> obs, info = env.reset(seed=0)
     >>> obs.shape, env.unwrapped.observation_labels[-3:]
     ((13,), ('ref_x', 'ref_y', 'ref_z'))
@@ -442,10 +442,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         scale = plant.scales()
         self.noise_std = (np.zeros_like(scale) if self.snr_db is None
                           else scale * 10.0 ** (-self.snr_db / 20.0))
-        w = self.reward_weights
-        weight = {"attitude": w.attitude, "rate": w.rate, "deflection": w.vibration}
-        self._cost_weights = np.concatenate([np.full(size, weight[g]) for g, size in plant.groups]
-                                            ) / scale**2
+        self._cost_weights = output_cost_weights(plant, self.reward_weights)
 
     # ------------------------------------------------------------- properties
     @property
@@ -487,8 +484,7 @@ class FlexibleSpacecraftEnv(gym.Env):
 
     def _observe(self) -> np.ndarray:
         y = self._y
-        outputs = y[:-1]
-        np.matmul(self.model.C, self._x, out=self._clean)   # kept for the next step's cost
+        outputs = y[:-1]                   # self._clean: C x, set by reset and step
         if self.snr_db is not None:
             np.add(self._clean, self.noise_std * self.np_random.standard_normal(outputs.shape[0]),
                    out=outputs)
@@ -554,6 +550,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._captures = self.model.capture_steps()
         self._torque = np.zeros(3)
         self._commands = deque([np.zeros(3)] * self.actuator_delay_steps)
+        np.matmul(self.model.C, self._x, out=self._clean)
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
@@ -592,15 +589,17 @@ class FlexibleSpacecraftEnv(gym.Env):
             total = total + self.disturbance_std * self.np_random.standard_normal(3)
         x = self._x
         model = self.model
-        # cost of the state the action acts on, plus the action (stage cost); the
-        # noiseless outputs of that state are the last observation's
-        err = self._clean - self._ref_outputs
-        cost = err @ (self._cost_weights * err) + self.reward_weights.torque * (a @ a)
         if self._k in self._captures:      # a module that brings its own momentum docks
             x = model.capture(x, self._k * model.dt)
         ad, bd = model._discrete_ab(self._k * model.dt)
         self._x = ad @ x + bd @ total
         self._k += 1
+        # the common stage cost (spacecraft_conventions.cost): the true outputs of the
+        # state the step produced against the reference, and the torque applied; the
+        # noiseless outputs are kept for the observation
+        np.matmul(model.C, self._x, out=self._clean)
+        err = self._clean - self._ref_outputs
+        cost = err @ (self._cost_weights * err) + self.reward_weights.torque * (torque @ torque)
         if self._terminated:
             # Gymnasium's convention (as CartPole): stepping past the end is undefined;
             # warn once, keep simulating, pay nothing, charge no penalty again

@@ -1,6 +1,6 @@
 """A family of spacecraft that no single fixed design serves: the adaptation task.
 
-Every episode of ``FlexibleSpacecraftFamily-v1`` flies a plant drawn from
+Every episode of ``FlexibleSpacecraftFamily-v2`` flies a plant drawn from
 :class:`TaskFamily`: the hub's inertia scaled, the appendages' modal
 stiffness scaled (their cantilever frequencies by its square root), an
 actuator efficiency (the torque the wheels deliver per torque commanded:

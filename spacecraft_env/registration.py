@@ -1,7 +1,7 @@
 """The registered environment ids, defined once, and their registration.
 
 Importing :mod:`spacecraft_env` registers them, so
-``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v1")`` works
+``gymnasium.make("spacecraft_env:FlexibleSpacecraftDocking-v2")`` works
 without a prior import.
 """
 
@@ -16,11 +16,11 @@ __all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "env_id", "register_envs"]
 
 #: Registered environment id -> scenario name.
 ENV_IDS: Mapping[str, str] = MappingProxyType({
-    "FlexibleSpacecraft-v1": "constant",
-    "FlexibleSpacecraftDocking-v1": "docking",
-    "FlexibleSpacecraftSolarRotation-v1": "solar_rotation",
-    "FlexibleSpacecraftPaddleRotation-v1": "paddle_rotation",
-    "FlexibleSpacecraftFamily-v1": "family",
+    "FlexibleSpacecraft-v2": "constant",
+    "FlexibleSpacecraftDocking-v2": "docking",
+    "FlexibleSpacecraftSolarRotation-v2": "solar_rotation",
+    "FlexibleSpacecraftPaddleRotation-v2": "paddle_rotation",
+    "FlexibleSpacecraftFamily-v2": "family",
 })
 
 #: Episode length of every registered id: 250 s at dt = 0.1 s.
@@ -39,7 +39,7 @@ def env_id(scenario: str) -> str:
     Returns
     -------
     str
-        ``"spacecraft_env:<id>"``, e.g. ``"spacecraft_env:FlexibleSpacecraftDocking-v1"``
+        ``"spacecraft_env:<id>"``, e.g. ``"spacecraft_env:FlexibleSpacecraftDocking-v2"``
         for ``"docking"``, which ``gymnasium.make`` accepts.
 
     Raises

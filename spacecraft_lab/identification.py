@@ -391,11 +391,18 @@ def _aggregate(per_seed: list[dict[str, Any]]) -> Any:
     vals = np.array([np.nan if v is None else v for v in per_seed], dtype=float)
     finite = vals[np.isfinite(vals)]
     if not finite.size:
-        return {"median": None, "min": None, "max": None, "diverged": len(vals)}
-    return {"median": float(np.median(vals)) if np.all(np.isfinite(vals)) else
-            float(np.median(np.where(np.isfinite(vals), vals, -np.inf))),
-            "min": float(finite.min()), "max": float(finite.max()),
-            "diverged": int(len(vals) - finite.size)}
+        return {"median": None, "min": None, "max": None, "q25": None, "q75": None,
+                "diverged": len(vals)}
+    # a diverged seed counts as the worst value: it pulls the median and quartiles down
+    # (the quartiles then take observed values, never an interpolation with -inf)
+    ranked = np.where(np.isfinite(vals), vals, -np.inf)
+    finite_all = bool(np.all(np.isfinite(vals)))
+    q25, q75 = (float(v) if np.isfinite(v) else None for v in np.percentile(
+        ranked, [25, 75], method="linear" if finite_all else "inverted_cdf"))
+    with np.errstate(invalid="ignore"):
+        median = float(np.median(ranked))
+    return {"median": median, "min": float(finite.min()), "max": float(finite.max()),
+            "q25": q25, "q75": q75, "diverged": int(len(vals) - finite.size)}
 
 
 @functools.lru_cache(maxsize=4)

@@ -22,6 +22,7 @@ from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftModel
 
 __all__ = [
+    "PREDICTION_SERIES",
     "mark_events",
     "plot_control_comparison",
     "plot_demo_response",
@@ -81,16 +82,18 @@ def plot_identification_responses(path: str | Path, u_test: np.ndarray, y_test: 
 
 
 def plot_identification_modal(path: str | Path, truth: FlexibleSpacecraftModel,
-                              scores: Mapping[str, Any], scenario: str) -> None:
+                              scores: Mapping[str, Any], scenario: str) -> Figure:
     """Identified modal frequencies (dots) against the truth's (lines), zoomed to
     the first paddle and antenna modes; true events dashed, detected ones marked."""
+    from matplotlib.lines import Line2D
+
     n_samples = len(next(iter(scores.values())).models)
     t = np.arange(0, n_samples, 10) * truth.dt
     true_f = np.array([truth.modal_residues(float(tk))[0] for tk in t])
     weight = np.array([truth.modal_residues(float(tk))[2] for tk in t])
     cols = min(3, len(scores))
     rows = -(-len(scores) // cols)
-    fig = Figure(figsize=(5 * cols, 3.6 * rows))
+    fig = Figure(figsize=(5 * cols, 3.6 * rows + 0.8), layout="constrained")
     axes = fig.subplots(rows, cols, sharey=True, squeeze=False)
     for ax in axes.flat[len(scores):]:
         ax.set_visible(False)
@@ -109,10 +112,17 @@ def plot_identification_modal(path: str | Path, truth: FlexibleSpacecraftModel,
         ax.grid(alpha=0.3)
     for row in axes:
         row[0].set_ylabel("natural frequency (Hz)")
-    fig.suptitle(f"{scenario}: identified (dots) vs true modal frequencies, first paddle and "
-                 "antenna modes (solid: torque-excited, dotted: weakly excited); black dashed: "
-                 "dockings, red: detected changes; seed 0", fontsize=9)
+    handles = [Line2D([], [], ls="", marker=".", color="tab:blue", label="identified"),
+               Line2D([], [], color="k", lw=1.2, label="true, torque-excited"),
+               Line2D([], [], color="k", ls=":", lw=0.8, label="true, weakly excited"),
+               Line2D([], [], color="tab:red", lw=0.8, label="detected change")]
+    if truth.scenario.event_times():
+        handles.append(Line2D([], [], color="k", ls="--", lw=0.8, label="docking"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles))
+    fig.suptitle(f"{scenario}: identified vs true modal frequencies (first paddle and "
+                 "antenna modes), seed 0")
     save(fig, path)
+    return fig
 
 
 def plot_rigid_gain(path: str | Path, truth: FlexibleSpacecraftModel,
@@ -144,40 +154,61 @@ def plot_rigid_gain(path: str | Path, truth: FlexibleSpacecraftModel,
     save(fig, path)
 
 
+#: The series of the prediction figure, at most five: the trivial baseline, the ceiling,
+#: the default identifier and the paper's two recursive methods (the rest are in the table).
+PREDICTION_SERIES = ("persistence", "truth frozen at k", "rigid-flexible", "improved",
+                     "classical")
+
+
 def plot_prediction_horizons(path: str | Path, metrics: Mapping[str, Any],
-                             raw: Mapping[str, Any], layout: Any) -> None:
-    """VAF against prediction horizon per output group: median and spread over seeds,
-    persistence and the frozen truth dashed."""
+                             raw: Mapping[str, Any], layout: Any) -> Figure:
+    """VAF against prediction horizon per output group: median and interquartile band
+    over seeds for at most five methods (:data:`PREDICTION_SERIES`), persistence grey
+    dashed and the frozen truth black dashed; each panel's axis starts just below the
+    lowest median it shows (values below are drawn at the axis' edge)."""
     dt = metrics["dt"]
     horizons = [str(h) for h in metrics["horizons_samples"]]
     hs = np.array([int(h) * dt for h in horizons])
-    fig = Figure(figsize=(13, 4))
-    axes = fig.subplots(1, 3)
-    for j, (name, res) in enumerate(metrics["methods"].items()):
-        vaf = res["summary"]["h_step_vaf"]
+    groups = [g for g in ("attitude", "rate", "deflection")
+              if any(g in metrics["methods"][m]["summary"]["h_step_vaf"][horizons[0]]
+                     for m in metrics["methods"])]
+    fig = Figure(figsize=(4.2 * len(groups) + 2.2, 4), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(groups)))
+    shown = [m for m in metrics["methods"] if m in PREDICTION_SERIES] or \
+        list(metrics["methods"])[:5]
+
+    def column(vaf: Mapping[str, Any], group: str, key: str) -> np.ndarray:
+        values = [vaf[h].get(group, {}).get(key, vaf[h].get(group, {}).get("median"))
+                  for h in horizons]
+        return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+    lowest = {g: 100.0 for g in groups}
+    for j, name in enumerate(shown):
+        vaf = metrics["methods"][name]["summary"]["h_step_vaf"]
         style = "--" if name in ("persistence", "truth frozen at k") else "-"
         color = "k" if name == "truth frozen at k" else "0.5" if name == "persistence" \
             else f"C{j}"
-        for ax, group in zip(axes, ("attitude", "rate", "deflection"), strict=True):
-            med = np.array([np.nan if vaf[h][group]["median"] is None else vaf[h][group]["median"]
-                            for h in horizons])
-            lo = np.array([np.nan if vaf[h][group]["min"] is None else vaf[h][group]["min"]
-                           for h in horizons])
-            hi = np.array([np.nan if vaf[h][group]["max"] is None else vaf[h][group]["max"]
-                           for h in horizons])
+        for ax, group in zip(axes, groups, strict=True):
+            med = column(vaf, group, "median")
             ax.plot(hs, med, style, marker="o", ms=3, color=color, label=name)
-            ax.fill_between(hs, lo, hi, color=color, alpha=0.12)
-    for ax, group in zip(axes, ("attitude", "rate", "deflection"), strict=True):
+            ax.fill_between(hs, column(vaf, group, "q25"), column(vaf, group, "q75"),
+                            color=color, alpha=0.12, lw=0)
+            if np.isfinite(med).any():
+                lowest[group] = min(lowest[group], float(np.nanmin(med)))
+    for ax, group in zip(axes, groups, strict=True):
         ax.set_xscale("log")
-        ax.set_ylim(0, 101)
+        floor = max(0.0, 5.0 * np.floor(lowest[group] / 5.0) - 5.0)
+        ax.set_ylim(floor, 100.5)
         ax.set_xlabel("prediction horizon (s)")
         ax.set_ylabel(f"{group} VAF (%)")
+        ax.set_title(group)
         ax.grid(alpha=0.3, which="both")
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"{metrics['scenario']}, {metrics['snr_db']} dB: h-step-ahead prediction from "
-                 f"each identifier's own state, median and min-max over {metrics['seeds']} seeds "
-                 "(dashed: persistence, truth frozen at k)", fontsize=9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside right center", fontsize=8)
+    fig.suptitle(f"{metrics['scenario']}, {metrics['snr_db']} dB: h-step-ahead prediction "
+                 f"VAF, median and interquartile band over {metrics['seeds']} seeds")
     save(fig, path)
+    return fig
 
 
 def _band(ax: Axes, t: np.ndarray, runs: Sequence[np.ndarray], label: str, color: str,

@@ -80,7 +80,7 @@ def test_env_scenarios_and_family_share_the_ranges():
 
 @pytest.mark.parametrize("plant", ["m=2", 3, [1, 2]])
 def test_the_family_plant_option_of_the_wrong_type_is_named(plant):
-    env = gym.make("FlexibleSpacecraftFamily-v1")
+    env = gym.make("FlexibleSpacecraftFamily-v2")
     with pytest.raises(ValueError, match=r"^plant must be a mapping with keys from"):
         env.reset(seed=0, options={"plant": plant})
 
@@ -89,7 +89,7 @@ def test_the_family_plant_option_of_the_wrong_type_is_named(plant):
                                  np.zeros(10, dtype=object)])
 @pytest.mark.parametrize("controller", [PD, FixedLQG, AdaptiveLQG])
 def test_a_controller_refuses_a_non_numeric_observation(obs, controller):
-    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v2")
     _, info = env.reset(seed=0)
     with pytest.raises(TypeError, match="observation must be a real numeric array"):
         controller(env).act(obs, info)
@@ -199,7 +199,7 @@ def test_rl_table_names_the_file_and_what_is_wrong(tmp_path, capsys, text, expec
 
 @pytest.fixture(scope="module")
 def saved_trajectory(tmp_path_factory) -> Path:
-    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v2")
     path = tmp_path_factory.mktemp("traj") / "t.npz"
     return run_episode(env, PD(env), seed=0, max_steps=50).save(path)
 
@@ -253,9 +253,9 @@ def test_training_without_the_rl_extra_names_it_before_any_work(tmp_path, capsys
     ({"seed": -1}, ValueError, "seed must be an integer >= 0"),
     ({"seed": "0"}, ValueError, "seed must be an integer >= 0"),
     ({"controller": object()}, TypeError, "controller must have act"),
-    ({"env": "FlexibleSpacecraft-v1"}, TypeError, "env must be a gymnasium.Env")])
+    ({"env": "FlexibleSpacecraft-v2"}, TypeError, "env must be a gymnasium.Env")])
 def test_run_episode_checks_its_arguments(kwargs, error, expected):
-    env = gym.make("FlexibleSpacecraft-v1")
+    env = gym.make("FlexibleSpacecraft-v2")
     args = {"env": env, "controller": PD(env), **kwargs}
     with pytest.raises(error, match=expected):
         run_episode(**args)
@@ -277,7 +277,7 @@ def test_small_api_faults_found_while_documenting():
     assert prediction_vaf(y, {1: pred})[1][0] == -np.inf
     with pytest.raises(ValueError, match="a task needs 'task_id'"):
         execute({"kind": "control", "params": {}})
-    env = gym.make("FlexibleSpacecraft-v1")
+    env = gym.make("FlexibleSpacecraft-v2")
     _, info = env.reset(seed=0)
     with pytest.raises(ValueError, match="'state' and 'time'"):
         OracleLQR(env).act(np.zeros(10), {"state": info["state"]})

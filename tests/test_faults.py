@@ -176,7 +176,7 @@ class _SensorDropouts(gym.ObservationWrapper):
 
 
 def test_features_wrapper_feeds_every_sample_and_the_identifier_counts_nans():
-    env = IdentifiedModelFeatures(_SensorDropouts(gym.make("FlexibleSpacecraftDocking-v1"),
+    env = IdentifiedModelFeatures(_SensorDropouts(gym.make("FlexibleSpacecraftDocking-v2"),
                                                   {100, 200, 300}))
     env.reset(seed=0)
     rng = np.random.default_rng(1)

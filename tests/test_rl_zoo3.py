@@ -48,9 +48,9 @@ def test_the_readme_command_trains_on_the_documented_task():
 
     argv = readme_command()
     assert argv[:3] == ["python", "-m", "rl_zoo3.train"]
-    assert argv[argv.index("--env") + 1] == "FlexibleSpacecraftFamily-v1"
+    assert argv[argv.index("--env") + 1] == "FlexibleSpacecraftFamily-v2"
     assert env_kwargs(argv) == {"task": "slew", "reward": "bounded"}
-    env = gym.make("FlexibleSpacecraftFamily-v1", **env_kwargs(argv))
+    env = gym.make("FlexibleSpacecraftFamily-v2", **env_kwargs(argv))
     assert env.unwrapped.task == "slew" and env.unwrapped.reward == "bounded"
     assert "inertia_scale" in env.reset(seed=0)[1]["plant"]        # a drawn plant
     config = (CONFIGS / "ppo.yml").read_text()
@@ -62,7 +62,7 @@ def test_the_readme_command_trains_on_the_documented_task():
 @pytest.mark.parametrize(("algo", "steps"), [("ppo", 2000), ("sac", 300)])
 def test_rl_zoo3_trains_with_the_shipped_hyperparameters(tmp_path, algo, steps):
     pytest.importorskip("rl_zoo3")
-    env_id = "FlexibleSpacecraftFamily-v1"
+    env_id = "FlexibleSpacecraftFamily-v2"
     argv = readme_command()
     argv[argv.index("--algo") + 1] = algo
     argv[argv.index("-conf") + 1] = str(CONFIGS / f"{algo}.yml")

@@ -91,7 +91,7 @@ def test_invalid_lqr_weights_dataclass():
 
 @pytest.mark.parametrize("make", [PD, FixedLQG, RobustLQG, ScheduledLQG, OracleLQG, OracleLQR])
 def test_baselines_regulate_the_constant_plant(make):
-    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=1500)
+    env = gym.make("FlexibleSpacecraft-v2", max_episode_steps=1500)
     traj = run_episode(env, make(env), seed=0)
     m = episode_metrics(traj, env.unwrapped.model)
     assert m["stable"]
@@ -116,7 +116,7 @@ def test_oracle_equals_fixed_lqg_on_the_nominal_plant():
 
 
 def test_slew_reaches_reference_without_steady_state_error():
-    env = gym.make("FlexibleSpacecraft-v1", task="slew", snr_db=None)
+    env = gym.make("FlexibleSpacecraft-v2", task="slew", snr_db=None)
     traj = run_episode(env, OracleLQR(env.unwrapped), seed=3)
     err = np.rad2deg(np.abs(traj.states[-1, :3] - traj.reference[-1]))
     assert np.abs(np.rad2deg(traj.reference[-1])).max() > 1.0   # a real slew
@@ -178,7 +178,7 @@ def test_stability_verdict_flags_a_saturated_limit_cycle():
 
 
 def test_adaptive_lqg_runs_and_counts_its_safeguards():
-    env = gym.make("FlexibleSpacecraftDocking-v1")
+    env = gym.make("FlexibleSpacecraftDocking-v2")
     ctrl = AdaptiveLQG(env.unwrapped)
     traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
@@ -231,7 +231,7 @@ def test_disk_margin_skips_a_frequency_at_an_undamped_pole():
 
 
 def test_adaptive_lqg_reads_attitude_and_rate_states_from_the_sensors():
-    env = gym.make("FlexibleSpacecraftDocking-v1")
+    env = gym.make("FlexibleSpacecraftDocking-v2")
     ctrl = AdaptiveLQG(env.unwrapped)
     traj = run_episode(env, ctrl, seed=0, max_steps=560)
     y = traj.observations[-1][ctrl._meas_obs].astype(float)
@@ -248,7 +248,7 @@ def test_adaptive_lqg_reads_attitude_and_rate_states_from_the_sensors():
 
 
 def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
-    env = gym.make("FlexibleSpacecraftDocking-v1")
+    env = gym.make("FlexibleSpacecraftDocking-v2")
     # the prediction test off: only the margin can reject the identified gains
     strict = AdaptiveLQG(env.unwrapped, acceptance=GainAcceptance(
         max_prediction_error=np.inf, min_disk_margin=0.999))
@@ -306,7 +306,7 @@ def test_sb3_style_predict_and_policy_wrapper():
 def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(make):
     """0.01 N m on every axis: PD keeps d / kp (about 0.01 deg); integral action removes it."""
     def steady_error(ctrl_factory):
-        env = gym.make("FlexibleSpacecraft-v1", snr_db=None, disturbance_torque=0.01,
+        env = gym.make("FlexibleSpacecraft-v2", snr_db=None, disturbance_torque=0.01,
                        max_episode_steps=4000)
         traj = run_episode(env, ctrl_factory(env.unwrapped), seed=0)
         return np.abs(np.rad2deg(traj.states[-500:, :3] - traj.reference[-500:]).mean(axis=0))
@@ -321,7 +321,7 @@ def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(ma
 
 
 def test_fixed_lqg_is_judged_unstable_past_96_deg_and_the_oracle_stable():
-    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=2500,
+    env = gym.make("FlexibleSpacecraft-v2", max_episode_steps=2500,
                    scenario=ConstantScenario(paddle_angle_deg=180.0))
     fixed = episode_metrics(run_episode(env, FixedLQG(env.unwrapped), seed=0),
                             env.unwrapped.model)
@@ -363,7 +363,7 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
 
     kwargs = {"scenario": "docking", "task": "slew", "max_episode_steps": 800,
               "outputs": ("attitude", "rate", "deflection", "reference")}
-    vec = DummyVecEnv([lambda: Monitor(gym.make("FlexibleSpacecraft-v1", **kwargs))
+    vec = DummyVecEnv([lambda: Monitor(gym.make("FlexibleSpacecraft-v2", **kwargs))
                        for _ in range(2)])
     vec.seed(100)
     ctrl = AdaptiveLQG(vec.envs[0].unwrapped)
@@ -376,7 +376,7 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
 
     alone = []
     for i in range(2):
-        env = gym.make("FlexibleSpacecraft-v1", **kwargs)
+        env = gym.make("FlexibleSpacecraft-v2", **kwargs)
         solo = AdaptiveLQG(env.unwrapped)
         solo.reset(seed=i)                 # env i's first episode through predict: seed i
         obs, info = env.reset(seed=100 + i)
@@ -399,7 +399,7 @@ def test_batched_evaluate_policy_equals_per_env_evaluation_to_1e9():
 
     kwargs = {"scenario": "docking", "task": "slew", "max_episode_steps": 600,
               "outputs": ("attitude", "rate", "deflection", "reference")}
-    vec = DummyVecEnv([lambda: gym.make("FlexibleSpacecraft-v1", **kwargs) for _ in range(2)])
+    vec = DummyVecEnv([lambda: gym.make("FlexibleSpacecraft-v2", **kwargs) for _ in range(2)])
     vec.seed(200)
     ctrl = AdaptiveLQG(vec.envs[0].unwrapped)
     with warnings.catch_warnings():            # no Monitor: its returns are rounded to 1e-6
@@ -407,7 +407,7 @@ def test_batched_evaluate_policy_equals_per_env_evaluation_to_1e9():
         batched, _ = evaluate_policy(ctrl, vec, n_eval_episodes=2, return_episode_rewards=True)
     per_env = []
     for i in range(2):
-        env = gym.make("FlexibleSpacecraft-v1", **kwargs)
+        env = gym.make("FlexibleSpacecraft-v2", **kwargs)
         solo = AdaptiveLQG(env.unwrapped)
         solo.reset(seed=i)                      # env i's first batched episode: seed i
         obs, _ = env.reset(seed=200 + i)
@@ -429,7 +429,7 @@ def test_a_loop_that_never_flies_its_identified_design_says_so():
     from controllers import FallbackWarning
     from identifiers import ImprovedRPBSID
 
-    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v2")
     for identifier, expected in ((ImprovedRPBSID(22), 1), (None, 0)):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

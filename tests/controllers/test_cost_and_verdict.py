@@ -22,11 +22,11 @@ from controllers import (
 from controllers.acceptance import GainAcceptance
 from controllers.harness import COST_WEIGHTS
 from spacecraft_conventions import NOMINAL_SCALE
-from spacecraft_env import ConstantScenario
+from spacecraft_env import ENV_IDS, ConstantScenario
 
 
 def _env(steps: int = 1200, **kwargs):
-    return gym.make("spacecraft_env:FlexibleSpacecraft-v1", task="slew",
+    return gym.make("spacecraft_env:FlexibleSpacecraft-v2", task="slew",
                     max_episode_steps=steps, **kwargs)
 
 
@@ -52,6 +52,27 @@ def test_stage_cost_in_closed_form():
     np.testing.assert_allclose(cost[:, 4], [w.torque * 0.25, 0.0])
 
 
+@pytest.mark.parametrize("env_id", sorted(ENV_IDS))
+@pytest.mark.parametrize("options", [
+    {"task": "slew"},
+    {"task": "regulation", "snr_db": None, "actuator_delay_steps": 2,
+     "torque_rate_limit": 0.5, "disturbance_std": 0.01},
+], ids=["slew", "delay-rate-limit-noise-free"])
+def test_the_cost_reward_is_minus_the_harness_stage_cost_at_every_step(env_id, options):
+    """One cost: the env's ``reward="cost"`` and the harness's :func:`stage_costs` (which
+    every LQG minimizes) agree at every step, on every registered id, with the torque
+    path's delay and rate limit and on the family's drawn plants (the actuator efficiency
+    scales what the plant receives; both charge the commanded torque ``info["torque"]``)."""
+    env = gym.make(f"spacecraft_env:{env_id}", max_episode_steps=300, **options)
+    for seed in (0, 1):
+        traj = run_episode(env, FixedLQG(env.unwrapped), seed=seed)
+        assert not traj.terminated
+        cost = stage_costs(traj, env.unwrapped.model)[:, :4].sum(axis=1)
+        assert cost.shape == traj.rewards.shape and np.all(cost > 0)
+        np.testing.assert_allclose(-traj.rewards, cost, rtol=1e-9, atol=1e-15)
+    assert env.unwrapped.reward_weights.cost_weights == COST_WEIGHTS
+
+
 def test_episode_metrics_report_the_cost_first_with_its_split():
     env = _env()
     m = episode_metrics(run_episode(env, OracleLQG(env.unwrapped), seed=0), env.unwrapped.model)
@@ -73,7 +94,7 @@ def test_the_fixed_design_is_judged_growing_where_its_true_loop_is_unstable():
 
 @pytest.mark.slow
 def test_the_fixed_design_is_judged_growing_over_a_1000_s_solar_rotation():
-    env = gym.make("spacecraft_env:FlexibleSpacecraftSolarRotation-v1", task="slew",
+    env = gym.make("spacecraft_env:FlexibleSpacecraftSolarRotation-v2", task="slew",
                    max_episode_steps=10_000)
     m = episode_metrics(run_episode(env, FixedLQG(env.unwrapped), seed=0), env.unwrapped.model)
     assert m["verdict"] == "growing" and m["true_radius_max"] > 1.001
@@ -133,7 +154,7 @@ def test_same_law_oracle_costs_what_the_oracle_costs():
     """With the controller's own Kalman filter (the default state), the adaptive law on
     the true model is the oracle LQG: no measured-state noise through the rate gain
     (it was 1.75x the oracle with the measured rigid states)."""
-    env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v1", task="slew")
+    env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v2", task="slew")
     same = AdaptiveLQG(env.unwrapped, identifier=TrueModelIdentifier(env.unwrapped),
                        excitation=BinaryExcitation(0.0, 0.0))
     costs = [episode_metrics(run_episode(env, ctrl, seed=0), env.unwrapped.model)
@@ -212,7 +233,7 @@ def test_compare_on_a_process_pool_equals_the_serial_run():
     from controllers import compare
 
     factories = {"robust": partial(RobustLQG), "adaptive": partial(AdaptiveLQG)}
-    make_env = partial(gym.make, "spacecraft_env:FlexibleSpacecraftDocking-v1", task="slew",
+    make_env = partial(gym.make, "spacecraft_env:FlexibleSpacecraftDocking-v2", task="slew",
                        max_episode_steps=1100)
     serial, _ = compare(factories, make_env, [0, 1, 2], progress=False)
     pooled, _ = compare(factories, make_env, [0, 1, 2], progress=False, workers=2)

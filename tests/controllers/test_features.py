@@ -16,7 +16,7 @@ from spacecraft_conventions import STANDARD_OUTPUTS
 
 
 def _wrapped(**kwargs):
-    env = gym.make("FlexibleSpacecraftDocking-v1")
+    env = gym.make("FlexibleSpacecraftDocking-v2")
     ident = MomentRefitRPBSID(22, 15, 0.999, warmup=100, regularization=0.001,
                               input_scale=np.ones(3), output_scale=STANDARD_OUTPUTS.scales())
     return IdentifiedModelFeatures(env, identifier=ident, **kwargs)
@@ -60,7 +60,7 @@ def test_features_pickle_and_vector_envs():
     clone = pickle.loads(pickle.dumps(env))
     a = np.array([0.2, -0.1, 0.05], dtype=np.float32)
     np.testing.assert_array_equal(env.step(a)[0], clone.step(a)[0])
-    vec = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v1", num_envs=2,
+    vec = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v2", num_envs=2,
                        vectorization_mode="sync", wrappers=[IdentifiedModelFeatures])
     obs, _ = vec.reset(seed=[0, 1])
     assert obs.shape == (2, 10 + 22 + 6 + 8 + 10 + 1)
@@ -71,7 +71,7 @@ def test_features_pickle_and_vector_envs():
 
 
 def test_features_reject_env_without_sensors():
-    env = gym.make("FlexibleSpacecraft-v1", outputs=("reference",))
+    env = gym.make("FlexibleSpacecraft-v2", outputs=("reference",))
     with pytest.raises(ValueError, match="sensor group"):
         IdentifiedModelFeatures(env)
 
@@ -79,7 +79,7 @@ def test_features_reject_env_without_sensors():
 def test_oracle_features_follow_the_true_plant_through_docking():
     from gymnasium.utils.env_checker import check_env
 
-    env = OracleModelFeatures(gym.make("FlexibleSpacecraftDocking-v1"), n_modes=2)
+    env = OracleModelFeatures(gym.make("FlexibleSpacecraftDocking-v2"), n_modes=2)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
@@ -100,7 +100,7 @@ def test_oracle_features_follow_the_true_plant_through_docking():
 
 @pytest.mark.parametrize("keep", [False, True])
 def test_keep_identifier_carries_the_model_over_episode_resets(keep):
-    env = IdentifiedModelFeatures(gym.make("FlexibleSpacecraftDocking-v1"), keep_identifier=keep)
+    env = IdentifiedModelFeatures(gym.make("FlexibleSpacecraftDocking-v2"), keep_identifier=keep)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     for _ in range(520):                 # past the default identifier's 500-sample warm-up

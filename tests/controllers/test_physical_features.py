@@ -33,7 +33,7 @@ def _checked(env):
 
 @pytest.mark.parametrize("wrapper", [PhysicalFeatures, PrivilegedFeatures])
 def test_both_wrappers_pass_both_env_checkers(wrapper):
-    env = wrapper(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    env = wrapper(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
     assert env.observation_space.shape == (N_OBS + N_FEAT,)
     _checked(env)
 
@@ -44,13 +44,13 @@ def test_names_describe_every_channel():
 
 
 def test_privileged_is_zero_at_the_nominal_plant_and_follows_a_draw():
-    env = PrivilegedFeatures(gym.make("FlexibleSpacecraft-v1", task="slew"))
+    env = PrivilegedFeatures(gym.make("FlexibleSpacecraft-v2", task="slew"))
     obs, _ = env.reset(seed=0)
     feats = obs[N_OBS:]
     np.testing.assert_allclose(feats[GAIN_DIAG], 0.0, atol=1e-6)   # the frame's origin
     np.testing.assert_allclose(feats[LOG_FREQ], 0.0, atol=1e-6)
     assert feats[-1] == 1.0 and feats[6] == 0.0                      # known exactly
-    family = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    family = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
     plant = {"inertia_scale": 1.0, "stiffness_scale": 1.21, "actuator_gain": 0.8,
              "module_masses_kg": [0.0, 0.0], "paddle_angle_deg": 0.0,
              "paddle_rate_deg_s": 0.0}
@@ -62,7 +62,7 @@ def test_privileged_is_zero_at_the_nominal_plant_and_follows_a_draw():
 
 
 def test_privileged_change_flag_marks_a_docking_for_twenty_seconds():
-    env = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"), every=1)
+    env = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"), every=1)
     plant = {"module_masses_kg": [600.0, 0.0], "docking_times_s": [50.0, 200.0],
              "paddle_angle_deg": 0.0, "paddle_rate_deg_s": 0.0}
     env.reset(seed=0, options={"plant": plant})
@@ -75,8 +75,8 @@ def test_privileged_change_flag_marks_a_docking_for_twenty_seconds():
     assert changed.min() == pytest.approx(50.0, abs=0.2)
     assert changed.max() == pytest.approx(70.0, abs=0.2)
     # refreshed every 10 steps (the default), the agent's decisions see the same vector
-    sparse = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
-    dense = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"), every=1)
+    sparse = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
+    dense = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"), every=1)
     for wrapper in (sparse, dense):
         wrapper.reset(seed=0, options={"plant": plant})
     for k in range(1, 701):
@@ -109,8 +109,8 @@ def test_identified_gain_and_modes_agree_with_the_privileged_ones():
         def reset(self, *, seed=None, options=None):
             return self.env.reset(seed=seed, options={"plant": plant})
 
-    ident = PhysicalFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v1", task="slew")))
-    truth = PrivilegedFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v1", task="slew")))
+    ident = PhysicalFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v2", task="slew")))
+    truth = PrivilegedFeatures(Fixed(gym.make("FlexibleSpacecraftFamily-v2", task="slew")))
     got = _multisine_episode(ident, 1500)[N_OBS:]
     want = _multisine_episode(truth, 1500)[N_OBS:]
     assert got[-1] == 1.0
@@ -124,7 +124,7 @@ def test_identified_gain_and_modes_agree_with_the_privileged_ones():
 
 
 def test_identified_features_are_zero_before_warm_up_and_restart_every_episode():
-    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
     obs, _ = env.reset(seed=0)
     assert np.all(obs[N_OBS:] == 0.0)
     obs = _multisine_episode(env, 450)
@@ -136,7 +136,7 @@ def test_identified_features_are_zero_before_warm_up_and_restart_every_episode()
 
 
 def test_identifier_sees_the_whole_torque_outside_a_residual_controller():
-    inner = gym.make("FlexibleSpacecraftFamily-v1", task="slew")
+    inner = gym.make("FlexibleSpacecraftFamily-v2", task="slew")
     env = PhysicalFeatures(ResidualControl(inner, FixedLQG(inner.unwrapped)))
     env.reset(seed=0)
     seen = []
@@ -154,16 +154,16 @@ def test_identifier_sees_the_whole_torque_outside_a_residual_controller():
 
 
 def test_physical_features_pickle_and_reject_bad_input():
-    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v1", task="slew"))
+    env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
     _multisine_episode(env, 550)
     clone = pickle.loads(pickle.dumps(env))
     a = np.array([0.02, -0.01, 0.0], dtype=np.float32)
     np.testing.assert_array_equal(env.step(a)[0], clone.step(a)[0])
     with pytest.raises(ValueError, match="n_modes"):
-        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1"), n_modes=0)
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v2"), n_modes=0)
     with pytest.raises(ValueError, match="every"):
-        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1"), every=0)
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v2"), every=0)
     with pytest.raises(ValueError, match="'attitude' and 'rate'"):
-        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1", outputs=("attitude", "deflection")))
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v2", outputs=("attitude", "deflection")))
     with pytest.raises(gym.error.ResetNeeded):
-        PhysicalFeatures(gym.make("FlexibleSpacecraft-v1")).step(np.zeros(3, np.float32))
+        PhysicalFeatures(gym.make("FlexibleSpacecraft-v2")).step(np.zeros(3, np.float32))

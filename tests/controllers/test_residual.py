@@ -19,7 +19,7 @@ from controllers import (
     run_episode,
 )
 
-ID = "FlexibleSpacecraftDocking-v1"
+ID = "FlexibleSpacecraftDocking-v2"
 
 
 class _Constant(Controller):

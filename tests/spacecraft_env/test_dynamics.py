@@ -285,7 +285,7 @@ def test_capture_conserves_angular_momentum(momentum):
 
     module = DockingModule(mass=800.0, position=(0.5, 0.0, 3.0), time=10.0,
                            angular_momentum=momentum)
-    env = gym.make("FlexibleSpacecraft-v1", scenario=DockingScenario(modules=(module,)),
+    env = gym.make("FlexibleSpacecraft-v2", scenario=DockingScenario(modules=(module,)),
                    snr_db=None).unwrapped
     env.reset(seed=0, options={"initial_rate": [0.002, -0.001, 0.003]})
     model, nd = env.model, env.model.n_dof

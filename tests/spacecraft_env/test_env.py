@@ -55,7 +55,7 @@ def test_sb3_check_env_without_warnings(env_id):
 
 
 def test_render_rgb_array_passes_check_env():
-    env = gym.make("FlexibleSpacecraftDocking-v1", render_mode="rgb_array").unwrapped
+    env = gym.make("FlexibleSpacecraftDocking-v2", render_mode="rgb_array").unwrapped
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env)
@@ -67,7 +67,7 @@ def test_render_rgb_array_passes_check_env():
 
 def test_make_without_prior_import_in_fresh_interpreter():
     code = ("import gymnasium as gym\n"
-            "env = gym.make('spacecraft_env:FlexibleSpacecraftDocking-v1')\n"
+            "env = gym.make('spacecraft_env:FlexibleSpacecraftDocking-v2')\n"
             "obs, info = env.reset(seed=0)\n"
             "print(env.spec.max_episode_steps, obs.shape, info['time'])\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -77,7 +77,7 @@ def test_make_without_prior_import_in_fresh_interpreter():
 
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_make_vec(mode):
-    envs = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v1", num_envs=2,
+    envs = gym.make_vec("spacecraft_env:FlexibleSpacecraftDocking-v2", num_envs=2,
                         vectorization_mode=mode)
     obs, _ = envs.reset(seed=[1, 2])
     assert obs.shape == (2, 10) and not np.allclose(obs[0], obs[1])
@@ -151,8 +151,14 @@ def test_reward_is_negative_quadratic_cost():
     _, reward, *_ = env.step(np.zeros(3))
     assert reward == pytest.approx(-4.0, rel=1e-9)  # (2 deg / 1 deg)^2, all else zero
     env.reset(seed=0, options={"initial_attitude": [0.0, 0.0, 0.0]})
-    _, reward, *_ = env.step(np.array([1.0, 0.0, 0.0]))
-    assert reward == pytest.approx(-0.01, rel=1e-9)  # torque weight * |a|^2
+    _, reward, _, _, info = env.step(np.array([1.0, 0.0, 0.0]))
+    # from rest, 10 N m on roll for one step: 0.3 per (N m)^2 of torque, and the
+    # outputs of the state it produced, x_1 = B_d u (each in units of its nominal level)
+    y = env.model.C @ info["state"]
+    levels = env.model.output_layout.scales()
+    weights = np.r_[np.ones(6), np.full(y.size - 6, 0.1)]
+    assert np.allclose(info["state"], env.model.discrete(0.0)[1] @ [10.0, 0, 0], rtol=1e-12)
+    assert reward == pytest.approx(-(0.3 * 100 + weights @ (y / levels) ** 2), rel=1e-9)
 
 
 def test_terminates_when_attitude_leaves_small_angle_range():
@@ -169,7 +175,7 @@ def test_terminates_when_attitude_leaves_small_angle_range():
 
 
 def test_time_limit_truncates():
-    env = gym.make("FlexibleSpacecraft-v1", max_episode_steps=5)
+    env = gym.make("FlexibleSpacecraft-v2", max_episode_steps=5)
     env.reset(seed=0)
     for _ in range(5):
         *_, terminated, truncated, _ = env.step(np.zeros(3, dtype=np.float32))
@@ -258,7 +264,7 @@ def test_actuator_delay_and_rate_limit_shape_the_applied_torque():
 
 
 def test_paddle_rotation_id_turns_the_paddles_from_90_to_180_deg():
-    env = gym.make("FlexibleSpacecraftPaddleRotation-v1")
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v2")
     _, info = env.reset(seed=0)
     assert np.rad2deg(info["paddle_angle"]) == pytest.approx(90.0)
     model = env.unwrapped.model
@@ -295,7 +301,7 @@ def test_crashing_does_not_pay(env_name, task, reward):
 
 
 def test_randomized_docking_records_its_draw_in_reset_info():
-    env = gym.make("FlexibleSpacecraftDocking-v1", randomize=True)
+    env = gym.make("FlexibleSpacecraftDocking-v2", randomize=True)
     _, first = env.reset(seed=3)
     _, second = env.reset()
     draws = [first["scenario"], second["scenario"]]
@@ -309,24 +315,24 @@ def test_randomized_docking_records_its_draw_in_reset_info():
     model = env.unwrapped.model
     after = model.inertia(draws[1]["times_s"][1] + 1.0)
     assert abs(after[0, 2]) + abs(after[1, 2]) > abs(model.inertia(0.0)[1, 2]) + 1.0
-    _, again = gym.make("FlexibleSpacecraftDocking-v1", randomize=True).reset(seed=3)
+    _, again = gym.make("FlexibleSpacecraftDocking-v2", randomize=True).reset(seed=3)
     assert again["scenario"] == draws[0]
 
 
 def test_the_slew_task_observes_its_reference_by_default():
-    slew = gym.make("FlexibleSpacecraftDocking-v1", task="slew")
+    slew = gym.make("FlexibleSpacecraftDocking-v2", task="slew")
     obs, info = slew.reset(seed=2)
     assert slew.unwrapped.outputs[-1] == "reference"
     np.testing.assert_allclose(obs[-3:], info["reference"], rtol=1e-6)
     assert np.abs(obs[-3:]).max() > 0
-    regulation = gym.make("FlexibleSpacecraftDocking-v1")
+    regulation = gym.make("FlexibleSpacecraftDocking-v2")
     assert regulation.unwrapped.outputs == ("attitude", "rate", "deflection")
 
 
 def _rewards_beside_the_cost(form, weights, steps):
     """(cost reward, ``form`` reward) of each step of one random-torque docking run, both
     envs fed the same actions, up to ``steps`` or the first termination."""
-    envs = [gym.make("FlexibleSpacecraftDocking-v1", reward=f, reward_weights=weights)
+    envs = [gym.make("FlexibleSpacecraftDocking-v2", reward=f, reward_weights=weights)
             for f in ("cost", form)]
     for env in envs:
         env.reset(seed=4)
@@ -394,8 +400,8 @@ def test_saturation_must_be_positive():
 
 
 def test_action_repeat_sums_the_rewards_of_the_held_steps():
-    inner = gym.make("FlexibleSpacecraftSolarRotation-v1", task="slew")
-    wrapped = ActionRepeat(gym.make("FlexibleSpacecraftSolarRotation-v1", task="slew"), 7)
+    inner = gym.make("FlexibleSpacecraftSolarRotation-v2", task="slew")
+    wrapped = ActionRepeat(gym.make("FlexibleSpacecraftSolarRotation-v2", task="slew"), 7)
     inner.reset(seed=2)
     wrapped.reset(seed=2)
     action = np.array([0.3, -0.2, 0.1], dtype=np.float32)
@@ -410,14 +416,14 @@ def test_action_repeat_sums_the_rewards_of_the_held_steps():
 
 
 def test_action_repeat_stops_at_the_end_of_the_episode():
-    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 1000)
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v2"), 1000)
     env.reset(seed=0)
     _, _, terminated, truncated, info = env.step(np.ones(3, dtype=np.float32))
     assert terminated and not truncated            # full torque leaves the bound first
     assert 1 <= info["repeated_steps"] < 1000
     assert info["repeated_steps"] == env.unwrapped._k
     # and at the time limit: 2500 steps are 3 actions of 1000 (the last one cut short)
-    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 1000)
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v2"), 1000)
     env.reset(seed=0)
     held = [env.step(np.zeros(3, dtype=np.float32))[4]["repeated_steps"] for _ in range(3)]
     assert held == [1000, 1000, 500]
@@ -425,7 +431,7 @@ def test_action_repeat_stops_at_the_end_of_the_episode():
 
 def test_action_repeat_is_recorded_in_the_spec():
     """Like Gymnasium's own wrappers: ``gym.make(env.spec)`` rebuilds it, repeat included."""
-    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), 5)
+    env = ActionRepeat(gym.make("FlexibleSpacecraftDocking-v2"), 5)
     again = gym.make(env.spec)
     assert isinstance(again, ActionRepeat) and again.repeat == 5
     assert pickle.loads(pickle.dumps(env)).repeat == 5
@@ -434,4 +440,4 @@ def test_action_repeat_is_recorded_in_the_spec():
 @pytest.mark.parametrize("repeat", [0, -1, 1.5, True, "10"])
 def test_action_repeat_rejects_bad_repeat(repeat):
     with pytest.raises(ValueError, match="repeat must be an integer >= 1"):
-        ActionRepeat(gym.make("FlexibleSpacecraftDocking-v1"), repeat)
+        ActionRepeat(gym.make("FlexibleSpacecraftDocking-v2"), repeat)

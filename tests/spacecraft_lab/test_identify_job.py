@@ -37,3 +37,34 @@ def test_seeds_on_a_process_pool_give_the_serial_numbers(tmp_path):
     with pytest.raises(ValueError, match="workers"):
         run_identification("docking", 1, tmp_path / "bad", workers=0, **options)
     assert not (tmp_path / "bad").exists()             # refused before anything was written
+
+
+def test_the_figures_of_the_identify_command_show_their_point(tmp_path):
+    """`spacecraft identify`'s figures on a small case: every figure written; the
+    prediction figure has at most five series per panel with an interquartile band, its
+    legend outside the data and an axis that starts near the lowest median; the modal
+    figure's line styles are explained by a legend, not by a paragraph of a title."""
+    from spacecraft_lab.plots import PREDICTION_SERIES, plot_prediction_horizons
+
+    metrics = run_identification("docking", 2, tmp_path, n_samples=800, convergence_s=50.0,
+                                 methods=["rigid-flexible", "improved", "classical",
+                                          "predictor"], progress=False)
+    for name in ("prediction", "gain", "modal", "responses"):
+        assert (tmp_path / f"{name}.png").stat().st_size > 20_000, name
+    fig = plot_prediction_horizons(tmp_path / "again.png", metrics, {}, None)
+    for ax in fig.axes:
+        labels = [line.get_label() for line in ax.get_lines()]
+        assert 2 <= len(labels) <= 5 and set(labels) <= set(PREDICTION_SERIES), labels
+        assert ax.get_legend() is None and ax.get_ylim()[1] <= 101
+        assert len(ax.collections) == len(labels)            # one band per series
+    assert len(fig.legends) == 1
+    summary = metrics["methods"]["classical"]["summary"]["h_step_vaf"]
+    cell = summary[str(metrics["horizons_samples"][-1])]["rate"]
+    assert cell["q25"] <= cell["median"] <= cell["q75"]
+    ylim = fig.axes[1].get_ylim()[0]
+    lowest = min(metrics["methods"][m]["summary"]["h_step_vaf"][h]["rate"]["median"]
+                 for m in metrics["methods"] if m in PREDICTION_SERIES
+                 for h in map(str, metrics["horizons_samples"]))
+    assert max(0.0, lowest - 10) <= ylim <= max(lowest, 0.0)
+
+    assert len(fig.get_suptitle()) < 110
