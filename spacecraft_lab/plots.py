@@ -388,9 +388,10 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
         if key in last and left in last[key]:
             axes[0].axhline(last[key][left], color=colour, ls=style, label=name)
             axes[1].axhline(last[key]["return"], color=colour, ls=style)
-    if left == "attitude_rms_deg":
-        axes[0].axhline(last["target_attitude_rms_deg"], color="gray", ls=":",
-                        label="2x adaptive LQG")
+    target = last.get("target_cost_after_100s" if left == "cost_after_100s"
+                      else "target_attitude_rms_deg")
+    if target is not None:
+        axes[0].axhline(target, color="gray", ls=":", label="2x adaptive LQG")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("cost from 100 s, median episode" if left == "cost_after_100s"
                        else "attitude RMS (deg), evaluation seeds")

@@ -196,8 +196,11 @@ def training_metrics_problem(m: Any) -> str | None:
             return f"{key!r} missing or not a string"
     if not isinstance(m.get("timesteps"), int) or isinstance(m.get("timesteps"), bool):
         return "'timesteps' missing or not an integer"
-    if not _is_number(m.get("target_attitude_rms_deg"), optional=False):
-        return "'target_attitude_rms_deg' missing or not a number"
+    # the threshold of "steps to 2x the adaptive LQG": on the cost from 100 s (files
+    # written before it was, on the whole-episode attitude RMS)
+    if not (_is_number(m.get("target_cost_after_100s"), optional=False)
+            or _is_number(m.get("target_attitude_rms_deg"), optional=False)):
+        return "'target_cost_after_100s' missing or not a number"
     runs = m.get("runs")
     if not isinstance(runs, list) or not runs:
         return "'runs' missing or not a non-empty list"
@@ -275,9 +278,10 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     over the evaluation episodes), then its ratio to the oracle LQG's and to
     the fixed LQG's on the same episodes, the attitude RMS, vibration,
     the env steps each seed needed to come within 2x of the adaptive LQG's
-    attitude RMS, and the cost's mean over the episodes (which counts an
-    unstable episode at its full cost, where the median does not) with its
-    ratio to the fixed LQG's mean; each as the median [min, max] over
+    cost from 100 s (median episode), and the cost's mean over the episodes
+    (which counts an unstable episode at its full cost, where the median does
+    not) with the worst episode named (its seed and cost) and its ratio to the
+    fixed LQG's mean; each as the median [min, max] over
     training seeds. Then
     the oracle, adaptive and fixed LQG and zero torque (the trivial
     baseline) on the same evaluation episodes (taken from the last
@@ -298,12 +302,20 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         mine, theirs = result.get(key), None if ref is None else ref.get(key)
         return None if mine is None or not theirs else mine / theirs
 
+    def worst_of(result: dict[str, Any]) -> str:
+        if "worst_episode_seed" not in result:
+            return "-"
+        return f"{result['worst_episode_seed']}: {result['cost_after_100s_worst']:.3g}"
+
     rows = []
     pooled = pooled_training_runs(directories)
     last = pooled[-1] if pooled else None
     for m in pooled:
         finals = [r["final"] for r in m["runs"]]
         reached = [r["steps_to_2x_adaptive"] for r in m["runs"]]
+        by_rms = m.get("threshold") != "cost_after_100s"      # a file from before
+        worst = [f"{f['worst_episode_seed']}: {f['cost_after_100s_worst']:.3g}"
+                 for f in finals if "worst_episode_seed" in f]
         task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]
         task += f", {m.get('reward', 'cost')} reward"
         rows.append(
@@ -313,14 +325,16 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             f"| {spread([ratio(f, m.get('fixed_lqg')) for f in finals], '.2f')} "
             f"| {spread([f['attitude_rms_deg'] for f in finals], '.2f')} "
             f"| {spread([f.get('vibration_rms_mm') for f in finals], '.2f')} "
-            f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)} "
+            f"| {', '.join('not reached' if x is None else f'{x:,}' for x in reached)}"
+            f"{' (by attitude RMS)' if by_rms else ''} "
             f"| {spread([f.get(mean) for f in finals], '.3g')} "
+            f"| {'; '.join(worst) or '-'} "
             f"| {spread([ratio(f, m.get('fixed_lqg'), mean) for f in finals], '.3g')} |")
     head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
             "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
-            "| env steps to <= 2x adaptive LQG RMS | cost, mean over episodes "
-            "| mean / fixed LQG's mean |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| env steps to <= 2x adaptive LQG's cost | cost, mean over episodes "
+            "| worst episode (seed: cost) | mean / fixed LQG's mean |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
         for name, key in (("oracle LQG", "oracle_lqg"), ("adaptive LQG", "adaptive_lqg"),
                           ("fixed LQG", "fixed_lqg"), ("zero torque", "zero_torque")):
@@ -332,6 +346,7 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                             f"| {b['attitude_rms_deg']:.2f} "
                             f"| {spread([b.get('vibration_rms_mm')], '.2f')} | - "
                             f"| {spread([b.get(mean)], '.3g')} "
+                            f"| {worst_of(b)} "
                             f"| {spread([ratio(b, last.get('fixed_lqg'), mean)], '.3g')} |")
     return "\n".join(head + rows) + "\n"
 

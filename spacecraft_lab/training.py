@@ -192,6 +192,7 @@ def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario
     return {"cost_after_100s": float(np.median(costs)),
             "cost_after_100s_mean": float(np.mean(costs)),
             "cost_after_100s_worst": float(np.max(costs)),
+            "worst_episode_seed": int(seeds[int(np.argmax(costs))]),
             "cost_after_100s_per_seed": costs.tolist(),
             "attitude_rms_deg": float(np.mean([m["attitude_rms_deg"] for m in per_seed])),
             "vibration_rms_mm": float(np.mean([m["vibration_rms_mm"] for m in per_seed])),
@@ -216,7 +217,12 @@ def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tu
                        workers: int | None, progress: bool) -> dict[str, dict[str, Any]]:
     """The comparators on the evaluation episodes, on a process pool when
     ``workers`` (default: the cores) is above 1."""
-    with tqdm(total=len(COMPARATORS), desc="controllers on the evaluation episodes",
+    if progress:
+        names = ", ".join(key.replace("_", " ") for key, _ in COMPARATORS)
+        tqdm.write(f"Before training: scoring the {len(COMPARATORS)} comparison controllers "
+                   f"({names}) on the {len(eval_seeds)} evaluation episodes the agents are "
+                   "judged on; each tick is one controller's episodes.")
+    with tqdm(total=len(COMPARATORS), desc="comparison controllers",
               disable=not progress) as bar:
         scores = map_in_order(partial(_score_comparator, scenario, env_kwargs, eval_seeds),
                               [make for _, make in COMPARATORS], workers, bar.update)
@@ -257,7 +263,10 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     ``timesteps`` and ``eval_every`` count env steps (0.1 s samples), also
     under ``repeat`` (agent decisions are ``timesteps / repeat``), so runs
-    with different ``repeat`` compare at equal simulated time.
+    with different ``repeat`` compare at equal simulated time. PPO trains
+    whole rollouts, so it can train more env steps than asked (it says so):
+    ``metrics.json``'s ``"timesteps"`` are the env steps trained (each seed's
+    in ``runs[i]["env_steps"]``), ``"timesteps_requested"`` what was asked.
 
     ``workers``: processes that score the four comparators side by side
     before training (default: one per core, at most four); every episode is
@@ -302,7 +311,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     out.mkdir(parents=True, exist_ok=True)
     comparators = _score_comparators(scenario, env_kwargs, eval_seeds, workers, progress)
     baseline = comparators["adaptive_lqg"]
-    target = 2.0 * baseline["attitude_rms_deg"]
+    # the threshold on the score itself (the cost from 100 s, median episode): the
+    # whole-episode attitude RMS is dominated by the slew, which every policy flies alike
+    target = 2.0 * baseline["cost_after_100s"]
 
     runs = []
     with _one_torch_thread(torch):
@@ -322,6 +333,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             # PPO collects whole rollouts: it runs to the next multiple of n_steps
             rollout = getattr(model, "n_steps", 1) * venv.num_envs
             total = -(-decisions // rollout) * rollout * repeat
+            if total != timesteps and progress and seed == first_seed:
+                tqdm.write(f"{algo.upper()} trains whole rollouts of {rollout} decisions x "
+                           f"{repeat} env steps: {timesteps:,} env steps asked, {total:,} "
+                           "trained (metrics.json's 'timesteps'; the request is "
+                           "'timesteps_requested').")
             callback = _eval_callback(BaseCallback, model, venv, name, curve, total,
                                      eval_every, scenario, features, env_kwargs, progress, repeat,
                                      eval_seeds)
@@ -332,17 +348,21 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             venv.training = False       # saved for inference: the statistics stay fixed
             model.save(out / f"{name}.zip")
             venv.save(str(out / f"{name}_vecnormalize.pkl"))
-            reached = next((c["timesteps"] for c in curve if c["attitude_rms_deg"] <= target), None)
+            reached = next((c["timesteps"] for c in curve if c["cost_after_100s"] <= target),
+                           None)
             runs.append({"seed": seed, "final": final, "curve": curve,
-                         "steps_to_2x_adaptive": reached})
+                         "steps_to_2x_adaptive": reached,
+                         "env_steps": int(model.num_timesteps * repeat)})
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
-        "timesteps": timesteps, "seeds": seeds, "eval_seeds": list(eval_seeds),
+        # the env steps every seed trained (whole rollouts), and what was asked
+        "timesteps": int(max(r["env_steps"] for r in runs)), "timesteps_requested": timesteps,
+        "seeds": seeds, "eval_seeds": list(eval_seeds),
         "torch_threads": torch_threads,
         **comparators,
-        "target_attitude_rms_deg": target, "runs": runs,
+        "threshold": "cost_after_100s", "target_cost_after_100s": target, "runs": runs,
         "final_cost_after_100s": float(np.median([r["final"]["cost_after_100s"] for r in runs])),
         "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
         "final_vibration_rms_mm": float(np.mean([r["final"]["vibration_rms_mm"] for r in runs])),

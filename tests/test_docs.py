@@ -49,8 +49,9 @@ def _documented_commands() -> list[tuple[str, str]]:
         candidates = [" ".join(m.split()) for m in INLINE.findall(text) if len(m.split()) > 2]
         for lang, body in FENCE.findall(text):
             if lang == "bash":            # a plain block is a synopsis, not a command
-                candidates += [line.split("  #")[0].strip() for line in body.splitlines()
-                               if line.startswith("spacecraft ")]
+                candidates += [line.split("  #")[0].strip().removeprefix(".venv/bin/")
+                               for line in body.splitlines()
+                               if line.startswith(("spacecraft ", ".venv/bin/spacecraft "))]
         for command in candidates:
             if any(c in command for c in "[]<>") or command.endswith("..."):
                 continue

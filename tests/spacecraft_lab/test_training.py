@@ -29,12 +29,23 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path):
     assert m["repeat"] == ACTION_REPEAT and m["reward"] == "bounded"
     assert m["torch_threads"] == 1
     assert 2000 < m["adaptive_lqg"]["return"] <= 2500
-    # curves count env steps, not decisions
+    # curves count env steps, not decisions; PPO's whole rollout (2048 decisions x 10 env
+    # steps) is what was trained, and metrics.json says so beside the request
     assert m["runs"][0]["curve"][0]["timesteps"] >= 2048
+    assert m["timesteps_requested"] == 2048 and m["timesteps"] == 20480
+    assert m["runs"][0]["env_steps"] == 20480 == m["runs"][0]["curve"][-1]["timesteps"]
     # the final result is the curve's last point, scored on the comparators' episodes
     run = m["runs"][0]
     assert run["final"] == {k: v for k, v in run["curve"][-1].items() if k != "timesteps"}
     assert m["eval_seeds"] == [1000, 1001]
+    # the learning-speed threshold is on the score (the cost from 100 s), and every mean
+    # names its worst episode
+    assert m["threshold"] == "cost_after_100s"
+    assert m["target_cost_after_100s"] == 2 * m["adaptive_lqg"]["cost_after_100s"]
+    reached = [c for c in run["curve"] if c["cost_after_100s"] <= m["target_cost_after_100s"]]
+    assert run["steps_to_2x_adaptive"] == (reached[0]["timesteps"] if reached else None)
+    fixed_costs = m["fixed_lqg"]["cost_after_100s_per_seed"]
+    assert m["fixed_lqg"]["worst_episode_seed"] == [1000, 1001][int(np.argmax(fixed_costs))]
     assert len(run["final"]["cost_after_100s_per_seed"]) == 2
     oracle, fixed = m["oracle_lqg"], m["fixed_lqg"]
     assert 0 < oracle["cost_after_100s"] <= 1.05 * fixed["cost_after_100s"]
@@ -119,10 +130,12 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     from spacecraft_lab.reporting import rl_table
 
     table = rl_table([tmp_path / "out"])
-    assert "| PPO | oracle | randomized docking, bounded reward | 2,048 | 1 |" in table
+    assert "| PPO | oracle | randomized docking, bounded reward | 20,480 | 1 |" in table
     assert "| fixed LQG |" in table and "| adaptive LQG |" in table
     assert "| oracle LQG | - | - | - | - |" in table and "| 1.00 |" in table
     assert "| zero torque |" in table
+    worst = m["fixed_lqg"]
+    assert f"| {worst['worst_episode_seed']}: {worst['cost_after_100s_worst']:.3g} |" in table
     plot_rl_comparison(tmp_path / "cmp.png", [m])
     assert (tmp_path / "cmp.png").stat().st_size > 10_000
 
