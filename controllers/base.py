@@ -10,12 +10,35 @@ harness runs LQR designs and RL agents alike.
 from __future__ import annotations
 
 import copy
+import zlib
 from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Controller", "PolicyController"]
+__all__ = ["Controller", "PolicyController", "episode_seed"]
+
+
+def episode_seed(first_observation: np.ndarray) -> int:
+    """The seed of an episode started through :meth:`Controller.predict`.
+
+    A function of the episode's first observation alone (CRC-32 of its float32
+    bytes, the dtype the envs observe in), so an episode's dither does not depend
+    on where it runs: env ``i`` of a batch, the same env alone, the first or the
+    tenth episode of a stream all get the same seed for the same start.
+
+    Parameters
+    ----------
+    first_observation : array_like
+        The observation ``reset`` returned.
+
+    Returns
+    -------
+    int
+        A seed in [0, 2^32).
+    """
+    obs = np.ascontiguousarray(first_observation, dtype=np.float32)
+    return zlib.crc32(obs.tobytes())
 
 
 class Controller(ABC):
@@ -51,14 +74,15 @@ class Controller(ABC):
         work. ``episode_start[i]`` resets env i's copy.
 
         Episodes started here are seeded (their dither and any other
-        randomness): the j-th episode of a single stream gets seed j, env
-        i's j-th episode of a batch of n gets ``j n + i``; so an evaluation
-        through ``predict`` (e.g. SB3's ``evaluate_policy``) is reproducible.
+        randomness) from their first observation (:func:`episode_seed`): an
+        evaluation through ``predict`` (e.g. SB3's ``evaluate_policy``) is
+        reproducible, and env i of a batch scores what the same env scores
+        alone (test).
         """
         obs = np.asarray(observation)
         if obs.ndim == 1:
             if episode_start is not None and np.any(episode_start):
-                self.reset(seed=self._next_seed())
+                self.reset(seed=episode_seed(obs))
             return self.act(obs), state
         if obs.ndim != 2:
             raise ValueError(f"observation must be (obs_dim,) or (n_envs, obs_dim), "
@@ -68,14 +92,9 @@ class Controller(ABC):
             np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
         copies = state if isinstance(state, _PerEnv) and len(state) == n else self._per_env(n)
         for i in np.flatnonzero(starts):
-            copies[i].reset(seed=copies.next_seed(i))
+            copies[i].reset(seed=episode_seed(obs[i]))
         actions = np.stack([c.act(o) for c, o in zip(copies, obs, strict=True)])
         return actions, copies
-
-    def _next_seed(self) -> int:
-        j = self.__dict__.get("_predict_episodes", 0)
-        self.__dict__["_predict_episodes"] = j + 1
-        return j
 
     def _per_env(self, n: int) -> _PerEnv:
         """This controller's per-env copies for a batch of ``n`` (made on first use)."""
@@ -92,22 +111,13 @@ class Controller(ABC):
         if env is not None:                     # the env is what we control, not our state
             memo.setdefault(id(env), env)
         for key, value in self.__dict__.items():
-            if key not in ("_batch", "_predict_episodes"):
+            if key != "_batch":
                 clone.__dict__[key] = copy.deepcopy(value, memo)
         return clone
 
 
 class _PerEnv(list):
     """Per-env controller copies: the ``state`` that batched ``predict`` returns."""
-
-    def __init__(self, controllers: list) -> None:
-        super().__init__(controllers)
-        self._episodes = [0] * len(controllers)
-
-    def next_seed(self, i: int) -> int:
-        j = self._episodes[i]
-        self._episodes[i] = j + 1
-        return j * len(self) + i
 
 
 class PolicyController(Controller):
