@@ -22,6 +22,7 @@ from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftModel
 
 __all__ = [
+    "MAX_AGENT_SERIES",
     "PREDICTION_SERIES",
     "mark_events",
     "plot_control_comparison",
@@ -355,20 +356,28 @@ def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
     save(fig, path)
 
 
-def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> None:
+#: Agent settings a comparison figure draws at most (the rest are in ``rl-table``).
+MAX_AGENT_SERIES = 5
+
+
+def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> Figure:
     """Learning curves of several ``spacecraft train`` runs: median and range over seeds.
 
     The common cost from 100 s (log scale; the attitude RMS for runs that
-    did not record it) and the return against env steps, one colour per run
-    (algorithm and features); the oracle, adaptive and fixed LQG and zero
-    torque on the same evaluation episodes as horizontal lines.
+    did not record it) and the return against env steps, one colour per
+    setting (algorithm and features; at most :data:`MAX_AGENT_SERIES`, the
+    title says when more were given); the oracle, adaptive and fixed LQG on the
+    same evaluation episodes as thin grey reference lines under the agents;
+    the legend outside the data.
     """
-    fig = Figure(figsize=(12, 4.5))
+    shown = list(runs[:MAX_AGENT_SERIES])
+    fig = Figure(figsize=(13, 4.8), layout="constrained")
     axes = fig.subplots(1, 2)
     # the common cost where every run recorded it (older runs: the attitude RMS)
     left = "cost_after_100s" if all("cost_after_100s" in c for m in runs for r in m["runs"]
                                     for c in r["curve"]) else "attitude_rms_deg"
-    for m in runs:
+    markers = "osD^v"
+    for j, m in enumerate(shown):
         curves = [r["curve"] for r in m["runs"] if r["curve"]]
         if not curves:
             continue
@@ -376,22 +385,21 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
         steps = np.array([c["timesteps"] for c in curves[0][:length]])
         label = f"{m['algo'].upper()}, {m['features']} ({len(curves)} seeds)"
         for ax, key in zip(axes, (left, "return"), strict=True):
-            values = np.array([[c[key] for c in curve[:length]] for curve in curves])
-            line, = ax.plot(steps, np.median(values, axis=0), "o-", ms=3, label=label)
+            values = np.array([[c[key] for c in curve[:length]] for curve in curves],
+                              dtype=float)
+            line, = ax.plot(steps, np.median(values, axis=0), "-", marker=markers[j], ms=5,
+                            lw=1.8, color=f"C{j}", label=label, zorder=3)
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
-                            color=line.get_color(), alpha=0.15)
+                            color=line.get_color(), alpha=0.15, zorder=2)
     last = runs[-1]
-    for name, key, style, colour in (("oracle LQG", "oracle_lqg", ":", "k"),
-                                     ("adaptive LQG", "adaptive_lqg", "--", "k"),
-                                     ("fixed LQG", "fixed_lqg", "-.", "k"),
-                                     ("zero torque", "zero_torque", "--", "darkgoldenrod")):
-        if key in last and left in last[key]:
-            axes[0].axhline(last[key][left], color=colour, ls=style, label=name)
-            axes[1].axhline(last[key]["return"], color=colour, ls=style)
-    target = last.get("target_cost_after_100s" if left == "cost_after_100s"
-                      else "target_attitude_rms_deg")
-    if target is not None:
-        axes[0].axhline(target, color="gray", ls=":", label="2x adaptive LQG")
+    for name, key, style in (("oracle LQG", "oracle_lqg", ":"),
+                             ("adaptive LQG", "adaptive_lqg", "--"),
+                             ("fixed LQG", "fixed_lqg", "-.")):
+        if key not in last or left not in last[key]:
+            continue
+        for ax, value in zip(axes, (last[key][left], last[key]["return"]), strict=True):
+            ax.axhline(value, color="0.4", ls=style, lw=1.0, zorder=1,
+                       label=f"{name} (same episodes)")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("cost from 100 s, median episode" if left == "cost_after_100s"
                        else "attitude RMS (deg), evaluation seeds")
@@ -403,10 +411,17 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> N
     for ax in axes:
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4),
+               fontsize=8)
+    algos = sorted({m["algo"].upper() for m in shown})
     task = ("randomized " if last.get("randomize") else "") + last["scenario"]
-    fig.suptitle(f"RL on {task}: median (line) and range (band) over training seeds")
+    more = f" (the first {len(shown)} of {len(runs)} settings)" if len(runs) > len(shown) \
+        else ""
+    fig.suptitle(f"{' and '.join(algos)} on {task}{more}: median (line) and range (band) "
+                 "over training seeds")
     save(fig, path)
+    return fig
 
 
 _APPENDAGES = {"s": "solar paddle", "a": "antenna"}

@@ -136,8 +136,20 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     assert "| zero torque |" in table
     worst = m["fixed_lqg"]
     assert f"| {worst['worst_episode_seed']}: {worst['cost_after_100s_worst']:.3g} |" in table
-    plot_rl_comparison(tmp_path / "cmp.png", [m])
+    fig = plot_rl_comparison(tmp_path / "cmp.png", [m])
     assert (tmp_path / "cmp.png").stat().st_size > 10_000
+    # the figure says the algorithm, keeps its legend off the data, draws the LQGs as
+    # reference lines under the agents, and at most five agent settings
+    assert "PPO on randomized docking" in fig.get_suptitle()
+    assert len(fig.legends) == 1 and all(ax.get_legend() is None for ax in fig.axes)
+    for ax in fig.axes:
+        agents = [ln for ln in ax.get_lines() if ln.get_marker() not in (None, "None", "")]
+        refs = [ln for ln in ax.get_lines() if ln not in agents]
+        assert len(agents) == 1 and len(refs) == 3
+        assert min(a.get_zorder() for a in agents) > max(r.get_zorder() for r in refs)
+    many = plot_rl_comparison(tmp_path / "many.png", [m] * 7)
+    assert "the first 5 of 7 settings" in many.get_suptitle()
+    assert sum(1 for ln in many.axes[0].get_lines() if ln.get_marker() != "None") == 5
 
 
 def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
