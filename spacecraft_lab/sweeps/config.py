@@ -66,7 +66,7 @@ MAX_TASKS = 100_000
 
 _TOP_KEYS = {"name", "task", "seeds", "params", "grid", "cases", "summary", "description",
              "timeout_s"}
-_SUMMARY_KEYS = {"rows", "columns", "metrics", "ratio_to", "reference"}
+_SUMMARY_KEYS = {"rows", "columns", "metrics", "ratio_to", "reference", "plot_rows"}
 
 
 def _canonical(value: Any, where: str) -> Any:
@@ -164,6 +164,9 @@ class SummarySpec:
         (and the references by theirs), for the timings: speed ratios that
         compare across machines and languages.
     reference : tuple of Reference
+    plot_rows : tuple of str, optional
+        The rows ``summary.png`` draws, at most five (default: the first five;
+        every row is in the tables).
     """
 
     rows: str | None = None
@@ -171,6 +174,7 @@ class SummarySpec:
     metrics: tuple[str, ...] | None = None
     ratio_to: str | None = None
     reference: tuple[Reference, ...] = ()
+    plot_rows: tuple[str, ...] | None = None
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None) -> SummarySpec:
@@ -192,15 +196,21 @@ class SummarySpec:
         if metrics is not None and (isinstance(metrics, str) or not all(
                 isinstance(m, str) for m in metrics)):
             raise TypeError("[summary] metrics must be a list of metric names")
+        plot_rows = data.get("plot_rows")
+        if plot_rows is not None and (isinstance(plot_rows, str) or not all(
+                isinstance(r, str) for r in plot_rows) or not 1 <= len(plot_rows) <= 5):
+            raise TypeError("[summary] plot_rows must be a list of one to five row names")
         return cls(rows=data.get("rows"), columns=data.get("columns"),
                    metrics=None if metrics is None else tuple(metrics),
-                   ratio_to=data.get("ratio_to"), reference=tuple(refs))
+                   ratio_to=data.get("ratio_to"), reference=tuple(refs),
+                   plot_rows=None if plot_rows is None else tuple(plot_rows))
 
     def to_dict(self) -> dict[str, Any]:
         return {"rows": self.rows, "columns": self.columns,
                 "metrics": None if self.metrics is None else list(self.metrics),
                 "ratio_to": self.ratio_to,
-                "reference": [ref.__dict__ for ref in self.reference]}
+                "reference": [ref.__dict__ for ref in self.reference],
+                "plot_rows": None if self.plot_rows is None else list(self.plot_rows)}
 
 
 def _timeout(value: Any) -> float | None:

@@ -346,7 +346,15 @@ METRIC_LABELS = {
     "vaf_h100_rate": "10 s-ahead VAF, rate (%)",
     "vaf_h100_deflection": "10 s-ahead VAF, deflection (%)",
     "gain_error_pct": "rigid-body gain error (%)",
+    "vaf_attitude_pct": "held-out one-step VAF, attitude (%)",
+    "vaf_rate_pct": "held-out one-step VAF, rate (%)",
+    "vaf_deflection_pct": "held-out one-step VAF, deflection (%)",
+    "unstable_share": "share of models with a pole outside 1.001",
+    "within_5pct": "runs with every test error within 5 % (share)",
+    "nonfinite": "runs that overflowed (share)",
 }
+#: Most rows (series) one panel of ``summary.png`` draws; ``[summary] plot_rows`` picks them.
+MAX_PLOT_ROWS = 5
 #: A plotted value beyond this many times the panel's median magnitude is drawn
 #: at the bound (a diverged run), so the typical values stay readable.
 _CLIP_FACTOR = 1e3
@@ -357,7 +365,15 @@ def metric_label(key: str) -> str:
     return METRIC_LABELS.get(key, key.replace("_", " "))
 
 
-def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
+def _bar(cell: dict[str, Any]) -> tuple[float, float]:
+    """The std bar below and above a cell's mean, cut to the values observed."""
+    std = cell.get("std") or 0.0
+    low, high = cell.get("min"), cell.get("max")
+    return (min(std, cell["mean"] - (-np.inf if low is None else low)),
+            min(std, (np.inf if high is None else high) - cell["mean"]))
+
+
+def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> Figure | None:
     # a metric that is 0 everywhere says nothing: no panel for it
     metrics = [m for m in summary["metrics"]
                if any(st["mean"] not in (None, 0) for row in summary["table"][m].values()
@@ -371,9 +387,11 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
     except ValueError:
         xs = list(range(len(cols)))
         categorical = True
+    rows_all = list(summary["row_names"])
+    plotted = [r for r in (spec.plot_rows or rows_all) if r in rows_all][:MAX_PLOT_ROWS]
     ncol = min(3, len(metrics))
     nrow = -(-len(metrics) // ncol)
-    fig = Figure(figsize=(5.2 * ncol, 3.8 * nrow))
+    fig = Figure(figsize=(5.2 * ncol, 3.8 * nrow + 0.8), layout="constrained")
     axes = fig.subplots(nrow, ncol, squeeze=False)
     for ax in axes.flat[len(metrics):]:
         ax.set_visible(False)
@@ -384,16 +402,21 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
         heavy = any(abs(st["mean"] - st["median"]) > 10 * max(abs(st["median"]), 1.0)
                     for st in cells_all)
         positive = []
-        for i, r in enumerate(summary["row_names"]):
+        for i, r in enumerate(rows_all):
+            if r not in plotted:
+                continue
             cells = summary["table"][m][r]
-            pts = [(x, cells[c]["median" if heavy else "mean"], 0.0 if heavy else cells[c]["std"])
+            # the bar is the std, cut to the values observed (a share never goes below 0)
+            pts = [(x, cells[c]["median" if heavy else "mean"],
+                    *((0.0, 0.0) if heavy else _bar(cells[c])))
                    for x, c in zip(xs, cols, strict=True)
                    if c in cells and cells[c]["mean"] is not None]
             if not pts:
                 continue
-            x, y, s = (np.array(v, dtype=float) for v in zip(*pts, strict=True))
-            ax.errorbar(x, y, yerr=None if heavy else s, marker="o", ms=4, capsize=3, label=r,
-                        color=f"C{i}")
+            x, y, lo, hi = (np.array(v, dtype=float) for v in zip(*pts, strict=True))
+            ax.errorbar(x, y, yerr=None if heavy else np.vstack([np.maximum(lo, 0.0),
+                                                                  np.maximum(hi, 0.0)]),
+                        marker="o", ms=4, capsize=3, label=r, color=f"C{i}")
             positive.extend(y)
             for ref in spec.reference:
                 if ref.metric == m and ref.row == r:
@@ -429,6 +452,12 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> None:
         ax.set_xlabel(metric_label(summary["columns"]) if summary["columns"] else "")
         ax.set_xticks(xs, cols, rotation=20 if categorical else 0)
         ax.grid(alpha=0.3)
-    axes.flat[0].legend(fontsize=7)
-    fig.suptitle(f"sweep {summary['sweep']}: mean ± std over seeds (dashed: references)")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4),
+               fontsize=8)
+    shown = "" if len(plotted) == len(rows_all) else \
+        f"; {len(plotted)} of {len(rows_all)} rows drawn, all in summary.md"
+    fig.suptitle(f"sweep {summary['sweep']}: mean ± std over seeds (bars cut to the observed "
+                 f"range; dashed: references){shown}")
     save(fig, path)
+    return fig

@@ -498,3 +498,29 @@ def test_summary_plot_reads_without_raw_keys_empty_panels_or_runaway_axes(tmp_pa
     assert titles[1].startswith("test-response error, attitude (%)")
     low, high = captured["axes"][1].get_ylim()
     assert low > -1e5 and high < 1e5
+
+
+def test_summary_plot_draws_at_most_five_rows_and_bars_within_the_observed_range(tmp_path):
+    """``[summary] plot_rows`` picks the rows the figure draws (at most five, the title
+    says how many of how many); a share's std bar never reaches below its smallest value."""
+    from spacecraft_lab.sweeps.config import SummarySpec
+    from spacecraft_lab.sweeps.summary import _plot
+
+    rows = [f"m{i}" for i in range(7)]
+    share = {"mean": 0.1, "median": 0.0, "std": 0.3, "min": 0.0, "max": 1.0}
+    table = {"nonfinite": {r: {"22": dict(share), "30": dict(share)} for r in rows}}
+    summary = {"metrics": ["nonfinite"], "table": table, "row_names": rows,
+               "column_names": ["22", "30"], "columns": "order", "sweep": "t"}
+    fig = _plot(tmp_path / "a.png", summary, SummarySpec())
+    (ax,) = [a for a in fig.axes if a.get_visible()]
+    assert len(ax.containers) == 5 and "5 of 7 rows drawn" in fig.get_suptitle()
+    assert ax.get_title() == "runs that overflowed (share)"
+    for container in ax.containers:           # errorbar: (line, caps, bar collections)
+        segments = container.lines[2][0].get_segments()
+        assert min(seg[:, 1].min() for seg in segments) >= 0.0 - 1e-12
+    picked = _plot(tmp_path / "b.png", summary, SummarySpec(plot_rows=("m6", "m1")))
+    (ax,) = [a for a in picked.axes if a.get_visible()]
+    assert sorted(c.get_label() for c in ax.containers) == ["m1", "m6"]
+    assert len(picked.legends) == 1 and ax.get_legend() is None
+    with pytest.raises(TypeError, match="plot_rows"):
+        SummarySpec.from_dict({"plot_rows": [f"r{i}" for i in range(6)]})
