@@ -60,7 +60,14 @@ from spacecraft_lab.sweeps import (
     run_sweep,
     summarize,
 )
-from spacecraft_lab.training import ACTION_REPEAT, ALGORITHMS, EVAL_SEEDS, FEATURES, run_training
+from spacecraft_lab.training import (
+    ACTION_REPEAT,
+    ALGORITHMS,
+    EVAL_SEEDS,
+    FEATURES,
+    RESIDUAL_REPEAT,
+    run_training,
+)
 
 __all__ = ["build_parser", "main", "synopsis"]
 
@@ -395,9 +402,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="draw a new scenario every episode (docking: masses, times, "
                             "off-axis offsets; rotation: rate); the task where model "
                             "knowledge matters")
-    train.add_argument("--repeat", type=_integer(1), default=ACTION_REPEAT,
-                       help="env steps each agent action is held for (ActionRepeat; "
-                            "10 = one decision per second)")
+    train.add_argument("--repeat", type=_integer(1), default=None,
+                       help=f"env steps each agent action is held for (ActionRepeat; "
+                            f"default {ACTION_REPEAT} = one decision per second, "
+                            f"{RESIDUAL_REPEAT} for the residual-* settings)")
     train.add_argument("--reward", choices=REWARDS, default="bounded",
                        help="env reward form: 'bounded' (1 - min(cost / saturation, 1) "
                             "per step alive), 'log' (the same on a log scale of the cost, "

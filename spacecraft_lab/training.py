@@ -63,6 +63,7 @@ from controllers import (
     PhysicalFeatures,
     PrivilegedFeatures,
     ResidualControl,
+    ScheduledLQG,
     episode_metrics,
     run_episode,
 )
@@ -73,7 +74,9 @@ from spacecraft_lab.plots import plot_learning_curves
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
-           "HYPERPARAMETERS", "NormalizedPolicy", "ZeroTorque", "run_training"]
+           "HYPERPARAMETERS", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT", "RESIDUAL_SCALE",
+           "NormalizedPolicy", "ZeroTorque", "run_training"]
+
 
 #: stable-baselines3 algorithms the job trains.
 ALGORITHMS = ("ppo", "sac")
@@ -81,7 +84,7 @@ ALGORITHMS = ("ppo", "sac")
 #: controller whose action it corrects.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "physical", "privileged", "residual-adaptive", "residual-fixed",
-            "residual-fixed-physical")
+            "residual-fixed-physical", "residual-scheduled")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -90,7 +93,15 @@ _IDENTIFIED = {
 }
 #: Base controller of each residual setting (``ResidualControl``).
 _RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
-             "residual-fixed-physical": FixedLQG}
+             "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG}
+#: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
+#: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
+#: the base's pointing without the authority to tumble the spacecraft.
+RESIDUAL_SCALE = 0.05
+#: Env steps per residual decision (0.2 s): a correction of the base's pointing must
+#: act within the flexible modes' period (the 0.51 Hz mode's is 2 s), which one
+#: decision a second cannot.
+RESIDUAL_REPEAT = 2
 #: Evaluation episode seeds (disjoint from training seeds): every point of a
 #: learning curve and the final result use the same ten episodes.
 EVAL_SEEDS = tuple(range(1000, 1010))
@@ -105,6 +116,14 @@ ACTION_REPEAT = 10
 #: random torque, which alone tumbles the spacecraft out of the bound).
 HYPERPARAMETERS: dict[str, dict[str, Any]] = {
     "ppo": {"policy_kwargs": {"log_std_init": -1.0}},
+    "sac": {},
+}
+#: The residual settings' PPO: exploration exp(-3) = 5 % of the residual's authority
+#: (0.025 N m), so an untrained residual perturbs its base's cost by percents, not by
+#: the 100x of log_std -1 on a 2.5 N m residual; its last layer starts at zero, so a
+#: fresh residual flies exactly its base (:func:`_start_at_the_base`).
+RESIDUAL_HYPERPARAMETERS: dict[str, dict[str, Any]] = {
+    "ppo": {"policy_kwargs": {"log_std_init": -3.0}},
     "sac": {},
 }
 
@@ -157,7 +176,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
     elif features == "privileged":
         env = PrivilegedFeatures(env)
     if features in _RESIDUAL:
-        env = ResidualControl(env, _RESIDUAL[features](env.unwrapped))
+        env = ResidualControl(env, _RESIDUAL[features](env.unwrapped), scale=RESIDUAL_SCALE)
     if features.endswith("-physical"):
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
@@ -245,11 +264,25 @@ def _one_torch_thread(torch) -> Iterator[None]:
         torch.set_num_threads(threads)
 
 
+def _start_at_the_base(model: Any) -> None:
+    """Zero the last layer of a residual policy's action mean (PPO's ``action_net``,
+    SAC's ``actor.mu``): the deterministic residual is then 0 and a fresh agent flies
+    exactly its base controller."""
+    import torch
+
+    layer = getattr(model.policy, "action_net", None)
+    if layer is None:
+        layer = model.policy.actor.mu
+    with torch.no_grad():
+        layer.weight.zero_()
+        layer.bias.zero_()
+
+
 def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100_000,
                  seeds: int = 1, out: str | Path = "results/train", *,
                  scenario: str = "docking", eval_every: int = 20_000,
                  tensorboard: str | None = None, progress: bool = True,
-                 randomize: bool = False, repeat: int = ACTION_REPEAT,
+                 randomize: bool = False, repeat: int | None = None,
                  reward: str = "bounded", first_seed: int = 0,
                  eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
@@ -304,6 +337,10 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     eval_seeds = tuple(int(s) for s in eval_seeds)
     if not eval_seeds or min(eval_seeds) < 0:
         raise ValueError(f"eval_seeds must be one or more seeds >= 0, got {eval_seeds}")
+    residual = features in _RESIDUAL
+    if repeat is None:
+        repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
+    hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
     env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
     # the env checks the reward form and the wrapper the repeat, before anything is written
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
@@ -325,7 +362,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                 norm_obs=True, norm_reward=True, clip_obs=10.0)
             venv.seed(seed)
             model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
-                                tensorboard_log=tensorboard, **HYPERPARAMETERS[algo])
+                                tensorboard_log=tensorboard, **hyper)
+            if residual:
+                _start_at_the_base(model)
             curve: list[dict[str, float]] = []
             name = f"{algo}-{features}-seed{seed}"
 
@@ -340,7 +379,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                            "'timesteps_requested').")
             callback = _eval_callback(BaseCallback, model, venv, name, curve, total,
                                      eval_every, scenario, features, env_kwargs, progress, repeat,
-                                     eval_seeds)
+                                     eval_seeds, out)
             model.learn(total_timesteps=decisions, callback=callback,
                         tb_log_name=name if tensorboard else "run")
             # the final evaluation is the curve's last point (same episodes, same axis)
@@ -352,11 +391,14 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                            None)
             runs.append({"seed": seed, "final": final, "curve": curve,
                          "steps_to_2x_adaptive": reached,
-                         "env_steps": int(model.num_timesteps * repeat)})
+                         "env_steps": int(model.num_timesteps * repeat),
+                         # selected on the evaluation episodes: optimistic
+                         "best_checkpoint": callback.best})
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
-        "repeat": repeat, "reward": reward, "hyperparameters": HYPERPARAMETERS[algo],
+        "repeat": repeat, "reward": reward, "hyperparameters": hyper,
+        "residual_scale": RESIDUAL_SCALE if residual else None,
         # the env steps every seed trained (whole rollouts), and what was asked
         "timesteps": int(max(r["env_steps"] for r in runs)), "timesteps_requested": timesteps,
         "seeds": seeds, "eval_seeds": list(eval_seeds),
@@ -374,7 +416,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
 
 def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
-                  features, env_kwargs, progress, repeat, eval_seeds):
+                  features, env_kwargs, progress, repeat, eval_seeds, out=None):
     """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` env
     steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each).
 
@@ -389,6 +431,7 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             self.bar = tqdm(total=timesteps, desc=name, disable=not progress)
             self.next_eval = eval_every
             self.last_eval: int | None = None
+            self.best: dict[str, Any] | None = None
 
         def evaluate_now(self) -> dict[str, Any]:
             """Evaluate the current policy, append it to the curve and dump it to the
@@ -409,6 +452,13 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             # the next rollout's dump (and only the last of several would survive)
             self.logger.dump(step=env_steps)
             self.last_eval = env_steps
+            cost = score["cost_after_100s"]
+            if out is not None and (self.best is None or cost < self.best["cost_after_100s"]):
+                # the best checkpoint by the evaluation cost (chosen on the evaluation
+                # episodes themselves: an optimistic pick, said so in metrics.json)
+                self.best = {"timesteps": env_steps, "cost_after_100s": cost}
+                model.save(out / f"{name}_best.zip")
+                venv.save(str(out / f"{name}_best_vecnormalize.pkl"))
             return score
 
         def _on_step(self) -> bool:

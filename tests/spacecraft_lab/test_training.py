@@ -273,3 +273,32 @@ def test_the_comparators_score_the_same_on_a_process_pool():
         assert np.isfinite(row["cost_after_100s_per_seed"]).all()
         np.testing.assert_allclose(pooled[key]["cost_after_100s_per_seed"],
                                    row["cost_after_100s_per_seed"], rtol=1e-9)
+
+
+def test_a_fresh_residual_flies_exactly_its_base():
+    """The residual settings start at their base: the action mean's last layer is zero,
+    so the deterministic residual is 0 and the env applies the base's action unchanged;
+    exploration is small (log std -3), decisions every 0.2 s, the authority 0.5 N m."""
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import PPO
+
+    from spacecraft_lab.training import (
+        RESIDUAL_HYPERPARAMETERS,
+        RESIDUAL_REPEAT,
+        RESIDUAL_SCALE,
+        _make_env,
+        _start_at_the_base,
+    )
+
+    env = _make_env("family", "residual-scheduled", {"task": "slew", "reward": "cost"})
+    model = PPO("MlpPolicy", env, seed=0, **RESIDUAL_HYPERPARAMETERS["ppo"])
+    _start_at_the_base(model)
+    obs, _ = env.reset(seed=3)
+    for _ in range(50):
+        action, _ = model.predict(obs, deterministic=True)
+        assert np.all(action == 0)
+        obs, _, _, _, info = env.step(action)
+        assert np.all(info["residual_action"] == 0) and np.any(info["base_action"] != 0)
+    std = model.policy.log_std.exp().detach().numpy()
+    assert np.allclose(std, np.exp(-3.0))
+    assert RESIDUAL_REPEAT == 2 and env.scale == RESIDUAL_SCALE == 0.05
