@@ -183,7 +183,7 @@ def _is_number(value: Any, optional: bool = True) -> bool:
 
 
 #: Comparators a ``metrics.json`` may hold: each a table of episode figures.
-_COMPARATORS = ("oracle_lqg", "adaptive_lqg", "fixed_lqg", "zero_torque")
+_COMPARATORS = ("oracle_lqg", "adaptive_lqg", "fixed_lqg", "scheduled_lqg", "zero_torque")
 
 
 def training_metrics_problem(m: Any) -> str | None:
@@ -337,7 +337,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
         for name, key in (("oracle LQG", "oracle_lqg"), ("adaptive LQG", "adaptive_lqg"),
-                          ("fixed LQG", "fixed_lqg"), ("zero torque", "zero_torque")):
+                          ("fixed LQG", "fixed_lqg"), ("scheduled LQG", "scheduled_lqg"),
+                          ("zero torque", "zero_torque")):
             if key in last:
                 b = last[key]
                 rows.append(f"| {name} | - | - | - | - | {spread([b.get(median)], '.4f')} "

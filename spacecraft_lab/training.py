@@ -219,9 +219,10 @@ def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario
             "stable_share": float(np.mean([m["stable"] for m in per_seed]))}
 
 
-#: The LQG comparators every agent is scored beside (None: zero torque).
+#: The LQG comparators every agent is scored beside (None: zero torque); each residual
+#: setting's base is among them.
 COMPARATORS = (("adaptive_lqg", AdaptiveLQG), ("fixed_lqg", FixedLQG), ("oracle_lqg", OracleLQG),
-               ("zero_torque", None))
+               ("scheduled_lqg", ScheduledLQG), ("zero_torque", None))
 
 
 def _score_comparator(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
@@ -301,8 +302,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ``metrics.json``'s ``"timesteps"`` are the env steps trained (each seed's
     in ``runs[i]["env_steps"]``), ``"timesteps_requested"`` what was asked.
 
-    ``workers``: processes that score the four comparators side by side
-    before training (default: one per core, at most four); every episode is
+    ``workers``: processes that score the comparators (:data:`COMPARATORS`) side by side
+    before training (default: one per core, at most one per comparator); every episode is
     built from its seed, so the scores do not depend on it.
 
     Raises

@@ -19,6 +19,7 @@ SMALL = {
     "sweep.py": ["--seeds", "1", "--steps", "1100", "--out", "sweep", "--backend", "serial"],
     "train_ppo_family.py": ["--timesteps", "2000", "--episodes", "1"],
     "residual_rl.py": ["--timesteps", "2000"],
+    "rigid_gain_tolerance.py": ["--samples", "600"],
 }
 
 

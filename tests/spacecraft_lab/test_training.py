@@ -268,7 +268,8 @@ def test_the_comparators_score_the_same_on_a_process_pool():
               "max_episode_steps": 1100}
     serial = _score_comparators("docking", kwargs, (1000, 1001), 1, False)
     pooled = _score_comparators("docking", kwargs, (1000, 1001), 2, False)
-    assert list(pooled) == ["adaptive_lqg", "fixed_lqg", "oracle_lqg", "zero_torque"]
+    assert list(pooled) == ["adaptive_lqg", "fixed_lqg", "oracle_lqg", "scheduled_lqg",
+                            "zero_torque"]
     for key, row in serial.items():
         assert np.isfinite(row["cost_after_100s_per_seed"]).all()
         np.testing.assert_allclose(pooled[key]["cost_after_100s_per_seed"],
