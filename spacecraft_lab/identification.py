@@ -380,14 +380,21 @@ def summarize_score(score: IdentificationScore, truth: FlexibleSpacecraftModel,
     return out
 
 
-def _aggregate(per_seed: list[dict[str, Any]]) -> Any:
-    """Median [min, max] over seeds of every numeric leaf."""
+#: Summaries where lower is better: a diverged seed ranks as +inf there (elsewhere, in the
+#: VAFs, as -inf), so it always counts as the worst value.
+_LOWER_IS_BETTER = frozenset({"test_error_pct"})
+
+
+def _aggregate(per_seed: list[dict[str, Any]], worst: float = -np.inf) -> Any:
+    """Median [min, max] over seeds of every numeric leaf; a diverged seed (None or
+    non-finite) ranks as ``worst``."""
     first = per_seed[0]
     if isinstance(first, dict):
-        return {k: _aggregate([s[k] for s in per_seed]) for k in first
-                if k not in ("events_s",)}
+        return {k: _aggregate([s[k] for s in per_seed],
+                              np.inf if k in _LOWER_IS_BETTER else worst)
+                for k in first if k not in ("events_s",)}
     if isinstance(first, list):
-        return [_aggregate([s[i] for s in per_seed]) for i in range(len(first))]
+        return [_aggregate([s[i] for s in per_seed], worst) for i in range(len(first))]
     vals = np.array([np.nan if v is None else v for v in per_seed], dtype=float)
     finite = vals[np.isfinite(vals)]
     if not finite.size:
@@ -395,12 +402,14 @@ def _aggregate(per_seed: list[dict[str, Any]]) -> Any:
                 "diverged": len(vals)}
     # a diverged seed counts as the worst value: it pulls the median and quartiles down
     # (the quartiles then take observed values, never an interpolation with -inf)
-    ranked = np.where(np.isfinite(vals), vals, -np.inf)
+    ranked = np.where(np.isfinite(vals), vals, worst)
     finite_all = bool(np.all(np.isfinite(vals)))
     q25, q75 = (float(v) if np.isfinite(v) else None for v in np.percentile(
         ranked, [25, 75], method="linear" if finite_all else "inverted_cdf"))
     with np.errstate(invalid="ignore"):
         median = float(np.median(ranked))
+    if not np.isfinite(median):      # most seeds diverged (strict JSON has no infinity)
+        median = None
     return {"median": median, "min": float(finite.min()), "max": float(finite.max()),
             "q25": q25, "q75": q75, "diverged": int(len(vals) - finite.size)}
 

@@ -68,3 +68,21 @@ def test_the_figures_of_the_identify_command_show_their_point(tmp_path):
     assert max(0.0, lowest - 10) <= ylim <= max(lowest, 0.0)
 
     assert len(fig.get_suptitle()) < 110
+
+
+def test_a_diverged_seed_counts_as_the_worst_value_in_either_direction():
+    """A diverged seed (None) is the worst: +inf for a test error (lower is better), -inf
+    for a VAF; the median of a majority of diverged seeds is None (strict JSON), and the
+    table says "diverged", never "-inf"."""
+    from spacecraft_lab.identification import _aggregate
+    from spacecraft_lab.reporting import _median
+
+    seeds = [{"test_error_pct": [1.0], "vaf": 1.0}, {"test_error_pct": [None], "vaf": None},
+             {"test_error_pct": [3.0], "vaf": 3.0}]
+    out = _aggregate(seeds)
+    assert out["test_error_pct"][0]["median"] == 3.0 and out["vaf"]["median"] == 1.0
+    assert out["vaf"]["diverged"] == 1
+    most = _aggregate([{"e": None}, {"e": None}, {"e": 2.0}])["e"]
+    assert most["median"] is None and most["diverged"] == 2
+    assert _median(most) == "diverged"
+    json.dumps(out, allow_nan=False)
