@@ -439,8 +439,19 @@ def _plot(path: Path, summary: dict[str, Any], spec: SummarySpec) -> Figure | No
             hi = max(float(inside.max()) if inside.size else 0.0, 0.0)
             lo = -bound if vals.min() < -bound else lo
             hi = bound if vals.max() > bound else hi
-            pad = 0.05 * (hi - lo)
-            ax.set_ylim(lo - pad, hi + pad)
+            if np.all(vals > 0):
+                # positive (errors, times): a log axis keeps 5 % and 100 % apart below
+                # the diverged runs drawn at the bound
+                ax.set_yscale("log")
+                ax.set_ylim(float(vals.min()) / 2, bound * 1.5)
+            else:
+                # signed (VAF): linear near the typical values, logarithmic beyond, so
+                # the methods near 100 % stay apart from those at -1e5
+                # a VAF (at most 100 %) is linear over its meaningful range
+                scale = 100.0 if vals.max() <= 100.0 else max(float(np.median(mags)), 1.0)
+                ax.set_yscale("symlog", linthresh=scale, linscale=2.0)
+                ax.set_ylim(lo * 1.5 if lo < 0 else lo - 0.05 * scale,
+                            hi * 1.5 if hi > 0 else hi + 0.05 * scale)
         elif vals.size and np.all(vals > 0) and vals.max() / vals.min() > 50:
             ax.set_yscale("log")
         title = metric_label(m)
