@@ -29,6 +29,7 @@ from spacecraft_conventions import (
     DEG_PER_RAD,
     NOMINAL_SCALE,
     CostWeights,
+    output_cost_weights,
     single_threaded_blas,
 )
 
@@ -485,16 +486,14 @@ def stage_costs(traj: Trajectory, model: Any,
         One row per step, the columns of :data:`COST_PARTS`, dimensionless.
     """
     layout = model.output_layout
-    states = traj.states[1:]
-    att = (states @ model.C[layout.slice("attitude")].T - traj.reference[1:]) \
-        / NOMINAL_SCALE["attitude"]
-    rate = states @ model.C[layout.slice("rate")].T / NOMINAL_SCALE["rate"]
-    defl = states @ model.C[layout.slice("deflection")].T / NOMINAL_SCALE["deflection"]
+    err = traj.states[1:] @ model.C.T           # the true outputs, in layout order
+    err[:, layout.slice("attitude")] -= traj.reference[1:]
+    # the same per-channel weights as the env's reward (spacecraft_conventions.cost)
+    weighted = output_cost_weights(layout, weights) * err**2
     torque = traj.torque
     exc = traj.excitation if traj.excitation is not None else np.zeros_like(torque)
-    return np.column_stack([weights.attitude * np.sum(att**2, axis=1),
-                            weights.rate * np.sum(rate**2, axis=1),
-                            weights.deflection * np.sum(defl**2, axis=1),
+    return np.column_stack([*(weighted[:, layout.slice(g)].sum(axis=1)
+                              for g in ("attitude", "rate", "deflection")),
                             weights.torque * np.sum(torque**2, axis=1),
                             weights.torque * np.sum(exc**2, axis=1)])
 
