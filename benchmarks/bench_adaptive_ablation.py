@@ -13,10 +13,21 @@ the steps from 60 s flown by the fallback:
 * ``true modal frequencies``: the identifier given the true plant's modal
   frequencies and damping at t = 0 as its modes (``prior``), not tracked;
   only the couplings and the rigid gain are identified;
+* ``model frozen at 60 s``: the default identifier, whose exported model
+  the loop stops seeing change at 60 s (what closed-loop learning after
+  that adds or costs);
+* ``true model after warm-up``: the adaptive law given the true model only
+  after its 30 s warm-up (the fallback and the 1 N m excitation fly until
+  then, as in the adaptive loop): what the warm-up itself costs;
 * ``same-law oracle + warm-up``: the adaptive law on the true model with
   the adaptive loop's 30 s, 1 N m warm-up excitation (does the energy the
   warm-up pumps into the modes cost anything, with a right model?);
 * ``same-law oracle``, ``oracle LQG``, ``robust LQG``: the references.
+
+Then the tolerance table (skip with ``--no-tolerance``): the same law on
+the true model with its flexible modes or rigid-body gain perturbed
+(:class:`PerturbedTruth`, :data:`TOLERANCE`): how wrong may an identified
+model be before the law pays for it?
 
 It then freezes the loop of the adaptive LQG's worst seed at ``--at`` seconds and prints the damping
 ratios of the true closed loop's modes between 0.07 and 0.1 Hz (the paddle
@@ -25,7 +36,8 @@ LQG's, beside the plant's own (about 0.01): a design that removes damping
 there feeds the modes it is meant to quiet.
 
 Usage: ``python benchmarks/bench_adaptive_ablation.py [--scenario paddle_rotation]
-[--seeds 6] [--paddle-angle DEG] [--at 200] [--workers 2]`` (about 2 minutes on 2 cores).
+[--seeds 6] [--paddle-angle DEG] [--at 200] [--workers 2] [--no-tolerance]``
+(about 3 minutes on 2 cores).
 
 The ``true rigid gain`` row reaches into the identifier's regression
 (``RigidFlexibleIdentifier._theta``): an ablation, not an API.
@@ -35,9 +47,11 @@ from __future__ import annotations
 
 import argparse
 from functools import partial
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
+import scipy.linalg
 
 import spacecraft_env  # noqa: F401  (registers the environments)
 from controllers import (
@@ -78,6 +92,95 @@ class TrueRigidGain(RigidFlexibleIdentifier):
         return theta
 
 
+class FrozenAfter(RigidFlexibleIdentifier):
+    """The default closed-loop identifier whose exported model stops changing at
+    sample ``freeze`` (it keeps learning; the loop no longer sees it)."""
+
+    def __init__(self, freeze: int, **options) -> None:
+        super().__init__(**options)
+        self.freeze = freeze
+        self._frozen = None
+
+    @property
+    def model(self):
+        if self._frozen is not None:
+            return self._frozen
+        model = super().model
+        if self._k >= self.freeze:
+            self._frozen = model
+        return model
+
+
+class LateTruth(TrueModelIdentifier):
+    """The true model, given only after the adaptive loop's warm-up (the fallback and
+    the warm-up excitation fly until then, as in the adaptive loop)."""
+
+    @property
+    def ready(self) -> bool:
+        return self._k >= self.warmup
+
+    @property
+    def model(self):
+        return super().model if self.ready else None
+
+
+class PerturbedTruth(TrueModelIdentifier):
+    """The true model with its flexible modes or rigid-body gain perturbed: how
+    wrong may a model be before the same law pays for it?
+
+    Every flexible mode's pole is moved along its own eigen-direction (rank-one
+    spectral projectors, so the rigid-body Jordan blocks are untouched): its
+    frequency by the factor ``1 + frequency * e_f`` and its damping ratio by
+    ``exp(damping * e_d)``; its input coupling is scaled by ``1 + coupling * e_c``
+    (``e_*`` standard normal per mode, from ``seed``); modes in ``drop`` (Hz band)
+    lose their input coupling (the model does not have them); the rigid-body
+    part of ``B`` is scaled by ``gain``. The continuous model is re-sampled
+    (ZOH) every second.
+    """
+
+    def __init__(self, env: gym.Env, frequency: float = 0.0, coupling: float = 0.0,
+                 damping: float = 0.0, gain: float = 1.0,
+                 drop: tuple[float, float] | None = None, seed: int = 7) -> None:
+        self.frequency, self.coupling, self.damping, self.gain = frequency, coupling, damping, gain
+        self.drop = drop
+        draws = np.random.default_rng(seed).standard_normal((3, 32))
+        self._e_f, self._e_c, self._e_d = draws
+        self._cached: tuple[float, object] | None = None
+        super().__init__(env)
+
+    def _system(self):
+        t = float(np.floor(self._k * self.dt))
+        if self._cached is not None and self._cached[0] == t:
+            return self._cached[1]
+        continuous = self.env.model.continuous(t)
+        a, b = continuous.A, continuous.B
+        vals, left, right = scipy.linalg.eig(a, left=True, right=True)
+        flexible = np.flatnonzero(np.abs(vals.imag) > 1e-9)
+        flexible = flexible[np.argsort(np.abs(vals[flexible]))]
+        a_new, b_new = a.astype(complex), b.astype(complex)
+        rigid = np.eye(a.shape[0], dtype=complex)
+        for rank, j in enumerate(flexible):
+            mode = rank // 2                        # a conjugate pair shares its draws
+            projector = np.outer(right[:, j], left[:, j].conj()) / (left[:, j].conj() @ right[:, j])
+            rigid -= projector
+            wn = abs(vals[j]) * (1.0 + self.frequency * self._e_f[mode])
+            zeta = min(0.9, -vals[j].real / abs(vals[j]) * np.exp(self.damping * self._e_d[mode]))
+            pole = complex(-zeta * wn, np.sign(vals[j].imag) * wn * np.sqrt(1.0 - zeta**2))
+            a_new += (pole - vals[j]) * projector
+            scale = self.coupling * self._e_c[mode]
+            if self.drop is not None and self.drop[0] < abs(vals[j]) / (2 * np.pi) < self.drop[1]:
+                scale = -1.0
+            b_new += scale * projector @ b
+        b_new += (self.gain - 1.0) * rigid @ b
+        n = a.shape[0]
+        block = np.zeros((n + 3, n + 3))
+        block[:n, :n], block[:n, n:] = a_new.real * self.dt, b_new.real * self.dt
+        zoh = scipy.linalg.expm(block)
+        system = SimpleNamespace(A=zoh[:n, :n], B=zoh[:n, n:])
+        self._cached = (t, system)
+        return system
+
+
 def true_resonators(env: gym.Env, t: float = 0.0) -> list[Resonator]:
     """The true plant's flexible modes at ``t`` as resonators."""
     eig = np.linalg.eigvals(env.unwrapped.model.continuous(t).A)
@@ -101,6 +204,22 @@ def _true_frequencies(env: gym.Env) -> AdaptiveLQG:
     return AdaptiveLQG(env, weights=LQRWeights(), identifier=RigidFlexibleIdentifier(**options))
 
 
+def _frozen(env: gym.Env) -> AdaptiveLQG:
+    return AdaptiveLQG(env, weights=LQRWeights(),
+                       identifier=FrozenAfter(FREEZE_AT, **CLOSED_LOOP_SETTINGS))
+
+
+def _late_truth(env: gym.Env) -> AdaptiveLQG:
+    identifier = LateTruth(env)
+    identifier.warmup = CLOSED_LOOP_SETTINGS["warmup"]
+    return AdaptiveLQG(env, weights=LQRWeights(), identifier=identifier)
+
+
+def _perturbed(env: gym.Env, **perturbation) -> AdaptiveLQG:
+    return AdaptiveLQG(env, weights=LQRWeights(), identifier=PerturbedTruth(env, **perturbation),
+                       excitation=BinaryExcitation(0.0, 0.0))
+
+
 def _same_law(env: gym.Env, warmup: bool) -> AdaptiveLQG:
     identifier = TrueModelIdentifier(env)
     if warmup:
@@ -118,11 +237,29 @@ def _robust(env: gym.Env) -> RobustLQG:
     return RobustLQG(env, LQRWeights())
 
 
+#: Sample at which the ``model frozen at 60 s`` row stops showing the loop new models.
+FREEZE_AT = 600
+
 ROWS = {"adaptive LQG": _adaptive, "true rigid gain": _true_gain,
         "true modal frequencies": _true_frequencies,
+        "model frozen at 60 s": _frozen,
+        "true model after warm-up": _late_truth,
         "same-law oracle + warm-up": partial(_same_law, warmup=True),
         "same-law oracle": partial(_same_law, warmup=False),
         "oracle LQG": _oracle, "robust LQG": _robust}
+
+
+#: The tolerance table: the same-law oracle on a perturbed true model (PerturbedTruth).
+TOLERANCE = {
+    "frequencies +-10 %": dict(frequency=0.1),
+    "damping x exp(+-0.7)": dict(damping=0.7),
+    "modal couplings +-30 %": dict(coupling=0.3),
+    "modal couplings +-60 %": dict(coupling=0.6),
+    "modes above 0.15 Hz missing": dict(drop=(0.15, 10.0)),
+    "strongest cluster mode missing": dict(drop=(0.095, 0.1)),
+    "rigid-body gain x 0.8": dict(gain=0.8),
+    "rigid-body gain x 1.2": dict(gain=1.2),
+}
 
 
 def cluster_damping(controller, a, b, c, gain, truth, t: float) -> np.ndarray:
@@ -185,14 +322,20 @@ def main() -> None:
     parser.add_argument("--at", type=float, default=200.0,
                         help="time of the frozen-loop damping analysis, s")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--no-tolerance", action="store_true",
+                        help="skip the tolerance table (the same law on perturbed true models)")
     args = parser.parse_args()
     env_id = {v: k for k, v in ENV_IDS.items()}[args.scenario]
     kwargs = env_kwargs_for(args.scenario, paddle_angle=args.paddle_angle)
-    table, _ = compare(ROWS, partial(gym.make, env_id, **kwargs), list(range(args.seeds)),
+    rows = dict(ROWS)
+    if not args.no_tolerance:
+        rows.update({f"same law, {name}": partial(_perturbed, **perturbation)
+                     for name, perturbation in TOLERANCE.items()})
+    table, _ = compare(rows, partial(gym.make, env_id, **kwargs), list(range(args.seeds)),
                        progress=True, workers=args.workers)
     oracle = np.array([m["cost_after_100s"] for m in table["oracle LQG"]["per_seed"]])
     print(f"\n{args.scenario}, {args.seeds} seeds, common cost from 100 s")
-    print(f"{'row':28s} {'/ oracle':>9s} {'worst':>7s}   split att / rate / defl / torque"
+    print(f"{'row':44s} {'/ oracle':>9s} {'worst':>7s}   split att / rate / defl / torque"
           f"   fallback t >= 60 s")
     worst = 0
     for name, result in table.items():
@@ -203,7 +346,7 @@ def main() -> None:
         if name == "adaptive LQG":
             worst = int(np.argmax(ratio))
         fallback = np.median([m.get("fallback_share_after_60s") or 0.0 for m in seeds])
-        print(f"{name:28s} {np.median(ratio):9.2f} {np.max(ratio):7.2f}   {split:34s}"
+        print(f"{name:44s} {np.median(ratio):9.2f} {np.max(ratio):7.2f}   {split:34s}"
               f" {100 * fallback:5.0f} %")
     frozen_loops(env_id, kwargs, args.at, worst)
 
