@@ -284,6 +284,20 @@ def cluster_damping(controller, a, b, c, gain, truth, t: float) -> np.ndarray:
     return np.sort(-s.real[inside] / np.abs(s[inside]))
 
 
+def hub_passivity(a: np.ndarray, b: np.ndarray, c: np.ndarray, rate_rows: np.ndarray,
+                  scale: float, dt: float) -> float:
+    """Smallest eigenvalue of the Hermitian part of the torque-to-body-rate response
+    over :data:`CLUSTER_HZ`, relative to ``scale``: the hub's rate gyro and torque are
+    collocated, so the plant's is >= 0 up to the sample-and-hold's half-sample lag;
+    a model with a clearly negative one injects energy where the plant dissipates it."""
+    smallest = np.inf
+    for f in np.linspace(*CLUSTER_HZ, 121):
+        z = np.exp(2j * np.pi * f * dt)
+        h = c[rate_rows] @ np.linalg.solve(z * np.eye(a.shape[0]) - a, b)
+        smallest = min(smallest, float(np.linalg.eigvalsh(0.5 * (h + h.conj().T)).min()))
+    return smallest / scale
+
+
 def frozen_loops(env_id: str, kwargs: dict, at_s: float, seed: int) -> None:
     env = gym.make(env_id, **kwargs)
     truth = env.unwrapped.model
@@ -310,6 +324,26 @@ def frozen_loops(env_id: str, kwargs: dict, at_s: float, seed: int) -> None:
     gain = oracle.law.design(true.A, true.B, oracle._c, oracle._c_att)
     damping = cluster_damping(oracle, true.A, true.B, oracle._c, gain, truth, t)
     print(f"  oracle LQG design     {np.round(damping, 4)}")
+    # how physical is the identified model? the rigid gain J^-1 is symmetric and the
+    # collocated torque-to-rate response passive, in the plant
+    rate = truth.output_layout.indices("rate")
+    h_true = [np.linalg.norm(truth.C[rate] @ np.linalg.solve(
+        np.exp(2j * np.pi * f * truth.dt) * np.eye(truth.n) - true.A, true.B))
+        for f in np.linspace(*CLUSTER_HZ, 121)]
+    scale = float(np.max(h_true))
+    plant = hub_passivity(true.A, true.B, truth.C, rate, scale, truth.dt)
+    estimate = adaptive.identifier.rigid_gain
+    print("\nhow physical the identified model is (plant in brackets)")
+    if estimate is not None:
+        g = estimate.gain
+        print(f"  rigid gain's antisymmetric part / its norm   "
+              f"{np.linalg.norm(g - g.T) / (2 * np.linalg.norm(g)):.3f}  [0]")
+    if model is not None:
+        rows = adaptive.measured_layout.indices("rate")
+        print(f"  min Hermitian part of the torque-to-rate response over the band, "
+              f"/ the plant's peak   "
+              f"{hub_passivity(model.A, model.B, model.C, rows, scale, truth.dt):.3f}  "
+              f"[{plant:.3f}]")
 
 
 def main() -> None:
