@@ -13,6 +13,9 @@ Commands
 ``train``
     stable-baselines3 agents with or without identified-model features
     (:func:`spacecraft_lab.training.run_training`); ``rl-table`` tabulates runs.
+``evaluate``
+    A saved agent (or one the repository ships) beside the LQGs on any
+    episodes (:func:`spacecraft_lab.agents.evaluate_agent`).
 ``sweep``
     A grid of identify/control tasks from a TOML/YAML file, on this
     machine's cores or a Ray cluster, resumable
@@ -40,6 +43,7 @@ from typing import Any
 from controllers import LQRWeights
 from spacecraft_conventions import __version__
 from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
+from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
@@ -424,6 +428,22 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--tensorboard", type=_output_directory, default=None,
                        help="TensorBoard log directory (default: none)")
 
+    evaluate = command("evaluate", help="a saved agent beside the LQGs on any episodes")
+    evaluate.add_argument("agent", metavar="AGENT",
+                          help=f"a model saved by 'train' (.zip, with its _vecnormalize.pkl "
+                               f"and the run's metrics.json beside it) or a shipped agent: "
+                               f"{', '.join(sorted(SHIPPED_AGENTS))}")
+    evaluate.add_argument("--episodes", type=_integer(1), default=len(HELD_OUT_SEEDS), metavar="N",
+                          help="episodes, seeds first-seed, first-seed + 1, ...")
+    evaluate.add_argument("--first-seed", type=_integer(0), default=HELD_OUT_SEEDS[0],
+                          help="first episode seed (default: held out from training and "
+                               "from its checkpoint selection)")
+    evaluate.add_argument("--workers", type=_integer(1), default=None,
+                          help="processes scoring the LQG comparators side by side; the "
+                               "scores do not depend on it (default: all cores)")
+    evaluate.add_argument("--out", type=_output_directory, default="results/evaluate",
+                          help="output directory (evaluation.json, table.md)")
+
     table = command("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
                        help="output directories of 'spacecraft train'")
@@ -527,6 +547,19 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace) -> int:
+    seeds = tuple(range(args.first_seed, args.first_seed + args.episodes))
+    result = evaluate_agent(args.agent, seeds, workers=args.workers)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = evaluation_table(result)
+    (out / "evaluation.json").write_text(json.dumps(result, indent=2))
+    (out / "table.md").write_text(table + "\n")
+    print(table)
+    print(f"wrote {out}/evaluation.json and table.md")
+    return 0
+
+
 def _rl_table(args: argparse.Namespace) -> int:
     print(rl_table(args.dirs))
     if args.plot is not None:
@@ -567,7 +600,7 @@ def _sweep_summary(args: argparse.Namespace) -> int:
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "demo": _demo, "identify": _identify, "control": _control, "train": _train,
-    "rl-table": _rl_table, "sweep": _sweep, "sweep-summary": _sweep_summary,
+    "evaluate": _evaluate, "rl-table": _rl_table, "sweep": _sweep, "sweep-summary": _sweep_summary,
 }
 
 

@@ -1,0 +1,220 @@
+"""Saved agents: load one, and score it beside the LQGs on any episodes.
+
+``spacecraft evaluate AGENT.zip [--episodes 10] [--first-seed 2000] [--json OUT]``
+calls :func:`evaluate_agent`: it loads a model saved by ``spacecraft train``
+(``<name>.zip``, its ``<name>_vecnormalize.pkl`` observation statistics and
+the run's ``metrics.json`` beside them, which say how the agent was trained:
+algorithm, features, scenario, reward, action repeat), flies it through the
+controllers' harness on the episodes asked for, and scores the same
+episodes with the oracle, adaptive, scheduled and fixed LQG: the common
+quadratic cost from 100 s (median, mean, worst episode and each episode),
+attitude RMS, vibration, share of stable episodes, and the agent's paired
+ratios to each comparator. The default episodes (seeds 2000-2009) are
+held out from training (seeds 0, 1, ...) and from the evaluation episodes
+training selects its best checkpoint on (1000-1009).
+
+The repository ships trained agents in ``agents/`` at its top level
+(:data:`SHIPPED_AGENTS`; a source checkout installed with ``make`` or ``pip
+install -e`` has them, a built wheel does not); ``docs/results/rl.md`` says
+how each was trained and what it scores.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacecraft_lab.training import (
+    ALGORITHMS,
+    COMPARATORS,
+    FEATURES,
+    NormalizedPolicy,
+    _evaluate,
+    _make_env,
+    _score_comparators,
+)
+
+__all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
+           "evaluation_table", "load_agent"]
+
+#: Episodes :func:`evaluate_agent` scores by default: disjoint from the training seeds
+#: and from the evaluation episodes training picks its best checkpoint on.
+HELD_OUT_SEEDS = tuple(range(2000, 2010))
+#: Where the repository keeps its trained agents.
+AGENT_DIRECTORY = Path(__file__).resolve().parent.parent / "agents"
+#: The shipped agents: name -> path of the model (``spacecraft evaluate NAME`` finds it).
+SHIPPED_AGENTS = {
+    "residual-scheduled-family":
+        AGENT_DIRECTORY / "residual-scheduled-family" / "ppo-residual-scheduled-seed0.zip",
+}
+#: Training settings an agent's ``metrics.json`` must hold.
+_SETTINGS = ("algo", "features", "scenario", "randomize", "reward", "repeat")
+
+
+def _resolve(agent: str | Path) -> Path:
+    """A shipped agent's name, or the path of a saved model (``.zip``)."""
+    if str(agent) in SHIPPED_AGENTS:
+        return SHIPPED_AGENTS[str(agent)]
+    path = Path(agent)
+    if path.suffix != ".zip":
+        raise ValueError(f"agent must be a saved model (.zip) or one of "
+                         f"{sorted(SHIPPED_AGENTS)}, got {str(agent)!r}")
+    return path
+
+
+def _settings(path: Path) -> dict[str, Any]:
+    """The training settings of the model at ``path``, from its run's ``metrics.json``."""
+    metrics_path = path.parent / "metrics.json"
+    if not metrics_path.is_file():
+        raise FileNotFoundError(f"{path} has no metrics.json beside it (the 'spacecraft train' "
+                                "run's record, which says how the agent was trained)")
+    try:
+        metrics = json.loads(metrics_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{metrics_path} is not JSON: {exc}") from None
+    missing = [key for key in _SETTINGS if key not in metrics]
+    if missing:
+        raise ValueError(f"{metrics_path} lacks the training settings {missing}")
+    settings = {key: metrics[key] for key in _SETTINGS}
+    if settings["algo"] not in ALGORITHMS or settings["features"] not in FEATURES:
+        raise ValueError(f"{metrics_path}: algo {settings['algo']!r} / features "
+                         f"{settings['features']!r} are not ones this version trains")
+    if not (isinstance(settings["repeat"], int) and settings["repeat"] >= 1):
+        raise ValueError(f"{metrics_path}: repeat must be an integer >= 1, "
+                         f"got {settings['repeat']!r}")
+    return settings
+
+
+def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
+    """Load a saved agent as a harness controller.
+
+    Parameters
+    ----------
+    agent : str or Path
+        A model saved by ``spacecraft train`` (``<name>.zip``, with
+        ``<name>_vecnormalize.pkl`` and the run's ``metrics.json`` in the
+        same directory), or a name of :data:`SHIPPED_AGENTS`.
+
+    Returns
+    -------
+    policy : NormalizedPolicy
+        The deterministic policy behind its fixed observation statistics,
+        deciding every ``repeat`` env steps as in training.
+    settings : dict
+        ``algo``, ``features``, ``scenario``, ``randomize``, ``reward``,
+        ``repeat``, ``env_kwargs`` (the environment's keywords) and ``path``.
+
+    Raises
+    ------
+    ImportError
+        Without the ``rl`` extra.
+    FileNotFoundError, ValueError
+        For a missing or inconsistent file, naming it.
+    """
+    path = _resolve(agent)
+    if not path.is_file():
+        raise FileNotFoundError(f"no saved model at {path}")
+    statistics = path.with_name(f"{path.stem}_vecnormalize.pkl")
+    if not statistics.is_file():
+        raise FileNotFoundError(f"{path} has no observation statistics beside it "
+                                f"({statistics.name})")
+    settings = _settings(path)
+    if importlib.util.find_spec("stable_baselines3") is None:
+        raise ImportError("loading an agent needs the 'rl' extra (stable-baselines3): run "
+                          "`make test`, or `pip install -c constraints.txt -e \".[rl]\"`")
+    # optional dependency (the "rl" extra): imported where it is needed
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    env_kwargs = {"task": "slew", "randomize": bool(settings["randomize"]),
+                  "reward": settings["reward"]}
+    venv = DummyVecEnv([lambda: _make_env(settings["scenario"], settings["features"],
+                                          env_kwargs)])
+    normalization = VecNormalize.load(str(statistics), venv)
+    normalization.training = False
+    model = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))[settings["algo"]].load(
+        str(path), device="cpu")
+    if model.observation_space.shape != venv.observation_space.shape:
+        raise ValueError(f"{path} expects observations of shape "
+                         f"{model.observation_space.shape}, its environment gives "
+                         f"{venv.observation_space.shape}")
+    policy = NormalizedPolicy(model, normalization, path.stem, settings["repeat"])
+    return policy, {**settings, "env_kwargs": env_kwargs, "path": str(path)}
+
+
+def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
+                   workers: int | None = None, progress: bool = True) -> dict[str, Any]:
+    """Score a saved agent and the LQG comparators on the same episodes.
+
+    Parameters
+    ----------
+    agent : str or Path
+        See :func:`load_agent`.
+    seeds : tuple of int
+        Episode seeds (default :data:`HELD_OUT_SEEDS`), all >= 0.
+    workers : int, optional
+        Processes scoring the comparators side by side (default: the cores);
+        the scores do not depend on it.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    dict
+        ``agent`` (the :func:`load_agent` settings), ``eval_seeds``, ``scores``
+        (name -> the harness's scores: ``cost_after_100s`` median, ``_mean``,
+        ``_worst``, ``_per_seed``, ``worst_episode_seed``, attitude RMS,
+        vibration, return, ``stable_share``; the agent under ``"agent"``) and
+        ``agent_over`` (comparator -> median and worst of the agent's paired
+        per-episode cost ratios).
+    """
+    seeds = tuple(int(s) for s in seeds)
+    if not seeds or min(seeds) < 0:
+        raise ValueError(f"seeds must be one or more integers >= 0, got {seeds}")
+    policy, settings = load_agent(agent)
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)            # the harness's episodes are serial and small
+    try:
+        score = _evaluate(policy, settings["scenario"], settings["features"],
+                          settings["env_kwargs"], seeds)
+    finally:
+        torch.set_num_threads(threads)
+    scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
+                                                   seeds, workers, progress)}
+    mine = np.asarray(score["cost_after_100s_per_seed"], dtype=float)
+    agent_over = {}
+    for key, _ in COMPARATORS:
+        theirs = np.asarray(scores[key]["cost_after_100s_per_seed"], dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = mine / theirs
+        ratio = np.where(np.isnan(ratio), np.inf, ratio)
+        agent_over[key] = {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
+    return {"agent": settings, "eval_seeds": list(seeds), "scores": scores,
+            "agent_over": agent_over}
+
+
+def evaluation_table(result: dict[str, Any]) -> str:
+    """Markdown table of :func:`evaluate_agent`'s result."""
+    settings = result["agent"]
+    lines = [f"{settings['algo'].upper()} {settings['features']} on {settings['scenario']} "
+             f"({Path(settings['path']).name}), {len(result['eval_seeds'])} episodes "
+             f"(seeds {result['eval_seeds'][0]}-{result['eval_seeds'][-1]}); common cost "
+             "from 100 s",
+             "",
+             "| controller | median | mean | worst (seed) | agent / it, median [worst] "
+             "| stable |",
+             "|---|---|---|---|---|---|"]
+    for key, score in result["scores"].items():
+        over = result["agent_over"].get(key)
+        ratio = "-" if over is None else f"{over['median']:.3g} [{over['worst']:.3g}]"
+        lines.append(f"| {key.replace('_', ' ')} | {score['cost_after_100s']:.4g} | "
+                     f"{score['cost_after_100s_mean']:.4g} | "
+                     f"{score['cost_after_100s_worst']:.4g} ({score['worst_episode_seed']}) | "
+                     f"{ratio} | {100 * score['stable_share']:.0f} % |")
+    return "\n".join(lines)

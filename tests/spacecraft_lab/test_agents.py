@@ -1,0 +1,108 @@
+"""Saved agents: loading, evaluation beside the LQGs, the shipped agent, bad input."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from spacecraft_lab.agents import (
+    HELD_OUT_SEEDS,
+    SHIPPED_AGENTS,
+    evaluate_agent,
+    evaluation_table,
+    load_agent,
+)
+from spacecraft_lab.cli import main
+from spacecraft_lab.training import COMPARATORS, EVAL_SEEDS, _evaluate
+
+SHIPPED = "residual-scheduled-family"
+
+
+def test_held_out_seeds_are_disjoint_from_training_and_checkpoint_selection():
+    assert not set(HELD_OUT_SEEDS) & set(EVAL_SEEDS)
+    assert min(HELD_OUT_SEEDS) > max(EVAL_SEEDS)
+
+
+def test_every_shipped_agent_is_in_the_repository_with_what_it_needs():
+    for path in SHIPPED_AGENTS.values():
+        assert path.is_file()
+        assert path.with_name(f"{path.stem}_vecnormalize.pkl").is_file()
+        assert (path.parent / "metrics.json").is_file()
+
+
+def test_the_shipped_agent_flies_as_it_did_when_it_was_trained():
+    """Loaded from the repository, the agent scores the training run's final evaluation
+    episodes exactly as the run recorded them (same policy, same statistics)."""
+    pytest.importorskip("stable_baselines3")
+    policy, settings = load_agent(SHIPPED)
+    assert settings["features"] == "residual-scheduled" and settings["repeat"] == 2
+    recorded = json.loads((SHIPPED_AGENTS[SHIPPED].parent / "metrics.json").read_text())
+    expected = recorded["runs"][0]["final"]["cost_after_100s_per_seed"][:2]
+    score = _evaluate(policy, settings["scenario"], settings["features"],
+                      settings["env_kwargs"], EVAL_SEEDS[:2])
+    np.testing.assert_allclose(score["cost_after_100s_per_seed"], expected, rtol=1e-6)
+
+
+def test_evaluation_scores_the_agent_and_every_comparator_on_the_same_episodes():
+    pytest.importorskip("stable_baselines3")
+    result = evaluate_agent(SHIPPED, seeds=(2000,), workers=1, progress=False)
+    assert result["eval_seeds"] == [2000]
+    assert set(result["scores"]) == {"agent"} | {key for key, _ in COMPARATORS}
+    mine = result["scores"]["agent"]["cost_after_100s_per_seed"][0]
+    for key, _ in COMPARATORS:
+        theirs = result["scores"][key]["cost_after_100s_per_seed"][0]
+        assert result["agent_over"][key]["median"] == pytest.approx(mine / theirs)
+    # the residual flies on its base: within a few percent of it, far below zero torque
+    assert 0.5 < result["agent_over"]["scheduled_lqg"]["median"] < 2.0
+    assert result["agent_over"]["zero_torque"]["median"] < 0.01
+    table = evaluation_table(result)
+    assert "| agent |" in table and "| oracle lqg |" in table and "seeds 2000-2000" in table
+
+
+def test_cli_evaluate_writes_json_and_table(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")
+    code = main(["evaluate", SHIPPED, "--episodes", "1", "--workers", "1",
+                 "--out", str(tmp_path / "ev")])
+    assert code == 0
+    result = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
+    assert result["agent"]["scenario"] == "family" and result["eval_seeds"] == [2000]
+    assert (tmp_path / "ev" / "table.md").read_text().startswith("PPO residual-scheduled")
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["evaluate", "no-such-agent"], "must be a saved model (.zip) or one of"),
+    (["evaluate", "/nonexistent/agent.zip"], "no saved model at"),
+    (["evaluate", SHIPPED, "--episodes", "0"], "--episodes"),
+])
+def test_cli_evaluate_refuses_bad_input_in_one_line(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_a_model_without_its_record_or_statistics_is_refused(tmp_path):
+    source = SHIPPED_AGENTS[SHIPPED]
+    shutil.copy(source, tmp_path / source.name)
+    with pytest.raises(FileNotFoundError, match="observation statistics"):
+        load_agent(tmp_path / source.name)
+    shutil.copy(source.with_name(f"{source.stem}_vecnormalize.pkl"), tmp_path)
+    with pytest.raises(FileNotFoundError, match="no metrics.json beside it"):
+        load_agent(tmp_path / source.name)
+    (tmp_path / "metrics.json").write_text(json.dumps({"algo": "ppo"}))
+    with pytest.raises(ValueError, match="lacks the training settings"):
+        load_agent(tmp_path / source.name)
+    record = json.loads((source.parent / "metrics.json").read_text())
+    (tmp_path / "metrics.json").write_text(json.dumps({**record, "features": "telepathy"}))
+    with pytest.raises(ValueError, match="not ones this version trains"):
+        load_agent(tmp_path / source.name)
+
+
+def test_evaluation_refuses_empty_or_negative_seeds():
+    with pytest.raises(ValueError, match="seeds"):
+        evaluate_agent(SHIPPED, seeds=())
+    with pytest.raises(ValueError, match="seeds"):
+        evaluate_agent(SHIPPED, seeds=(-1,))
