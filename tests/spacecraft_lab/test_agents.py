@@ -90,7 +90,7 @@ def test_a_model_without_its_record_or_statistics_is_refused(tmp_path):
     with pytest.raises(FileNotFoundError, match="observation statistics"):
         load_agent(tmp_path / source.name)
     shutil.copy(source.with_name(f"{source.stem}_vecnormalize.pkl"), tmp_path)
-    with pytest.raises(FileNotFoundError, match="no metrics.json beside it"):
+    with pytest.raises(FileNotFoundError, match=r"no metrics\.json beside it"):
         load_agent(tmp_path / source.name)
     (tmp_path / "metrics.json").write_text(json.dumps({"algo": "ppo"}))
     with pytest.raises(ValueError, match="lacks the training settings"):
