@@ -414,11 +414,13 @@ class AdaptiveLQG(_LQGController):
             reasons = ", ".join(f"{reason} {count}" for reason, count in sorted(
                 self.stats["rejected_by"].items(), key=lambda item: -item[1])) or "none"
             model = "no model yet" if self.identifier.model is None else "models rejected"
+            # stacklevel 4: past this method, act and its single_threaded_blas wrapper,
+            # to the code that called act
             warnings.warn(
                 f"AdaptiveLQG has flown only its fallback from {JUDGED_FROM_S:g} s to "
                 f"{self._k * self.dt:.0f} s ({type(self.identifier).__name__}: {model}; "
                 f"rejections by reason: {reasons}); the identifier may not suit the loop "
-                "(see stats['rejected_by'])", FallbackWarning, stacklevel=3)
+                "(see stats['rejected_by'])", FallbackWarning, stacklevel=4)
 
     def _supervise(self, y: np.ndarray, ref: np.ndarray) -> None:
         """Take the identified design off when the measured envelope grows.
