@@ -363,11 +363,14 @@ MAX_AGENT_SERIES = 5
 def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> Figure:
     """Learning curves of several ``spacecraft train`` runs: median and range over seeds.
 
-    The common cost from 100 s (log scale; the attitude RMS for runs that
-    did not record it) and the return against env steps, one colour per
+    The common cost from 100 s, median episode (log scale; the attitude RMS
+    for runs that did not record it) and a second panel against env steps, one colour per
     setting (algorithm and features; at most :data:`MAX_AGENT_SERIES`, the
     title says when more were given); the oracle, adaptive and fixed LQG on the
-    same evaluation episodes as thin grey reference lines under the agents;
+    same evaluation episodes as thin grey reference lines under the agents (and
+    the scheduled LQG, for runs that scored it); the right panel is the return
+    for a bounded reward and, for a cost reward (whose return the slew
+    dominates), the cost from 100 s over the mean episode;
     the legend outside the data.
     """
     shown = list(runs[:MAX_AGENT_SERIES])
@@ -377,6 +380,14 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     left = "cost_after_100s" if all("cost_after_100s" in c for m in runs for r in m["runs"]
                                     for c in r["curve"]) else "attitude_rms_deg"
     markers = "osD^v"
+    last = runs[-1]
+    bounded = last.get("reward", "cost") == "bounded"
+    # right: the return of a bounded reward (steps held); under a cost reward the
+    # return is the whole episode's cost, which the slew dominates alike for every
+    # policy, so the right panel is the cost from 100 s over the mean episode instead
+    right = "return" if bounded or not all(
+        "cost_after_100s_mean" in c for m in runs for r in m["runs"] for c in r["curve"]) \
+        else "cost_after_100s_mean"
     for j, m in enumerate(shown):
         curves = [r["curve"] for r in m["runs"] if r["curve"]]
         if not curves:
@@ -384,30 +395,33 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
         length = min(len(c) for c in curves)
         steps = np.array([c["timesteps"] for c in curves[0][:length]])
         label = f"{m['algo'].upper()}, {m['features']} ({len(curves)} seeds)"
-        for ax, key in zip(axes, (left, "return"), strict=True):
+        for ax, key in zip(axes, (left, right), strict=True):
             values = np.array([[c[key] for c in curve[:length]] for curve in curves],
                               dtype=float)
             line, = ax.plot(steps, np.median(values, axis=0), "-", marker=markers[j], ms=5,
                             lw=1.8, color=f"C{j}", label=label, zorder=3)
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
                             color=line.get_color(), alpha=0.15, zorder=2)
-    last = runs[-1]
     for name, key, style in (("oracle LQG", "oracle_lqg", ":"),
+                             ("scheduled LQG", "scheduled_lqg", (0, (3, 1, 1, 1, 1, 1))),
                              ("adaptive LQG", "adaptive_lqg", "--"),
                              ("fixed LQG", "fixed_lqg", "-.")):
-        if key not in last or left not in last[key]:
+        if key not in last or left not in last[key] or right not in last[key]:
             continue
-        for ax, value in zip(axes, (last[key][left], last[key]["return"]), strict=True):
+        for ax, value in zip(axes, (last[key][left], last[key][right]), strict=True):
             ax.axhline(value, color="0.4", ls=style, lw=1.0, zorder=1,
                        label=f"{name} (same episodes)")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("cost from 100 s, median episode" if left == "cost_after_100s"
                        else "attitude RMS (deg), evaluation seeds")
-    bounded = last.get("reward", "cost") == "bounded"
-    axes[1].set_ylabel("return (bounded reward: steps held, of 2500)" if bounded
-                       else "return (negative cost), evaluation seeds")
-    if not bounded:            # cost returns span decades (crashes pay ~1e6)
-        axes[1].set_yscale("symlog", linthresh=1e4)
+    if right == "return":
+        axes[1].set_ylabel("return (bounded reward: steps held, of 2500)" if bounded
+                           else "return (negative cost), evaluation seeds")
+        if not bounded:            # cost returns span decades (crashes pay ~1e6)
+            axes[1].set_yscale("symlog", linthresh=1e4)
+    else:
+        axes[1].set_ylabel("cost from 100 s, mean over episodes")
+        axes[1].set_yscale("log")
     for ax in axes:
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)

@@ -139,13 +139,14 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     fig = plot_rl_comparison(tmp_path / "cmp.png", [m])
     assert (tmp_path / "cmp.png").stat().st_size > 10_000
     # the figure says the algorithm, keeps its legend off the data, draws the LQGs as
-    # reference lines under the agents, and at most five agent settings
+    # reference lines under the agents (oracle, scheduled, adaptive, fixed: the run
+    # scored all four), and at most five agent settings
     assert "PPO on randomized docking" in fig.get_suptitle()
     assert len(fig.legends) == 1 and all(ax.get_legend() is None for ax in fig.axes)
     for ax in fig.axes:
         agents = [ln for ln in ax.get_lines() if ln.get_marker() not in (None, "None", "")]
         refs = [ln for ln in ax.get_lines() if ln not in agents]
-        assert len(agents) == 1 and len(refs) == 3
+        assert len(agents) == 1 and len(refs) == 4
         assert min(a.get_zorder() for a in agents) > max(r.get_zorder() for r in refs)
     many = plot_rl_comparison(tmp_path / "many.png", [m] * 7)
     assert "the first 5 of 7 settings" in many.get_suptitle()
@@ -303,3 +304,28 @@ def test_a_fresh_residual_flies_exactly_its_base():
     std = model.policy.log_std.exp().detach().numpy()
     assert np.allclose(std, np.exp(-3.0))
     assert RESIDUAL_REPEAT == 2 and env.scale == RESIDUAL_SCALE == 0.05
+
+
+def test_rl_figure_under_a_cost_reward_shows_the_mean_episode_not_the_slew(tmp_path):
+    """A cost reward's return is the whole episode's cost, which the slew dominates
+    alike for every policy; the figure's second panel is then the cost from 100 s over
+    the mean episode, with the LQGs' means as references."""
+    from spacecraft_lab.plots import plot_rl_comparison
+
+    score = {"cost_after_100s": 0.004, "cost_after_100s_mean": 0.009, "return": -25000.0}
+    curve = [{"timesteps": t, "cost_after_100s": 0.004 + 1e-4 * i,
+              "cost_after_100s_mean": 0.009 + 1e-3 * i, "return": -25000.0}
+             for i, t in enumerate((100_000, 200_000))]
+    run = {"algo": "ppo", "features": "residual-scheduled", "scenario": "family",
+           "randomize": False, "reward": "cost", "runs": [{"curve": curve}],
+           **{key: dict(score) for key in ("oracle_lqg", "scheduled_lqg", "adaptive_lqg",
+                                           "fixed_lqg")}}
+    fig = plot_rl_comparison(tmp_path / "cost.png", [run])
+    right = fig.axes[1]
+    assert right.get_ylabel() == "cost from 100 s, mean over episodes"
+    assert right.get_yscale() == "log"
+    agent = next(ln for ln in right.get_lines() if ln.get_marker() not in (None, "None", ""))
+    np.testing.assert_allclose(agent.get_ydata(), [0.009, 0.010])
+    references = [ln for ln in right.get_lines() if ln is not agent]
+    assert len(references) == 4
+    assert all(np.allclose(ln.get_ydata(), 0.009) for ln in references)
