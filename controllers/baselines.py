@@ -25,6 +25,7 @@ class               model                                           state
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
@@ -108,6 +109,12 @@ class _EnvController(Controller):
             if np.all(np.isfinite(ref)):
                 return ref
         return np.zeros(3)
+
+    def _actuator_gain(self) -> float:
+        """Torque the true plant receives per torque commanded (the env's
+        ``actuator_gain``: the task family's drawn efficiency, else 1); what the
+        oracles know and the verdict's true closed loop uses."""
+        return float(getattr(self.env, "actuator_gain", 1.0))
 
     def _to_action(self, torque: np.ndarray) -> np.ndarray:
         action = np.clip(torque / self.max_torque, -1.0, 1.0).astype(np.float32)
@@ -258,13 +265,14 @@ class _LQGController(_EnvController):
         if filt is None:
             return None
         true = truth.discrete(t)
+        b_true = self._actuator_gain() * true.B        # the torque the plant receives
         c_t = truth.C[self._meas_rows] if c.shape[0] == len(self._meas_rows) else \
             truth.C[self._meas_rows][self._rows]
         c_att = truth.C[truth.output_layout.slice("attitude")]
         nt, n = true.A.shape[0], a.shape[0]
         gx, gz = gain[:, :n], gain[:, n:]
         to_u = np.hstack([-gx @ filt @ c_t, -gx @ (np.eye(n) - filt @ c), -gz])
-        top = np.hstack([true.A, np.zeros((nt, n + 3))]) + true.B @ to_u
+        top = np.hstack([true.A, np.zeros((nt, n + 3))]) + b_true @ to_u
         mid = np.hstack([a @ filt @ c_t, a @ (np.eye(n) - filt @ c), np.zeros((n, 3))]) \
             + b @ to_u
         bottom = np.hstack([self.dt * c_att, np.zeros((3, n)), np.eye(3)])
@@ -486,7 +494,7 @@ class OracleLQG(_LQGController):
         if info is None or "time" not in info:
             raise ValueError("OracleLQG needs the env's info dict with 'time'")
         sys_ = self.env.model.discrete(float(info["time"]))
-        a, b = sys_.A, sys_.B
+        a, b = sys_.A, self._actuator_gain() * sys_.B      # the true plant, efficiency too
         qn = process_noise(b)
         obs = self._observation(obs)
         x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
@@ -537,7 +545,7 @@ class OracleLQR(_EnvController):
             raise ValueError("OracleLQR needs the env's info dict with 'state' and 'time'")
         model = self.env.model
         sys_ = model.discrete(float(info["time"]))
-        gain = self._tracker.design(sys_.A, sys_.B)
+        gain = self._tracker.design(sys_.A, self._actuator_gain() * sys_.B)
         x_ref = equilibrium_state(sys_.A, model.C[model.output_layout.slice("attitude")],
                                   self._reference(info))
         return self._to_action(-gain @ (np.asarray(info["state"]) - x_ref))
@@ -582,7 +590,10 @@ class TrueModelIdentifier:
         return slice(0, 3), slice(nd, nd + 3)
 
     def _system(self) -> Any:
-        return self.env.model.discrete(self._k * self.dt)
+        true = self.env.model.discrete(self._k * self.dt)
+        gain = float(getattr(self.env, "actuator_gain", 1.0))
+        # the torque the plant receives per torque commanded: the family's efficiency
+        return true if gain == 1.0 else SimpleNamespace(A=true.A, B=gain * true.B)
 
     @property
     def model(self) -> StateSpaceModel:
@@ -594,7 +605,8 @@ class TrueModelIdentifier:
     @property
     def rigid_gain(self) -> RigidGainEstimate:
         gain = np.linalg.inv(self.env.model.inertia(self._k * self.dt))
-        return RigidGainEstimate(gain, np.zeros((9, 9)))
+        return RigidGainEstimate(float(getattr(self.env, "actuator_gain", 1.0)) * gain,
+                                 np.zeros((9, 9)))
 
     def filtered_state(self, y: ArrayLike) -> np.ndarray:
         c = self.env.model.C[self._rows]

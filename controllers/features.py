@@ -558,8 +558,7 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         model, t = base.model, max(t, 0.0)
 
         def compute() -> np.ndarray:
-            plant = getattr(base, "plant", None)
-            efficiency = 1.0 if plant is None else plant.actuator_gain
+            efficiency = float(getattr(base, "actuator_gain", 1.0))
             feats = np.zeros(self.n_features)
             freq, zeta = self.frame.dominant_modes(model, t)
             self.frame.fill(feats, efficiency * np.linalg.inv(model.inertia(t)), 0.0,

@@ -73,8 +73,10 @@ class Trajectory:
     frequency_time : (K,) ndarray or None
     gain_error : (K,) ndarray or None
         Relative error of the identified rigid-body gain against the true
-        ``J(t)^-1`` (:func:`identifiers.relative_gain_error`) at
-        ``frequency_time``, NaN before warm-up.
+        ``J(t)^-1`` (times the env's ``actuator_gain``, the family's drawn
+        efficiency: the gain from commanded torque to rate)
+        (:func:`identifiers.relative_gain_error`) at ``frequency_time``, NaN
+        before warm-up.
     gain_covered : (K,) ndarray or None
         1 where the identifier's own calibrated rigid-body gain
         (``identifier.rigid_gain``, :class:`identifiers.RigidGainEstimate`)
@@ -348,7 +350,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 freq_id.append(np.full(n_freq, np.nan) if model is None
                                else _first(model.modal(unique=False)[0], n_freq))
                 freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
-                true_gain = np.linalg.inv(base.model.inertia(info["time"]))
+                # the gain from commanded torque to body rate: the inverse inertia,
+                # times the task family's actuator efficiency
+                true_gain = float(getattr(base, "actuator_gain", 1.0)) * np.linalg.inv(
+                    base.model.inertia(info["time"]))
                 gain_err.append(np.nan if model is None or rate_rows is None else
                                 relative_gain_error(rigid_body_gain(model, rate_rows),
                                                     true_gain))

@@ -465,6 +465,14 @@ class FlexibleSpacecraftEnv(gym.Env):
         """The scenario of the current episode (a random draw if ``randomize``)."""
         return self.model.scenario
 
+    @property
+    def actuator_gain(self) -> float:
+        """Torque the plant receives per torque commanded: the task family's drawn
+        actuator efficiency (:attr:`PlantDraw.actuator_gain`), 1 for the other
+        scenarios. ``info["torque"]`` is the commanded torque; a controller that
+        knows the true plant (the oracles) scales its input matrix by this."""
+        return 1.0 if self.plant is None else float(self.plant.actuator_gain)
+
     def set_reference(self, reference: Sequence[float]) -> None:
         """Change the reference attitude (rad, (3,)) mid-episode."""
         ref = _vector3("reference", reference)
@@ -583,8 +591,7 @@ class FlexibleSpacecraftEnv(gym.Env):
             move = self.torque_rate_limit * self.model.dt
             torque = self._torque + np.clip(torque - self._torque, -move, move)
         self._torque = torque
-        total = (torque if self.plant is None else self.plant.actuator_gain * torque) \
-            + self.disturbance_torque
+        total = self.actuator_gain * torque + self.disturbance_torque
         if self.disturbance_std > 0:
             total = total + self.disturbance_std * self.np_random.standard_normal(3)
         x = self._x

@@ -440,3 +440,39 @@ def test_a_loop_that_never_flies_its_identified_design_says_so():
             # attributed to the code that called act (the harness), not to the
             # BLAS-limiting decorator act runs in
             assert said[0].filename.endswith("harness.py"), said[0].filename
+
+
+def test_the_oracles_and_the_gain_error_know_the_familys_actuator_efficiency():
+    """The task family draws an actuator efficiency a (torque received per torque
+    commanded; info["torque"] is the commanded one): the plant's input matrix is a B.
+    The true-model identifier, the oracles' designs and the harness's true rigid-body
+    gain all use a J^-1, so the same-law oracle's identified gain has no error."""
+    from controllers import TrueModelIdentifier
+
+    env = gym.make("FlexibleSpacecraftFamily-v2", task="slew")
+    for seed in range(20):                      # a draw clearly off 1
+        env.reset(seed=seed)
+        a = env.unwrapped.actuator_gain
+        if abs(a - 1.0) > 0.15:
+            break
+    assert a == env.unwrapped.plant.actuator_gain and abs(a - 1.0) > 0.15
+    # the plant integrates a times the commanded torque
+    base = env.unwrapped
+    x0, t0 = base.state, base.time
+    _, _, _, _, info = env.step(np.array([0.3, -0.2, 0.1], dtype=np.float32))
+    true = base.model.discrete(t0)
+    np.testing.assert_allclose(info["state"], true.A @ x0 + a * true.B @ info["torque"],
+                               rtol=1e-9, atol=1e-15)
+    ident = TrueModelIdentifier(env)
+    np.testing.assert_allclose(ident.model.B, a * base.model.discrete(0.0).B, rtol=1e-12)
+    np.testing.assert_allclose(ident.rigid_gain.gain,
+                               a * np.linalg.inv(base.model.inertia(0.0)), rtol=1e-12)
+    same_law = AdaptiveLQG(env, identifier=TrueModelIdentifier(env))
+    traj = run_episode(env, same_law, seed=seed, max_steps=100, freq_every=10)
+    # (the gain read back from the discrete model's B is exact to 1e-4; without the
+    # efficiency the error would be |a - 1| > 0.15)
+    assert np.nanmax(traj.gain_error) < 1e-3
+    # the oracle designs, filters and reads its true closed-loop radius on a B
+    oracle = OracleLQG(env)
+    assert oracle._actuator_gain() == a
+    assert FlexibleSpacecraftEnv("constant").actuator_gain == 1.0
