@@ -423,6 +423,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--workers", type=_integer(1), default=None,
                        help="processes scoring the LQG comparators side by side before "
                             "training; the scores do not depend on it (default: all cores)")
+    train.add_argument("--envs", type=_integer(1, 64), default=1,
+                       help="environments stepped side by side while training (above 1: "
+                            "one process each; PPO collects a rollout from every env, so "
+                            "it is a different run, not the same one faster)")
     train.add_argument("--out", type=_output_directory, default="results/train",
                        help="output directory")
     train.add_argument("--tensorboard", type=_output_directory, default=None,
@@ -533,9 +537,9 @@ def _train(args: argparse.Namespace) -> int:
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
-                     workers=args.workers)
+                     workers=args.workers, envs=args.envs)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
-                               "repeat", "reward", "final_cost_after_100s",
+                               "repeat", "reward", "envs", "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",
                                "final_return")}
     for key in ("oracle_lqg", "adaptive_lqg", "fixed_lqg"):
@@ -543,6 +547,8 @@ def _train(args: argparse.Namespace) -> int:
     print(json.dumps(brief, indent=2))
     print("env steps to 2x the adaptive LQG's cost from 100 s:",
           [r["steps_to_2x_adaptive"] for r in m["runs"]])
+    print("training throughput, env steps/s (evaluations included):",
+          [round(r["env_steps_per_s"]) for r in m["runs"]])
     print(f"wrote {args.out}/metrics.json, learning_curves.png and the models")
     return 0
 

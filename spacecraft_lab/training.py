@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import partial
@@ -165,6 +166,15 @@ class NormalizedPolicy(Controller):
         return self._held
 
 
+def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
+                   repeat: int) -> gym.Env:
+    """One training env: the setting's env, its action held ``repeat`` steps, Monitor-wrapped
+    (module level, so a ``SubprocVecEnv`` can build it in its worker)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    return Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs), repeat))
+
+
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
     env = gym.make(env_id(scenario), **env_kwargs)
     if features in _IDENTIFIED:
@@ -285,7 +295,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  tensorboard: str | None = None, progress: bool = True,
                  randomize: bool = False, repeat: int | None = None,
                  reward: str = "bounded", first_seed: int = 0,
-                 eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None) -> dict:
+                 eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None,
+                 envs: int = 1) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -306,6 +317,14 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     before training (default: one per core, at most one per comparator); every episode is
     built from its seed, so the scores do not depend on it.
 
+    ``envs``: environments stepped side by side while training (default 1: one
+    ``DummyVecEnv`` env in this process; above 1, a ``SubprocVecEnv`` of that many
+    processes, env ``i`` seeded ``seed + i``). PPO then collects ``n_steps`` decisions
+    from each env per rollout, so a run with more envs is a different (equally valid)
+    run, not the same one faster. ``metrics.json`` records ``envs`` and each seed's
+    training throughput (``env_steps_per_s``: env steps trained per second of
+    ``learn``, evaluations included).
+
     Raises
     ------
     ImportError
@@ -322,8 +341,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     algos = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
     if algo not in algos:
@@ -334,6 +352,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
     if timesteps < 1 or seeds < 1 or first_seed < 0:
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
+    if not (isinstance(envs, int) and not isinstance(envs, bool) and 1 <= envs <= 64):
+        raise ValueError(f"envs must be an integer in [1, 64], got {envs!r}")
     check_workers(workers)
     eval_seeds = tuple(int(s) for s in eval_seeds)
     if not eval_seeds or min(eval_seeds) < 0:
@@ -357,10 +377,10 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     with _one_torch_thread(torch):
         torch_threads = torch.get_num_threads()
         for seed in range(first_seed, first_seed + seeds):
-            venv = VecNormalize(
-                DummyVecEnv([lambda: Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs),
-                                                          repeat))]),
-                norm_obs=True, norm_reward=True, clip_obs=10.0)
+            factory = partial(_monitored_env, scenario, features, env_kwargs, repeat)
+            vec = (DummyVecEnv([factory]) if envs == 1
+                   else SubprocVecEnv([factory] * envs, start_method="forkserver"))
+            venv = VecNormalize(vec, norm_obs=True, norm_reward=True, clip_obs=10.0)
             venv.seed(seed)
             model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
                                 tensorboard_log=tensorboard, **hyper)
@@ -381,24 +401,29 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             callback = _eval_callback(BaseCallback, model, venv, name, curve, total,
                                      eval_every, scenario, features, env_kwargs, progress, repeat,
                                      eval_seeds, out)
+            started = time.perf_counter()
             model.learn(total_timesteps=decisions, callback=callback,
                         tb_log_name=name if tensorboard else "run")
+            seconds = time.perf_counter() - started
             # the final evaluation is the curve's last point (same episodes, same axis)
             final = callback.evaluate_now()
             venv.training = False       # saved for inference: the statistics stay fixed
             model.save(out / f"{name}.zip")
             venv.save(str(out / f"{name}_vecnormalize.pkl"))
+            venv.close()
             reached = next((c["timesteps"] for c in curve if c["cost_after_100s"] <= target),
                            None)
             runs.append({"seed": seed, "final": final, "curve": curve,
                          "steps_to_2x_adaptive": reached,
                          "env_steps": int(model.num_timesteps * repeat),
+                         # training throughput on this machine (evaluations included)
+                         "env_steps_per_s": float(model.num_timesteps * repeat / seconds),
                          # selected on the evaluation episodes: optimistic
                          "best_checkpoint": callback.best})
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
-        "repeat": repeat, "reward": reward, "hyperparameters": hyper,
+        "repeat": repeat, "reward": reward, "hyperparameters": hyper, "envs": envs,
         "residual_scale": RESIDUAL_SCALE if residual else None,
         # the env steps every seed trained (whole rollouts), and what was asked
         "timesteps": int(max(r["env_steps"] for r in runs)), "timesteps_requested": timesteps,

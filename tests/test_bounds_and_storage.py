@@ -56,7 +56,9 @@ def test_every_limit_refuses_bools_strings_and_out_of_range_values():
     ("control --rotation-rate 11", "must be a number in [-10, 10] deg/s"),
     ("control --steps 100000000", "must be an integer in [100, 10000000]"),
     ("demo --steps 10000000", "must be an integer in [1, 100000]"),
-    ("control --disturbance-torque 1e9", "[-100, 100] N m")])
+    ("control --disturbance-torque 1e9", "[-100, 100] N m"),
+    ("train --envs 0", "must be an integer in [1, 64]"),
+    ("train --envs 1000", "must be an integer in [1, 64]")])
 def test_cli_refuses_unbounded_values(capsys, argv, expected):
     assert expected in _error_line(capsys, argv.split())
 

@@ -329,3 +329,19 @@ def test_rl_figure_under_a_cost_reward_shows_the_mean_episode_not_the_slew(tmp_p
     references = [ln for ln in right.get_lines() if ln is not agent]
     assert len(references) == 4
     assert all(np.allclose(ln.get_ydata(), 0.009) for ln in references)
+
+
+def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp_path):
+    """--envs 2: a SubprocVecEnv of two processes; PPO collects a rollout of n_steps
+    decisions from each, so one rollout is twice the env steps; metrics.json says how
+    many envs and how fast training went."""
+    pytest.importorskip("stable_baselines3")
+    m = run_training("ppo", "none", 2048, 1, tmp_path, eval_every=10**9, progress=False,
+                     eval_seeds=(1000,), envs=2, workers=1)
+    run = m["runs"][0]
+    assert m["envs"] == 2
+    assert run["env_steps"] == 2 * 2048 * ACTION_REPEAT == m["timesteps"]
+    assert run["env_steps_per_s"] > 0
+    assert (tmp_path / "ppo-none-seed0.zip").exists()
+    with pytest.raises(ValueError, match="envs"):
+        run_training("ppo", "none", 2048, 1, tmp_path, envs=0, progress=False)
