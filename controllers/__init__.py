@@ -51,7 +51,7 @@ from controllers.harness import (
     stage_costs,
 )
 from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
-from controllers.residual import ResidualControl
+from controllers.residual import ResidualControl, ResidualObservations
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
 from spacecraft_conventions import __version__
 
@@ -74,6 +74,7 @@ __all__ = [
     "PolicyController",
     "PrivilegedFeatures",
     "ResidualControl",
+    "ResidualObservations",
     "RiccatiTracker",
     "RobustLQG",
     "ScheduledLQG",

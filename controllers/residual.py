@@ -32,10 +32,13 @@ from numpy.typing import ArrayLike
 from controllers.adaptive import AdaptiveLQG
 from controllers.base import Controller
 
-__all__ = ["ResidualControl"]
+__all__ = ["ResidualControl", "ResidualObservations"]
 
 #: Seeds of the base controller's episodes (its excitation) are drawn below this.
 _SEED_BOUND = 2**31
+#: Bound of the channels :class:`ResidualObservations` appends (physical units: rad,
+#: normalized torque, the base's model coordinates; all far inside it).
+_EXTRA_BOUND = 100.0
 
 
 class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -112,3 +115,66 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["residual_action"] = (applied - base).astype(np.float32)
         self._obs, self._info = obs, info
         return obs, reward, terminated, truncated, info
+
+
+class ResidualObservations(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Append what a residual agent needs to correct its base law.
+
+    The agent of :class:`ResidualControl` sees the env's observation alone:
+    one noisy sample, attitude and reference apart, no memory. This wrapper,
+    put around the :class:`ResidualControl` (or anything wrapping it), appends
+
+    * the attitude error, measured attitude minus reference (rad, 3);
+    * the last torque applied (the env's ``info["torque"]``, normalized by
+      ``max_torque``, 3): the base's action and the agent's correction;
+    * the base controller's state estimate (its Kalman filter's state, in
+      its model's coordinates, ``env.unwrapped.model.n`` entries; zeros
+      while it has none or when its model has another order).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A :class:`ResidualControl`, or a wrapper chain containing one.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+        inner = env
+        while not isinstance(inner, ResidualControl):
+            if not hasattr(inner, "env"):
+                raise TypeError("ResidualObservations needs a ResidualControl in the "
+                                "wrapped chain")
+            inner = inner.env
+        self.residual = inner
+        base = env.unwrapped
+        self._att = base.observation_layout.indices("attitude")
+        self._max_torque = float(base.max_torque)
+        self.n_states = int(base.model.n)
+        n_extra = 6 + self.n_states
+        low = np.concatenate([env.observation_space.low, np.full(n_extra, -_EXTRA_BOUND)])
+        high = np.concatenate([env.observation_space.high, np.full(n_extra, _EXTRA_BOUND)])
+        self.observation_space = gym.spaces.Box(low.astype(np.float32),
+                                                high.astype(np.float32), dtype=np.float32)
+
+    def _extend(self, obs: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+        extra = np.zeros(6 + self.n_states)
+        reference = np.asarray(info.get("reference", np.zeros(3)), dtype=float)
+        extra[:3] = np.asarray(obs, dtype=float)[self._att] - reference
+        extra[3:6] = np.asarray(info.get("torque", np.zeros(3)), dtype=float) / self._max_torque
+        kf = getattr(self.residual.controller, "kf", None)
+        state = None if kf is None else np.asarray(kf.x, dtype=float)
+        if state is not None and state.shape == (self.n_states,):
+            extra[6:] = state
+        extra = np.clip(np.nan_to_num(extra, nan=0.0), -_EXTRA_BOUND, _EXTRA_BOUND)
+        return np.concatenate([np.asarray(obs, dtype=np.float32), extra.astype(np.float32)])
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        return self._extend(obs, info), info
+
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
+                                              dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return self._extend(obs, info), reward, terminated, truncated, info

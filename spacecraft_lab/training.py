@@ -19,11 +19,14 @@ identifier's raw model features, :class:`controllers.IdentifiedModelFeatures`
 ``identified-kept``: it is carried over episode resets;
 ``identified-kept-no-state``: carried over, without its state estimate) or
 their truth version :class:`controllers.OracleModelFeatures` (``oracle``).
-Three settings use a model through a controller instead (residual RL,
+Settings named residual-* use a model through a controller instead (residual RL,
 :class:`controllers.ResidualControl`): the agent's action is added to that
 of the self-tuning LQG on the identified model (``residual-adaptive``), of
-the fixed LQG on the nominal model (``residual-fixed``), or of the fixed LQG
-with the physical estimates observed (``residual-fixed-physical``).
+the fixed LQG on the nominal model (``residual-fixed``), of the fixed LQG
+with the physical estimates observed (``residual-fixed-physical``), of the
+gain-scheduled LQG (``residual-scheduled``), or of that one with the attitude
+error, the last torque and the base's state estimate observed
+(``residual-scheduled-observed``, :class:`controllers.ResidualObservations`).
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -64,6 +67,7 @@ from controllers import (
     PhysicalFeatures,
     PrivilegedFeatures,
     ResidualControl,
+    ResidualObservations,
     ScheduledLQG,
     episode_metrics,
     run_episode,
@@ -85,7 +89,7 @@ ALGORITHMS = ("ppo", "sac")
 #: controller whose action it corrects.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "physical", "privileged", "residual-adaptive", "residual-fixed",
-            "residual-fixed-physical", "residual-scheduled")
+            "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -94,7 +98,8 @@ _IDENTIFIED = {
 }
 #: Base controller of each residual setting (``ResidualControl``).
 _RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
-             "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG}
+             "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG,
+             "residual-scheduled-observed": ScheduledLQG}
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
@@ -190,6 +195,9 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
     if features.endswith("-physical"):
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
+    if features.endswith("-observed"):
+        # the attitude error, the last torque and the base's state estimate
+        env = ResidualObservations(env)
     return env
 
 

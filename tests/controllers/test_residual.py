@@ -135,3 +135,33 @@ def test_default_base_is_the_adaptive_lqg_and_it_scores_like_it():
     assert isinstance(wrapped.controller, AdaptiveLQG)
     traj = run_episode(wrapped, _Constant(np.zeros(3)), seed=2, max_steps=300)
     assert episode_metrics(traj, env.unwrapped.model)["stable"]
+
+
+def test_residual_observations_append_the_error_the_torque_and_the_bases_state():
+    from controllers import ResidualObservations, ScheduledLQG
+
+    env = gym.make("FlexibleSpacecraftFamily-v2", task="slew")
+    base = ScheduledLQG(env.unwrapped)
+    wrapped = ResidualObservations(ResidualControl(env, base, scale=0.05))
+    n = env.unwrapped.model.n
+    assert wrapped.observation_space.shape == (env.observation_space.shape[0] + 6 + n,)
+    obs, info = wrapped.reset(seed=4)
+    assert wrapped.observation_space.contains(obs)
+    att = env.unwrapped.observation_layout.indices("attitude")
+    for _ in range(30):
+        obs, _, _, _, info = wrapped.step(np.array([0.5, -0.5, 0.0], dtype=np.float32))
+    plain = obs[:env.observation_space.shape[0]]
+    extra = obs[env.observation_space.shape[0]:]
+    np.testing.assert_allclose(extra[:3], plain[att] - info["reference"], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(extra[3:6], info["torque"] / env.unwrapped.max_torque,
+                               rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(extra[6:], base.kf.x, rtol=1e-5, atol=1e-9)
+    assert np.any(extra[6:] != 0)
+    # the same seed, the same observations
+    again, _ = wrapped.reset(seed=4)
+    other = gym.make("FlexibleSpacecraftFamily-v2", task="slew")
+    first, _ = ResidualObservations(ResidualControl(
+        other, ScheduledLQG(other.unwrapped), scale=0.05)).reset(seed=4)
+    np.testing.assert_allclose(again, first)
+    with pytest.raises(TypeError, match="ResidualControl"):
+        ResidualObservations(env)
