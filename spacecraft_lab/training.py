@@ -26,7 +26,10 @@ the fixed LQG on the nominal model (``residual-fixed``), of the fixed LQG
 with the physical estimates observed (``residual-fixed-physical``), of the
 gain-scheduled LQG (``residual-scheduled``), or of that one with the attitude
 error, the last torque and the base's state estimate observed
-(``residual-scheduled-observed``, :class:`controllers.ResidualObservations`).
+(``residual-scheduled-observed``, :class:`controllers.ResidualObservations`), or
+of that one with the identifier's physical estimates observed
+(``residual-scheduled-physical``: the draw's rigid gain and modes, which the
+schedule on the paddle angle does not know).
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -89,7 +92,8 @@ ALGORITHMS = ("ppo", "sac")
 #: controller whose action it corrects.
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "physical", "privileged", "residual-adaptive", "residual-fixed",
-            "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed")
+            "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
+            "residual-scheduled-physical")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -99,7 +103,8 @@ _IDENTIFIED = {
 #: Base controller of each residual setting (``ResidualControl``).
 _RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
              "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG,
-             "residual-scheduled-observed": ScheduledLQG}
+             "residual-scheduled-observed": ScheduledLQG,
+             "residual-scheduled-physical": ScheduledLQG}
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
