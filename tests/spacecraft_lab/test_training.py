@@ -11,7 +11,9 @@ import pytest
 from spacecraft_env import env_id
 from spacecraft_lab.training import (
     ACTION_REPEAT,
+    FEATURES,
     NormalizedPolicy,
+    _make_env,
     _one_torch_thread,
     run_training,
 )
@@ -345,3 +347,15 @@ def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp
     assert (tmp_path / "ppo-none-seed0.zip").exists()
     with pytest.raises(ValueError, match="envs"):
         run_training("ppo", "none", 2048, 1, tmp_path, envs=0, progress=False)
+
+
+@pytest.mark.parametrize("features", FEATURES)
+def test_every_training_setting_builds_an_env_whose_observations_fit_its_space(features):
+    """Each --features setting's env passes its own space check after a reset and a step
+    (the residual settings wrap the base law; -physical / -observed append channels)."""
+    env = _make_env("family", features, {"task": "slew", "reward": "cost"})
+    obs, _ = env.reset(seed=1)
+    assert env.observation_space.contains(obs), features
+    obs, *_ = env.step(np.zeros(3, dtype=np.float32))
+    assert env.observation_space.contains(obs), features
+    env.close()
