@@ -423,6 +423,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--workers", type=_integer(1), default=None,
                        help="processes scoring the LQG comparators side by side before "
                             "training; the scores do not depend on it (default: all cores)")
+    train.add_argument("--log-std", type=_number(-10.0, 2.0), default=None,
+                       help="PPO's initial log std of the action noise, normalized action "
+                            "units (default -1; -3 for the residual-* settings, whose "
+                            "action is scaled by 0.05)")
     train.add_argument("--envs", type=_integer(1, 64), default=1,
                        help="environments stepped side by side while training (above 1: "
                             "one process each; PPO collects a rollout from every env, so "
@@ -537,7 +541,7 @@ def _train(args: argparse.Namespace) -> int:
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
-                     workers=args.workers, envs=args.envs)
+                     workers=args.workers, envs=args.envs, log_std_init=args.log_std)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
                                "repeat", "reward", "envs", "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",

@@ -309,7 +309,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  randomize: bool = False, repeat: int | None = None,
                  reward: str = "bounded", first_seed: int = 0,
                  eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None,
-                 envs: int = 1) -> dict:
+                 envs: int = 1, log_std_init: float | None = None) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -329,6 +329,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ``workers``: processes that score the comparators (:data:`COMPARATORS`) side by side
     before training (default: one per core, at most one per comparator); every episode is
     built from its seed, so the scores do not depend on it.
+
+    ``log_std_init``: PPO's initial log standard deviation of the action noise, in
+    normalized action units (default: :data:`HYPERPARAMETERS`' -1, or
+    :data:`RESIDUAL_HYPERPARAMETERS`' -3 for the residual settings, whose action is
+    scaled by :data:`RESIDUAL_SCALE`); PPO only.
 
     ``envs``: environments stepped side by side while training (default 1: one
     ``DummyVecEnv`` env in this process; above 1, a ``SubprocVecEnv`` of that many
@@ -375,6 +380,13 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     if repeat is None:
         repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
     hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
+    if log_std_init is not None:
+        if algo != "ppo":
+            raise ValueError(f"log_std_init applies to PPO, not {algo!r}")
+        if not (np.isfinite(log_std_init) and -10.0 <= log_std_init <= 2.0):
+            raise ValueError(f"log_std_init must be in [-10, 2], got {log_std_init}")
+        hyper = {**hyper, "policy_kwargs": {**hyper.get("policy_kwargs", {}),
+                                            "log_std_init": float(log_std_init)}}
     env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
     # the env checks the reward form and the wrapper the repeat, before anything is written
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()

@@ -339,14 +339,21 @@ def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp
     many envs and how fast training went."""
     pytest.importorskip("stable_baselines3")
     m = run_training("ppo", "none", 2048, 1, tmp_path, eval_every=10**9, progress=False,
-                     eval_seeds=(1000,), envs=2, workers=1)
+                     eval_seeds=(1000,), envs=2, workers=1, log_std_init=-2.5)
     run = m["runs"][0]
     assert m["envs"] == 2
+    # the exploration asked for is the one trained with, and recorded
+    assert m["hyperparameters"]["policy_kwargs"]["log_std_init"] == -2.5
     assert run["env_steps"] == 2 * 2048 * ACTION_REPEAT == m["timesteps"]
     assert run["env_steps_per_s"] > 0
     assert (tmp_path / "ppo-none-seed0.zip").exists()
     with pytest.raises(ValueError, match="envs"):
         run_training("ppo", "none", 2048, 1, tmp_path, envs=0, progress=False)
+    with pytest.raises(ValueError, match="log_std_init applies to PPO"):
+        run_training("sac", "none", 2048, 1, tmp_path, log_std_init=-2.0, progress=False)
+    with pytest.raises(ValueError, match=r"log_std_init must be in \[-10, 2\]"):
+        run_training("ppo", "none", 2048, 1, tmp_path, log_std_init=float("nan"),
+                     progress=False)
 
 
 @pytest.mark.parametrize("features", FEATURES)
