@@ -110,12 +110,6 @@ class _EnvController(Controller):
                 return ref
         return np.zeros(3)
 
-    def _actuator_gain(self) -> float:
-        """Torque the true plant receives per torque commanded (the env's
-        ``actuator_gain``: the task family's drawn efficiency, else 1); what the
-        oracles know and the verdict's true closed loop uses."""
-        return float(getattr(self.env, "actuator_gain", 1.0))
-
     def _to_action(self, torque: np.ndarray) -> np.ndarray:
         action = np.clip(torque / self.max_torque, -1.0, 1.0).astype(np.float32)
         self._last = action
@@ -265,7 +259,7 @@ class _LQGController(_EnvController):
         if filt is None:
             return None
         true = truth.discrete(t)
-        b_true = self._actuator_gain() * true.B        # the torque the plant receives
+        b_true = self.env.actuator_gain * true.B        # the torque the plant receives
         c_t = truth.C[self._meas_rows] if c.shape[0] == len(self._meas_rows) else \
             truth.C[self._meas_rows][self._rows]
         c_att = truth.C[truth.output_layout.slice("attitude")]
@@ -494,7 +488,7 @@ class OracleLQG(_LQGController):
         if info is None or "time" not in info:
             raise ValueError("OracleLQG needs the env's info dict with 'time'")
         sys_ = self.env.model.discrete(float(info["time"]))
-        a, b = sys_.A, self._actuator_gain() * sys_.B      # the true plant, efficiency too
+        a, b = sys_.A, self.env.actuator_gain * sys_.B      # the true plant, efficiency too
         qn = process_noise(b)
         obs = self._observation(obs)
         x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
@@ -545,7 +539,7 @@ class OracleLQR(_EnvController):
             raise ValueError("OracleLQR needs the env's info dict with 'state' and 'time'")
         model = self.env.model
         sys_ = model.discrete(float(info["time"]))
-        gain = self._tracker.design(sys_.A, self._actuator_gain() * sys_.B)
+        gain = self._tracker.design(sys_.A, self.env.actuator_gain * sys_.B)
         x_ref = equilibrium_state(sys_.A, model.C[model.output_layout.slice("attitude")],
                                   self._reference(info))
         return self._to_action(-gain @ (np.asarray(info["state"]) - x_ref))
@@ -591,7 +585,7 @@ class TrueModelIdentifier:
 
     def _system(self) -> Any:
         true = self.env.model.discrete(self._k * self.dt)
-        gain = float(getattr(self.env, "actuator_gain", 1.0))
+        gain = self.env.actuator_gain
         # the torque the plant receives per torque commanded: the family's efficiency
         return true if gain == 1.0 else SimpleNamespace(A=true.A, B=gain * true.B)
 
@@ -605,8 +599,7 @@ class TrueModelIdentifier:
     @property
     def rigid_gain(self) -> RigidGainEstimate:
         gain = np.linalg.inv(self.env.model.inertia(self._k * self.dt))
-        return RigidGainEstimate(float(getattr(self.env, "actuator_gain", 1.0)) * gain,
-                                 np.zeros((9, 9)))
+        return RigidGainEstimate(self.env.actuator_gain * gain, np.zeros((9, 9)))
 
     def filtered_state(self, y: ArrayLike) -> np.ndarray:
         c = self.env.model.C[self._rows]

@@ -558,7 +558,7 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         model, t = base.model, max(t, 0.0)
 
         def compute() -> np.ndarray:
-            efficiency = float(getattr(base, "actuator_gain", 1.0))
+            efficiency = base.actuator_gain
             feats = np.zeros(self.n_features)
             freq, zeta = self.frame.dominant_modes(model, t)
             self.frame.fill(feats, efficiency * np.linalg.inv(model.inertia(t)), 0.0,

@@ -352,8 +352,7 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 freq_true.append(_first(base.model.modal(info["time"])[0], n_freq))
                 # the gain from commanded torque to body rate: the inverse inertia,
                 # times the task family's actuator efficiency
-                true_gain = float(getattr(base, "actuator_gain", 1.0)) * np.linalg.inv(
-                    base.model.inertia(info["time"]))
+                true_gain = base.actuator_gain * np.linalg.inv(base.model.inertia(info["time"]))
                 gain_err.append(np.nan if model is None or rate_rows is None else
                                 relative_gain_error(rigid_body_gain(model, rate_rows),
                                                     true_gain))

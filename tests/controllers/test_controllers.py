@@ -472,7 +472,11 @@ def test_the_oracles_and_the_gain_error_know_the_familys_actuator_efficiency():
     # (the gain read back from the discrete model's B is exact to 1e-4; without the
     # efficiency the error would be |a - 1| > 0.15)
     assert np.nanmax(traj.gain_error) < 1e-3
-    # the oracle designs, filters and reads its true closed-loop radius on a B
+    # the oracle designs and filters on a B: the model its filter steps with
     oracle = OracleLQG(env)
-    assert oracle._actuator_gain() == a
+    obs, info = env.reset(seed=seed)
+    oracle.reset(seed)
+    oracle.act(obs, info)
+    np.testing.assert_allclose(oracle._pending[1], a * base.model.discrete(0.0).B,
+                               rtol=1e-12)
     assert FlexibleSpacecraftEnv("constant").actuator_gain == 1.0
