@@ -35,7 +35,9 @@ from spacecraft_lab.training import (
     NormalizedPolicy,
     _evaluate,
     _make_env,
+    _one_torch_thread,
     _score_comparators,
+    _training_env_kwargs,
 )
 
 __all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
@@ -130,8 +132,7 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    env_kwargs = {"task": "slew", "randomize": bool(settings["randomize"]),
-                  "reward": settings["reward"]}
+    env_kwargs = _training_env_kwargs(settings["randomize"], settings["reward"])
     venv = DummyVecEnv([lambda: _make_env(settings["scenario"], settings["features"],
                                           env_kwargs)])
     normalization = VecNormalize.load(str(statistics), venv)
@@ -178,13 +179,9 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
     policy, settings = load_agent(agent)
     import torch
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)            # the harness's episodes are serial and small
-    try:
+    with _one_torch_thread(torch):      # as in training: results independent of the cores
         score = _evaluate(policy, settings["scenario"], settings["features"],
                           settings["env_kwargs"], seeds)
-    finally:
-        torch.set_num_threads(threads)
     scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
                                                    seeds, workers, progress)}
     mine = np.asarray(score["cost_after_100s_per_seed"], dtype=float)

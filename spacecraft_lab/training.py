@@ -176,6 +176,11 @@ class NormalizedPolicy(Controller):
         return self._held
 
 
+def _training_env_kwargs(randomize: bool, reward: str) -> dict[str, Any]:
+    """``gym.make`` keywords of the environments an agent trains and is evaluated on."""
+    return {"task": "slew", "randomize": bool(randomize), "reward": reward}
+
+
 def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
                    repeat: int) -> gym.Env:
     """One training env: the setting's env, its action held ``repeat`` steps, Monitor-wrapped
@@ -387,7 +392,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             raise ValueError(f"log_std_init must be in [-10, 2], got {log_std_init}")
         hyper = {**hyper, "policy_kwargs": {**hyper.get("policy_kwargs", {}),
                                             "log_std_init": float(log_std_init)}}
-    env_kwargs = {"task": "slew", "randomize": bool(randomize), "reward": reward}
+    env_kwargs = _training_env_kwargs(randomize, reward)
     # the env checks the reward form and the wrapper the repeat, before anything is written
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
     out = Path(out)
