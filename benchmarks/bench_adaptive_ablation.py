@@ -64,7 +64,7 @@ from controllers import (
     compare,
 )
 from controllers.baselines import process_noise
-from identifiers import CLOSED_LOOP_SETTINGS, Resonator, steady_state_gain
+from identifiers import CLOSED_LOOP_SETTINGS, Resonator
 from identifiers.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_env import ENV_IDS
 from spacecraft_lab.control import env_kwargs_for
@@ -183,10 +183,8 @@ class PerturbedTruth(TrueModelIdentifier):
 
 def true_resonators(env: gym.Env, t: float = 0.0) -> list[Resonator]:
     """The true plant's flexible modes at ``t`` as resonators."""
-    eig = np.linalg.eigvals(env.unwrapped.model.continuous(t).A)
-    eig = eig[eig.imag > 1e-6]
-    return [Resonator(float(abs(e) / (2 * np.pi)), float(-e.real / abs(e)))
-            for e in sorted(eig, key=abs)]
+    freq, zeta = env.unwrapped.model.modal(t)
+    return [Resonator(float(f), float(z)) for f, z in zip(freq, zeta, strict=True)]
 
 
 def _adaptive(env: gym.Env) -> AdaptiveLQG:
@@ -263,20 +261,13 @@ TOLERANCE = {
 
 
 def cluster_damping(controller, a, b, c, gain, truth, t: float) -> np.ndarray:
-    """Damping ratios of the true closed loop's modes in :data:`CLUSTER_HZ` (the loop
-    of the design ``(a, b, c, gain)`` with its steady-state Kalman filter, the true
-    plant frozen at ``t``, the integral of the attitude error)."""
-    filt = steady_state_gain(a, c, process_noise(b), np.diag(controller._noise_var))[0]
-    true = truth.discrete(t)
-    c_t = truth.C[controller._meas_rows]
-    c_att = truth.C[truth.output_layout.slice("attitude")]
-    nt, n = true.A.shape[0], a.shape[0]
-    gx, gz = gain[:, :n], gain[:, n:]
-    to_u = np.hstack([-gx @ filt @ c_t, -gx @ (np.eye(n) - filt @ c), -gz])
-    top = np.hstack([true.A, np.zeros((nt, n + 3))]) + true.B @ to_u
-    mid = np.hstack([a @ filt @ c_t, a @ (np.eye(n) - filt @ c), np.zeros((n, 3))]) + b @ to_u
-    bottom = np.hstack([truth.dt * c_att, np.zeros((3, n)), np.eye(3)])
-    eig = np.linalg.eigvals(np.vstack([top, mid, bottom]))
+    """Damping ratios of the true closed loop's modes in :data:`CLUSTER_HZ`: the loop of
+    the design ``(a, b, c, gain)`` with its steady-state Kalman filter and the true plant
+    frozen at ``t``, as the harness's verdict builds it (the controller's
+    ``_closed_loop``)."""
+    loop = controller._closed_loop(a, b, c, gain, process_noise(b), controller._noise_var,
+                                   truth, t)
+    eig = np.linalg.eigvals(loop)
     eig = eig[(eig.imag > 0) & (np.abs(eig) > 0)]
     s = np.log(eig) / truth.dt
     freq = np.abs(s) / (2 * np.pi)
@@ -308,13 +299,11 @@ def frozen_loops(env_id: str, kwargs: dict, at_s: float, seed: int) -> None:
         obs, _, _, _, info = env.step(adaptive.act(obs, info))
     model = adaptive.identifier.model
     t = at_s
-    open_loop = np.linalg.eigvals(truth.continuous(t).A)
-    open_loop = open_loop[open_loop.imag > 0]
-    band = (np.abs(open_loop) / (2 * np.pi) > CLUSTER_HZ[0]) & \
-        (np.abs(open_loop) / (2 * np.pi) < CLUSTER_HZ[1])
+    freq, zeta = truth.modal(t)
+    band = (freq > CLUSTER_HZ[0]) & (freq < CLUSTER_HZ[1])
     print(f"\nclosed-loop damping ratios of the modes in {CLUSTER_HZ[0]}-{CLUSTER_HZ[1]} Hz, "
           f"seed {seed} (the adaptive LQG's worst), loop frozen at t = {t:g} s")
-    plant = np.sort(-open_loop[band].real / np.abs(open_loop[band]))
+    plant = np.sort(zeta[band])
     print(f"  plant (open loop)     {np.round(plant, 4)}")
     if adaptive._flying_gain is not None and model is not None:
         damping = cluster_damping(adaptive, model.A, model.B, model.C, adaptive._flying_gain,

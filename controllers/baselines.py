@@ -239,7 +239,16 @@ class _LQGController(_EnvController):
     def _loop_radius(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
                      qn: np.ndarray, noise_var: np.ndarray, truth: Any, t: float
                      ) -> float | None:
-        """Spectral radius of this design's closed loop with the true plant frozen at ``t``.
+        """Spectral radius of this design's closed loop with the true plant frozen at ``t``
+        (:meth:`_closed_loop`); None without a steady-state filter."""
+        loop = self._closed_loop(a, b, c, gain, qn, noise_var, truth, t)
+        return None if loop is None else float(np.abs(np.linalg.eigvals(loop)).max())
+
+    def _closed_loop(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
+                     qn: np.ndarray, noise_var: np.ndarray, truth: Any, t: float
+                     ) -> np.ndarray | None:
+        """Transition matrix of this design's closed loop with the true plant frozen at
+        ``t``, state ``[x; xhat; z]``.
 
         The loop: plant ``x+ = A_t x + B_t u``; the design's steady-state Kalman
         filter ``xf = xhat + L (y - C xhat)``, ``xhat+ = A xf + B u``, with
@@ -270,7 +279,7 @@ class _LQGController(_EnvController):
         mid = np.hstack([a @ filt @ c_t, a @ (np.eye(n) - filt @ c), np.zeros((n, 3))]) \
             + b @ to_u
         bottom = np.hstack([self.dt * c_att, np.zeros((3, n)), np.eye(3)])
-        return float(np.abs(np.linalg.eigvals(np.vstack([top, mid, bottom]))).max())
+        return np.vstack([top, mid, bottom])
 
     def _apply(self, gain: np.ndarray, x: np.ndarray, a: np.ndarray, obs: np.ndarray,
                info: dict[str, Any] | None) -> np.ndarray:
