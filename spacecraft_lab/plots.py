@@ -377,17 +377,18 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     fig = Figure(figsize=(13, 4.8), layout="constrained")
     axes = fig.subplots(1, 2)
     # the common cost where every run recorded it (older runs: the attitude RMS)
-    left = "cost_after_100s" if all("cost_after_100s" in c for m in runs for r in m["runs"]
-                                    for c in r["curve"]) else "attitude_rms_deg"
+    def recorded(key: str) -> bool:
+        return all(key in c for m in runs for r in m["runs"] for c in r["curve"])
+
+    left = "cost_after_100s" if recorded("cost_after_100s") else "attitude_rms_deg"
     markers = "osD^v"
     last = runs[-1]
     bounded = last.get("reward", "cost") == "bounded"
     # right: the return of a bounded reward (steps held); under a cost reward the
     # return is the whole episode's cost, which the slew dominates alike for every
     # policy, so the right panel is the cost from 100 s over the mean episode instead
-    right = "return" if bounded or not all(
-        "cost_after_100s_mean" in c for m in runs for r in m["runs"] for c in r["curve"]) \
-        else "cost_after_100s_mean"
+    right = "cost_after_100s_mean" if not bounded and recorded("cost_after_100s_mean") \
+        else "return"
     for j, m in enumerate(shown):
         curves = [r["curve"] for r in m["runs"] if r["curve"]]
         if not curves:
