@@ -65,7 +65,7 @@ from controllers import (
 )
 from controllers.baselines import process_noise
 from identifiers import CLOSED_LOOP_SETTINGS, Resonator
-from identifiers.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_env import ENV_IDS
 from spacecraft_lab.control import env_kwargs_for
 

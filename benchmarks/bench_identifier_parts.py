@@ -30,12 +30,11 @@ from collections.abc import Callable
 import numpy as np
 from bench_identifiers import bare_rls_seconds
 
-import identifiers.base as base
-import identifiers.change_detection as change_detection
-import identifiers.data_monitor as data_monitor
-import identifiers.kalman as kalman
-import identifiers.modal_tracker as modal_tracker
-import identifiers.rigid_flexible as rigid_flexible
+import identifiers.core.data_monitor as data_monitor
+import identifiers.core.kalman as kalman
+import identifiers.structured.change_detection as change_detection
+import identifiers.structured.modal_tracker as modal_tracker
+import identifiers.structured.rigid_flexible as rigid_flexible
 from identifiers import add_measurement_noise, identification_inputs
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
@@ -107,7 +106,7 @@ class _Timers:
 
 def parts(truth, u, y) -> list[tuple[str, float]]:
     """The per-part table, us per update."""
-    rf, ob = rigid_flexible.RigidFlexibleIdentifier, base.OnlineIdentifier
+    rf = ob = rigid_flexible.RigidFlexibleIdentifier
     timers = _Timers()
     for owner, name, label, context in (
             (ob, "update", "update", None), (ob, "_validate", "validate", None),
@@ -122,8 +121,11 @@ def parts(truth, u, y) -> list[tuple[str, float]]:
             (change_detection.RegressionGLR, "update", "change test", None),
             (modal_tracker.ModalTracker, "update", "tracker moments", None),
             (rf, "_refine_modes", "tracker refine", None), (rf, "_export", "export", None)):
-        if name in vars(owner):
-            timers.wrap(owner, name, label, context)
+        # the class of the identifier's MRO (the identifier, its parts, the base class)
+        # that defines the method
+        definer = next((c for c in owner.__mro__ if name in vars(c)), None)
+        if definer is not None:
+            timers.wrap(definer, name, label, context)
     try:
         with single_threaded_blas:
             ident = make_identifier("rigid-flexible", truth, "default")

@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from identifiers import add_measurement_noise, identification_inputs
-from identifiers.rls import RecursiveLeastSquares
+from identifiers.core.rls import RecursiveLeastSquares
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.identification import make_identifier

@@ -14,7 +14,7 @@ The comparison with other packages (SRIM, N4SID, MOESP, online ARX) is
 import numpy as np
 
 from identifiers import add_measurement_noise, identification_inputs, pbsid, vaf
-from identifiers.varx import predictor_product, regressor_matrix
+from identifiers.subspace.varx import predictor_product, regressor_matrix
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel
 

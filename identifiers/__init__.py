@@ -17,27 +17,39 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
 * :class:`ClassicalRPBSID`: Houtzager et al.'s recursive PBSID.
 * :class:`WindowedPBSID`: batch PBSID refitted on a sliding window.
 * :func:`pbsid`: offline batch PBSID.
+
+The package has two families over a small core, and imports run one way
+(``core`` <- ``subspace`` <- ``structured`` <- the modules at the top):
+
+* :mod:`identifiers.core`: what every method uses: the streaming base class
+  (:class:`OnlineIdentifier`) composed of its sample guard
+  (:mod:`identifiers.core.screening`) and its health guard
+  (:mod:`identifiers.core.rollback`), the one RLS primitive, the models,
+  the Kalman predictor, the health report and the data monitor;
+* :mod:`identifiers.subspace`: the predictor-based subspace methods
+  (recursive, sliding-window and batch PBSID) and their shared stages;
+* :mod:`identifiers.structured`: the structure-aware identifier
+  (:class:`RigidFlexibleIdentifier`) and its parts: the modal filter bank,
+  the mode search and tracker, the rigid-body gain, the change tests;
+* :mod:`identifiers.defaults` (the recommended settings) and
+  :mod:`identifiers.signals` (test inputs and noise) and
+  :mod:`identifiers.evaluation` (predictions and scores).
+
+Everything public is importable from ``identifiers`` itself.
 """
 
-from identifiers.base import (
-    OnlineIdentifier,
-    PredictionStateIdentifier,
-    RecursiveVARXIdentifier,
-    SystemRLSIdentifier,
-)
-from identifiers.batch import PBSIDResult, pbsid
-from identifiers.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
-from identifiers.classical import ClassicalRPBSID
+from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
+from identifiers.core.kalman import KalmanPredictor, steady_state_gain
+from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
+from identifiers.core.online import OnlineIdentifier
+from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.defaults import CLOSED_LOOP_SETTINGS, DEFAULT_SETTINGS, default_identifier
 from identifiers.evaluation import (
     HORIZONS,
-    add_measurement_noise,
     h_step_predictions,
-    identification_inputs,
     modal_errors,
     normalized_error,
     one_step_predictions,
-    paper_test_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
@@ -45,18 +57,23 @@ from identifiers.evaluation import (
     unstable_share,
     vaf,
 )
-from identifiers.health import IdentifierHealth, IdentifierHealthWarning
-from identifiers.improved import ImprovedRPBSID
-from identifiers.kalman import KalmanPredictor, steady_state_gain
-from identifiers.modal_basis import ModalFilterBank, Resonator
-from identifiers.modal_discovery import discover_resonators, merge_resonators
-from identifiers.model import ModelSequence, Modes, StateSpaceModel, observability_basis
-from identifiers.moment_refit import MomentRefitRPBSID
-from identifiers.predictor import PredictorRPBSID
-from identifiers.rigid_flexible import RigidFlexibleIdentifier
-from identifiers.rigid_gain import RigidGainEstimate
-from identifiers.rls import RecursiveLeastSquares
-from identifiers.windowed import WindowedPBSID
+from identifiers.signals import add_measurement_noise, identification_inputs, paper_test_inputs
+from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
+from identifiers.structured.modal_basis import ModalFilterBank, Resonator
+from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
+from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.subspace.batch import PBSIDResult, pbsid
+from identifiers.subspace.classical import ClassicalRPBSID
+from identifiers.subspace.improved import ImprovedRPBSID
+from identifiers.subspace.moment_refit import MomentRefitRPBSID
+from identifiers.subspace.predictor import PredictorRPBSID
+from identifiers.subspace.recursive import (
+    PredictionStateIdentifier,
+    RecursiveVARXIdentifier,
+    SystemRLSIdentifier,
+)
+from identifiers.subspace.windowed import WindowedPBSID
 from spacecraft_conventions import __version__
 
 __all__ = [

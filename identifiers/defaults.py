@@ -3,7 +3,7 @@
 Everything that needs "the identifier we recommend" (the adaptive
 controller, the RL features wrapper, the experiments) calls
 :func:`default_identifier`. Its settings are the constructor defaults of
-:class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier`, written once
+:class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`, written once
 there; :data:`DEFAULT_SETTINGS` lists them for display.
 """
 
@@ -14,8 +14,8 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
-from identifiers.base import OnlineIdentifier
-from identifiers.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.core.online import OnlineIdentifier
+from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["CLOSED_LOOP_SETTINGS", "DEFAULT_SETTINGS", "default_identifier"]
@@ -63,13 +63,13 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
         Sample time, s.
     **options
         Overrides of :data:`DEFAULT_SETTINGS`, i.e. any keyword of
-        :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier` (e.g.
+        :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` (e.g.
         ``prior=`` a nominal structural model's modes).
 
     Returns
     -------
     OnlineIdentifier
-        A new :class:`~identifiers.rigid_flexible.RigidFlexibleIdentifier`.
+        A new :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`.
 
     Examples
     --------

@@ -85,3 +85,46 @@ def test_nothing_points_outside_the_repository():
     offenders = [str(p.relative_to(ROOT)) for p in texts
                  if any(pat in p.read_text(errors="ignore") for pat in patterns)]
     assert offenders == []
+
+
+#: The layers inside ``identifiers``, lowest first: a module may import its own
+#: layer and the ones before it, never a later one.
+IDENTIFIER_LAYERS = ("identifiers.core", "identifiers.subspace", "identifiers.structured",
+                     "identifiers")
+#: Longest module the identifiers package holds (lines).
+MAX_MODULE_LINES = 400
+
+
+def _layer(module: str) -> int:
+    """Index in :data:`IDENTIFIER_LAYERS` of a module of ``identifiers``."""
+    return next(i for i, prefix in enumerate(IDENTIFIER_LAYERS)
+                if module == prefix or module.startswith(prefix + "."))
+
+
+def _identifier_module_imports() -> list[tuple[str, str]]:
+    """(importing module, imported module) for every import within ``identifiers``."""
+    edges = []
+    for path in (ROOT / "identifiers").rglob("*.py"):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            edges += [(module, n) for n in names if n.split(".")[0] == "identifiers"]
+    return edges
+
+
+def test_identifier_layers_import_only_downward():
+    edges = _identifier_module_imports()
+    assert any(_layer(b) == 0 for _, b in edges)          # the parse sees the imports
+    upward = [f"{a} -> {b}" for a, b in edges if _layer(b) > _layer(a)]
+    # a subpackage's __init__ re-exports its own layer only
+    upward += [f"{a} -> {b}" for a, b in edges if a in IDENTIFIER_LAYERS[:-1] and
+               _layer(b) != _layer(a)]
+    assert upward == []
+
+
+def test_no_identifier_module_is_over_the_line_budget():
+    long = {str(p.relative_to(ROOT)): n for p in (ROOT / "identifiers").rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert long == {}

@@ -32,9 +32,9 @@ from identifiers import (
     identification_inputs,
     prediction_vaf,
 )
-from identifiers.health import IdentifierHealthWarning, _estimators, _positive_definite
-from identifiers.model import ModelSequence
-from identifiers.rls import RecursiveLeastSquares
+from identifiers.core.health import IdentifierHealthWarning, _estimators, _positive_definite
+from identifiers.core.model import ModelSequence
+from identifiers.core.rls import RecursiveLeastSquares
 from spacecraft_conventions import STANDARD_OUTPUTS
 from spacecraft_env import FlexibleSpacecraftEnv, FlexibleSpacecraftModel
 from spacecraft_lab.cli import main

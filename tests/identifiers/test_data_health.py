@@ -14,12 +14,13 @@ from identifiers import (
     ImprovedRPBSID,
     MomentRefitRPBSID,
     PredictorRPBSID,
+    RigidFlexibleIdentifier,
     add_measurement_noise,
     default_identifier,
     identification_inputs,
 )
-from identifiers.data_monitor import WINDOW, DataMonitor
-from identifiers.health import IdentifierHealthWarning, degenerate, state_problem
+from identifiers.core.data_monitor import WINDOW, DataMonitor
+from identifiers.core.health import IdentifierHealthWarning, degenerate, state_problem
 from spacecraft_conventions import STANDARD_OUTPUTS
 from spacecraft_env import FlexibleSpacecraftModel
 
@@ -176,3 +177,19 @@ def test_the_monitor_clears_a_fault_when_the_data_recover():
     for _ in range(WINDOW):
         monitor.observe(rng.normal(size=1), rng.normal(size=2), skipped=False)
     assert not monitor.faults
+
+
+@pytest.mark.parametrize("cls", [RigidFlexibleIdentifier, ImprovedRPBSID])
+def test_a_health_warning_points_at_the_callers_line(record, cls):
+    # attributed to the user's update(), not to a module inside the package's subpackages
+    u, y, _ = record
+    frozen = y[:600].copy()
+    frozen[100:, 0] = frozen[100, 0]                     # a stuck attitude sensor
+    ident = cls() if cls is RigidFlexibleIdentifier else cls(22, **SCALES)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for k in range(600):
+            ident.update(u[k], frozen[k])
+    health = [w for w in caught if issubclass(w.category, IdentifierHealthWarning)]
+    assert health
+    assert {w.filename for w in health} == {__file__}

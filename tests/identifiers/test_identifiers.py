@@ -21,7 +21,7 @@ from identifiers import (
     pbsid,
     vaf,
 )
-from identifiers.varx import free_response, predictor_product, regressor_matrix
+from identifiers.subspace.varx import free_response, predictor_product, regressor_matrix
 
 
 def _innovation_system(seed: int = 0, n_samples: int = 3000, noise: float = 0.1):

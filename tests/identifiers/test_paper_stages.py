@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from identifiers import ClassicalRPBSID, ImprovedRPBSID, pbsid
-from identifiers.base import SystemRLSIdentifier
-from identifiers.rls import RecursiveLeastSquares
-from identifiers.varx import regressor_matrix
+from identifiers.core.rls import RecursiveLeastSquares
+from identifiers.subspace.recursive import SystemRLSIdentifier
+from identifiers.subspace.varx import regressor_matrix
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from bench_pole_jump import BEFORE, JUMP, closed_loop_record, eigenvalue_error

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from identifiers import default_identifier
-from identifiers.modal_basis import ModalFilterBank, Resonator, mode_zoh
-from identifiers.modal_kernels import oscillator_zoh, oscillator_zoh_derivatives
-from identifiers.modal_tracker import ModalTracker, TrackerGroup
-from identifiers.rigid_gain import RigidGainEstimate
-from identifiers.rls import RecursiveLeastSquares
+from identifiers.core.rls import RecursiveLeastSquares
+from identifiers.structured.modal_basis import ModalFilterBank, Resonator, mode_zoh
+from identifiers.structured.modal_kernels import oscillator_zoh, oscillator_zoh_derivatives
+from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
+from identifiers.structured.rigid_gain import RigidGainEstimate
 from spacecraft_env import FlexibleSpacecraftModel
 
 DT = 0.1

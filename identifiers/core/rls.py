@@ -12,7 +12,7 @@ Symmetric by construction
     symmetric matrix-vector product and the correction
     ``- (P phi)(P phi)^T / denom`` a symmetric rank-1 update of that
     triangle (one compiled pass per update:
-    :func:`identifiers.rls_kernel.rls_step`). The plain update lets the
+    :func:`identifiers.core.rls_kernel.rls_step`). The plain update lets the
     non-symmetric part of ``P`` grow by ``1 / lambda`` per step until ``P``
     turns indefinite; with one triangle there is no non-symmetric part to
     grow, and the symmetric recursion is numerically stable for
@@ -62,7 +62,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identifiers.rls_kernel import rls_step
+from identifiers.core.rls_kernel import rls_step
 
 __all__ = ["RecursiveLeastSquares"]
 

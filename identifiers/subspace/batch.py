@@ -3,7 +3,7 @@
 VARX least squares, the weighted predictor product LK, an SVD of
 ``LK Phi`` for the state sequence, then least squares for ``[C D]`` and
 ``[A B K]`` (Chiuso 2007; van Wingerden and Verhaegen; docs/design/identification.md).
-Also the comparator that :class:`~identifiers.windowed.WindowedPBSID`
+Also the comparator that :class:`~identifiers.subspace.windowed.WindowedPBSID`
 refits on a sliding window.
 """
 
@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
-from identifiers.model import StateSpaceModel
-from identifiers.varx import predictor_product, regressor_matrix
+from identifiers.core.model import StateSpaceModel
+from identifiers.subspace.varx import predictor_product, regressor_matrix
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["DEFAULT_PAST", "DEFAULT_RIDGE", "PBSIDResult", "pbsid"]

@@ -5,7 +5,7 @@ learns from have gone bad: a sensor that repeats its last value, one that
 saturates, one whose noise rose a hundredfold, samples it must skip, or an
 input that stopped exciting the plant while forgetting erases what was
 learnt. None of these breaks the arithmetic, so the state checks of
-:mod:`identifiers.health` cannot see them, and a model read from the
+:mod:`identifiers.core.health` cannot see them, and a model read from the
 identifier goes stale without a word. :class:`DataMonitor` looks at the
 normalized samples the identifier receives, one window of
 :data:`WINDOW` samples at a time, and reports the faults it sees while they

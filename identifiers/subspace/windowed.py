@@ -1,6 +1,6 @@
 """Sliding-window SVD-based PBSID: the batch method refitted at every step.
 
-The paper's SVD-based comparator: at each sample, :func:`~identifiers.batch.pbsid`
+The paper's SVD-based comparator: at each sample, :func:`~identifiers.subspace.batch.pbsid`
 (VARX least squares, weighted LK, SVD, least squares for the system
 matrices) is run on the most recent ``window`` samples. Accurate and simple,
 but O(window p^2 (r + m)^2) per step. Each refit comes out in its own SVD
@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identifiers.base import OnlineIdentifier, _positive_int
-from identifiers.batch import pbsid
+from identifiers.core.checks import positive_int
+from identifiers.core.online import OnlineIdentifier
+from identifiers.subspace.batch import pbsid
 
 __all__ = ["WindowedPBSID"]
 
@@ -42,7 +43,7 @@ class WindowedPBSID(OnlineIdentifier):
     regularization : float
         VARX Tikhonov term as a fraction of the window length (0: plain LS).
     dt, warmup, input_scale, output_scale
-        See :class:`~identifiers.base.OnlineIdentifier`; warm-up defaults to
+        See :class:`~identifiers.core.online.OnlineIdentifier`; warm-up defaults to
         the window length.
     """
 
@@ -54,8 +55,8 @@ class WindowedPBSID(OnlineIdentifier):
                  warmup: int | None = None, input_scale: ArrayLike | None = None,
                  output_scale: ArrayLike | None = None,
                  regularization: float = 0.0) -> None:
-        self.window = _positive_int("window", window)
-        self.refit_every = _positive_int("refit_every", refit_every)
+        self.window = positive_int("window", window)
+        self.refit_every = positive_int("refit_every", refit_every)
         self.f = f
         if not (np.isfinite(regularization) and regularization >= 0):
             raise ValueError(f"regularization must be >= 0, got {regularization}")

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from identifiers.base import PredictionStateIdentifier
-from identifiers.varx import free_response
+from identifiers.subspace.recursive import PredictionStateIdentifier
+from identifiers.subspace.varx import free_response
 
 __all__ = ["PredictorRPBSID"]
 
@@ -29,7 +29,7 @@ class PredictorRPBSID(PredictionStateIdentifier):
         Order, past window, forgetting factor.
     **kwargs
         ``f``, ``basis``, ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.base.PredictionStateIdentifier`.
+        :class:`~identifiers.subspace.recursive.PredictionStateIdentifier`.
     """
 
     def _predictions(self, phi: np.ndarray) -> np.ndarray:

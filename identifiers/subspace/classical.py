@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from identifiers.base import PredictionStateIdentifier
-from identifiers.varx import predictor_product
+from identifiers.subspace.recursive import PredictionStateIdentifier
+from identifiers.subspace.varx import predictor_product
 
 __all__ = ["ClassicalRPBSID"]
 
@@ -33,12 +33,12 @@ class ClassicalRPBSID(PredictionStateIdentifier):
     **kwargs
         ``f`` (default ``p``, as the PBSID toolbox's ``rpbsid``), ``basis``,
         ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.base.PredictionStateIdentifier`.
+        :class:`~identifiers.subspace.recursive.PredictionStateIdentifier`.
 
     Notes
     -----
     Building LK costs O(f^2 m^2 p (r + m)) per step; this is what
-    :class:`~identifiers.predictor.PredictorRPBSID` avoids.
+    :class:`~identifiers.subspace.predictor.PredictorRPBSID` avoids.
 
     Examples
     --------

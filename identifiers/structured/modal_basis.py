@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from identifiers.modal_kernels import (
+from identifiers.structured.modal_kernels import (
     bank_highpassed,
     bank_regressor,
     bank_run,
@@ -38,7 +38,8 @@ from identifiers.modal_kernels import (
     oscillator_zoh_derivatives,
 )
 
-__all__ = ["MAX_DAMPING", "MIN_DAMPING", "HighPass", "ModalFilterBank", "Resonator", "mode_zoh"]
+__all__ = ["MAX_DAMPING", "MIN_DAMPING", "HighPass", "ModalFilterBank", "Resonator",
+           "highpass_noise_gain", "mode_zoh"]
 
 #: Range a tracked resonator's damping ratio is kept in.
 MIN_DAMPING, MAX_DAMPING = 1e-4, 0.3
@@ -151,7 +152,7 @@ class ModalFilterBank:
     ``step``, ``ramp``    2        1 and ``t - t_restart`` (s)
     ====================  =======  =====================================
 
-    One sample is one compiled pass (:func:`identifiers.modal_kernels.bank_step`).
+    One sample is one compiled pass (:func:`identifiers.structured.modal_kernels.bank_step`).
     """
 
     def __init__(self, resonators: tuple[Resonator, ...] | list[Resonator], dt: float,
@@ -304,3 +305,12 @@ class ModalFilterBank:
                       float(np.clip(r.damping + d[i, 1], MIN_DAMPING, MAX_DAMPING)), r.rank)
             for i, r in enumerate(self.resonators))
         self._set_matrices()
+
+
+def highpass_noise_gain(rho: float) -> float:
+    """Sum of the squared impulse response of ``((1 - z^-1) / (1 - rho z^-1))^2``:
+    the factor by which :class:`HighPass` scales the variance of white noise."""
+    hp = HighPass(1, rho)
+    impulse = np.zeros(4000)
+    impulse[0] = 1.0
+    return float(sum(hp(np.array([x]))[0] ** 2 for x in impulse))

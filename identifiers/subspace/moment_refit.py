@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 from scipy.linalg.blas import dger
 
-from identifiers.base import RecursiveVARXIdentifier, _positive_int, state_horizon
-from identifiers.varx import predictor_product
+from identifiers.core.checks import positive_int
+from identifiers.subspace.recursive import RecursiveVARXIdentifier, state_horizon
+from identifiers.subspace.varx import predictor_product
 
 __all__ = ["MomentRefitRPBSID"]
 
@@ -49,7 +50,7 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
     **kwargs
         ``dt``, ``warmup``, ``regularization``, ``varx_forgetting``,
         ``varx_init`` and the scales of
-        :class:`~identifiers.base.RecursiveVARXIdentifier`.
+        :class:`~identifiers.subspace.recursive.RecursiveVARXIdentifier`.
     """
 
     _SIGNAL_STATE = ("_phi", "_ext")
@@ -60,7 +61,7 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
                 or refit_every < 1:
             raise ValueError(f"refit_every must be a positive int, got {refit_every!r}")
         self.refit_every = int(refit_every)
-        self.f = None if f is None else _positive_int("f", f)
+        self.f = None if f is None else positive_int("f", f)
         super().__init__(n, p, forgetting, **kwargs)
         if self.warmup - self.p < self.n:
             raise ValueError(f"the state basis needs warmup >= p + n = {self.p + self.n}")

@@ -11,7 +11,7 @@ forward with future inputs zero and future outputs replaced by their own
 predictions (the "weighted" product of Houtzager et al.; docs/design/identification.md).
 Its rows approximate ``Gamma_f x_k`` with ``Gamma_f = [C; CA; ...]`` built
 on the true ``A``, so the first n of them are a state in the observability
-basis (:func:`identifiers.model.observability_basis`).
+basis (:func:`identifiers.core.model.observability_basis`).
 """
 
 from __future__ import annotations

@@ -35,9 +35,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from identifiers.base import SystemRLSIdentifier, _forgetting
-from identifiers.rls import RecursiveLeastSquares
-from identifiers.varx import toeplitz_windows
+from identifiers.core.checks import forgetting_factor
+from identifiers.core.rls import RecursiveLeastSquares
+from identifiers.subspace.recursive import SystemRLSIdentifier
+from identifiers.subspace.varx import toeplitz_windows
 
 __all__ = ["ImprovedRPBSID"]
 
@@ -47,7 +48,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
 
     The defaults are the best settings we measured for this algorithm: a
     predict step before the sign correction, a larger step, and the long
-    memory of :class:`~identifiers.base.RecursiveVARXIdentifier`.
+    memory of :class:`~identifiers.subspace.recursive.RecursiveVARXIdentifier`.
     ``ImprovedRPBSID.paper(n)`` is the paper's algorithm with the paper's
     constants, for reproducing its tables.
 
@@ -70,7 +71,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
         sample, so it lags a state that moves with the dynamics.
     **kwargs
         ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.base.SystemRLSIdentifier`.
+        :class:`~identifiers.subspace.recursive.SystemRLSIdentifier`.
 
     Examples
     --------
@@ -108,8 +109,8 @@ class ImprovedRPBSID(SystemRLSIdentifier):
         if not (np.isfinite(mu) and mu > 0 and np.isfinite(nu) and nu >= 0):
             raise ValueError(f"mu must be > 0 and nu >= 0, got mu={mu}, nu={nu}")
         self.mu, self.nu = float(mu), float(nu)
-        forgetting = _forgetting("forgetting", forgetting)
-        self.state_forgetting = _forgetting(
+        forgetting = forgetting_factor("forgetting", forgetting)
+        self.state_forgetting = forgetting_factor(
             "state_forgetting", forgetting if state_forgetting is None else state_forgetting)
         super().__init__(n, p, forgetting, **kwargs)
 

@@ -1,0 +1,40 @@
+"""The identifiers' core: the streaming base class and what every method uses.
+
+:class:`OnlineIdentifier` (:mod:`~identifiers.core.online`) composed of
+:class:`SampleScreening` (:mod:`~identifiers.core.screening`: what may be
+learned from) and :class:`HealthGuard` (:mod:`~identifiers.core.rollback`:
+the estimator's own state); the one RLS primitive
+(:mod:`~identifiers.core.rls`, its compiled kernel
+:mod:`~identifiers.core.rls_kernel`); state-space models
+(:mod:`~identifiers.core.model`); the Kalman predictor
+(:mod:`~identifiers.core.kalman`); the health report
+(:mod:`~identifiers.core.health`) and the data monitor
+(:mod:`~identifiers.core.data_monitor`); argument checks
+(:mod:`~identifiers.core.checks`). Nothing here imports the method families.
+"""
+
+from identifiers.core.data_monitor import DataMonitor
+from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
+from identifiers.core.kalman import KalmanPredictor, steady_state_gain
+from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
+from identifiers.core.online import OnlineIdentifier
+from identifiers.core.rls import RecursiveLeastSquares
+from identifiers.core.rollback import HealthGuard
+from identifiers.core.screening import OUTLIER_RUN, SampleScreening
+
+__all__ = [
+    "OUTLIER_RUN",
+    "DataMonitor",
+    "HealthGuard",
+    "IdentifierHealth",
+    "IdentifierHealthWarning",
+    "KalmanPredictor",
+    "ModelSequence",
+    "Modes",
+    "OnlineIdentifier",
+    "RecursiveLeastSquares",
+    "SampleScreening",
+    "StateSpaceModel",
+    "observability_basis",
+    "steady_state_gain",
+]

@@ -1,0 +1,55 @@
+"""Validation of the identifiers' constructor arguments, with messages that name
+the expected type or range (one definition for every identifier)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["forgetting_factor", "positive_float", "positive_int", "positive_scales", "rms_scale"]
+
+
+def positive_int(name: str, value) -> int:
+    """``value`` as an int >= 1; ``TypeError``/``ValueError`` naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be >= 1, got {value}")
+    return int(value)
+
+
+def positive_float(name: str, value: float) -> float:
+    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` otherwise."""
+    value = float(value)
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be positive, got {value}")
+    return value
+
+
+def forgetting_factor(name: str, value: float) -> float:
+    """``value`` as a forgetting factor in (0, 1]; ``ValueError`` naming ``name`` otherwise."""
+    value = float(value)
+    if not 0.0 < value <= 1.0:
+        raise ValueError(f"{name} must be in (0, 1], got {value}")
+    return value
+
+
+def positive_scales(name: str, value) -> np.ndarray:
+    """``value`` as a 1-D array of positive finite per-channel scales."""
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.ndim != 1 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{name} must be a 1-D array of positive finite scales")
+    return arr
+
+
+def rms_scale(samples: np.ndarray) -> np.ndarray:
+    """Per-column RMS of the finite entries, 1 where there is none or it is 0.
+
+    Computed relative to each column's peak, so data of any magnitude up to
+    the largest float give a finite scale (no overflow in the squares).
+    """
+    finite = np.where(np.isfinite(samples), samples, 0.0)
+    count = np.isfinite(samples).sum(axis=0)
+    peak = np.abs(finite).max(axis=0)
+    peak = np.where(peak > 0, peak, 1.0)
+    rms = peak * np.sqrt(((finite / peak) ** 2).sum(axis=0) / np.maximum(count, 1))
+    return np.where((rms > 0) & np.isfinite(rms), rms, 1.0)

@@ -1,0 +1,37 @@
+"""The structure-aware identifier and its parts.
+
+:class:`RigidFlexibleIdentifier` (:mod:`~identifiers.structured.rigid_flexible`)
+uses what physics fixes (the rigid body's kinematics, modes as resonators,
+which sensor sees what) and estimates the rest. Its parts, each in its own
+module:
+
+* :mod:`~identifiers.structured.modal_basis` (and its compiled kernels
+  :mod:`~identifiers.structured.modal_kernels`): the modal filter bank
+  that makes every output linear in the unknown gains;
+* :mod:`~identifiers.structured.modal_discovery`: the batch search for the
+  modes; :mod:`~identifiers.structured.modal_tracker`: their tracking;
+* :mod:`~identifiers.structured.rigid_gain`: the rigid-body gain
+  ``J^-1`` with its calibrated uncertainty;
+* :mod:`~identifiers.structured.change_detection`: the change tests.
+
+Imports :mod:`identifiers.core` and :mod:`identifiers.subspace` (the mode
+search runs a batch PBSID), never the reverse.
+"""
+
+from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
+from identifiers.structured.modal_basis import ModalFilterBank, Resonator
+from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
+from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.structured.rigid_gain import RigidGainEstimate
+
+__all__ = [
+    "ChangeEvent",
+    "InnovationCUSUM",
+    "ModalFilterBank",
+    "RegressionGLR",
+    "Resonator",
+    "RigidFlexibleIdentifier",
+    "RigidGainEstimate",
+    "discover_resonators",
+    "merge_resonators",
+]
