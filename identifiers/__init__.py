@@ -8,6 +8,10 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
   spacecraft's outputs, with its settings.
 * :class:`RigidFlexibleIdentifier`: known rigid-body kinematics, estimated
   inverse inertia and flexible modes, change detection; the default.
+* :class:`PhysicalFitIdentifier`: a physical model (symmetric positive
+  definite inverse inertia, passive collocated modes) fitted once to the
+  warm-up by output error and held; for a plant that does not change much
+  after its warm-up.
 * :class:`ImprovedRPBSID`: the paper's improved recursive PBSID (affine
   projection sign state update), for reproduction.
 * :class:`MomentRefitRPBSID`: recursive VARX plus batch-equivalent refits of
@@ -61,6 +65,9 @@ from identifiers.signals import add_measurement_noise, identification_inputs, pa
 from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
 from identifiers.structured.modal_basis import ModalFilterBank, Resonator
 from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
+from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
+from identifiers.structured.physical_identifier import PhysicalFitIdentifier
+from identifiers.structured.physical_model import PhysicalModel
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.subspace.batch import PBSIDResult, pbsid
@@ -93,6 +100,9 @@ __all__ = [
     "MomentRefitRPBSID",
     "OnlineIdentifier",
     "PBSIDResult",
+    "PhysicalFit",
+    "PhysicalFitIdentifier",
+    "PhysicalModel",
     "PredictionStateIdentifier",
     "PredictorRPBSID",
     "RecursiveLeastSquares",
@@ -108,6 +118,7 @@ __all__ = [
     "add_measurement_noise",
     "default_identifier",
     "discover_resonators",
+    "fit_physical_model",
     "h_step_predictions",
     "identification_inputs",
     "merge_resonators",

@@ -40,6 +40,7 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
+from identifiers import PhysicalFitIdentifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
     ENV_IDS,
@@ -55,10 +56,9 @@ from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import control_table
 from spacecraft_lab.sweeps.backends import check_workers
 
-__all__ = ["CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE", "SAME_LAW",
-           "SCENARIO_NAMES",
-           "control_task",
-           "env_kwargs_for", "run_control"]
+__all__ = ["ALL_CONTROLLER_NAMES", "CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE",
+           "PHYSICAL", "SAME_LAW", "SCENARIO_NAMES", "control_task", "env_kwargs_for",
+           "run_control"]
 
 #: Scenarios with a registered environment id.
 SCENARIO_NAMES = tuple(ENV_IDS.values())
@@ -80,6 +80,10 @@ def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
         return PD(env)
     if name == "adaptive LQG":
         return AdaptiveLQG(env, weights=weights)
+    if name == PHYSICAL:
+        layout = env.unwrapped.observation_layout.sensors()
+        return AdaptiveLQG(env, weights=weights, identifier=PhysicalFitIdentifier(
+            layout, dt=env.unwrapped.model.dt))
     if name == SAME_LAW:
         return AdaptiveLQG(env, weights=weights, identifier=TrueModelIdentifier(env),
                            excitation=BinaryExcitation(0.0, 0.0))
@@ -90,21 +94,28 @@ def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
     raise ValueError(f"unknown controller {name!r}")
 
 
-#: The controllers of the comparison, in their table order.
+#: The adaptive law on the physical model fitted to its warm-up and held
+#: (:class:`identifiers.PhysicalFitIdentifier`): not in the default comparison (it
+#: does not follow turning paddles; docs/results/control.md).
+PHYSICAL = "adaptive LQG, physical fit"
+#: The controllers of the default comparison, in their table order.
 CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", SAME_LAW,
                     ORACLE, "full-state oracle")
+#: Every controller the comparison can fly: the default ones and the options.
+ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES[:5], PHYSICAL, *CONTROLLER_NAMES[5:])
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
-    """Name -> factory ``env -> Controller`` for the comparison (picklable, so the
-    comparison can run its seeds on a process pool)."""
-    return {name: partial(_build, name, weights) for name in CONTROLLER_NAMES}
+    """Name -> factory ``env -> Controller`` for every controller of
+    :data:`ALL_CONTROLLER_NAMES` (picklable, so the comparison can run its seeds on a
+    process pool)."""
+    return {name: partial(_build, name, weights) for name in ALL_CONTROLLER_NAMES}
 
 
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
 CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
-                   "same-law-oracle": SAME_LAW,
+                   "adaptive-lqg-physical": PHYSICAL, "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle"}
 
 
@@ -305,7 +316,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     weights : LQRWeights, optional
         LQR weights shared by the LQG designs.
     controllers : sequence of str, optional
-        Keys of :data:`CONTROLLER_KEYS` (default: all).
+        Keys of :data:`CONTROLLER_KEYS` (default: those of :data:`CONTROLLER_NAMES`,
+        i.e. all but ``adaptive-lqg-physical``).
     steps : int, optional
         Episode length, steps of 0.1 s (default: the registered 2500).
     save_trajectories : bool
@@ -322,7 +334,9 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         kwargs = {**kwargs, "max_episode_steps": int(steps)}
     weights = weights or LQRWeights()
     factories = CONTROLLERS(weights)
-    if controllers is not None:
+    if controllers is None:
+        factories = {name: factories[name] for name in CONTROLLER_NAMES}
+    else:
         unknown = sorted(set(controllers) - set(CONTROLLER_KEYS))
         if unknown:
             raise ValueError(f"unknown controllers {unknown}; expected {sorted(CONTROLLER_KEYS)}")

@@ -169,7 +169,7 @@ def control_brief(table: dict[str, dict], oracle: str | None = "oracle LQG",
         rows.append((name, f"{row['median']['cost_after_100s']:.3g}",
                      *("-" if r is None else f"{r:.2f}" for r in ratios),
                      ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items()),
-                     "-" if not np.isfinite(fallback) or name != "adaptive LQG"
+                     "-" if not np.isfinite(fallback) or not name.startswith("adaptive LQG")
                      else f"{100 * fallback:.0f} %"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(c.ljust(w) if i == 0 or i == 4 else c.rjust(w)

@@ -14,6 +14,12 @@ module:
   ``J^-1`` with its calibrated uncertainty;
 * :mod:`~identifiers.structured.change_detection`: the change tests.
 
+:class:`PhysicalFitIdentifier` (:mod:`~identifiers.structured.physical_identifier`)
+is the other structure-aware identifier: a :class:`PhysicalModel`
+(:mod:`~identifiers.structured.physical_model`: symmetric positive definite
+``J^-1``, passive collocated modes) fitted once to the warm-up by output
+error (:mod:`~identifiers.structured.physical_fit`) and then held.
+
 Imports :mod:`identifiers.core` and :mod:`identifiers.subspace` (the mode
 search runs a batch PBSID), never the reverse.
 """
@@ -21,6 +27,9 @@ search runs a batch PBSID), never the reverse.
 from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
 from identifiers.structured.modal_basis import ModalFilterBank, Resonator
 from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
+from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
+from identifiers.structured.physical_identifier import PhysicalFitIdentifier
+from identifiers.structured.physical_model import PhysicalModel
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 
@@ -28,10 +37,14 @@ __all__ = [
     "ChangeEvent",
     "InnovationCUSUM",
     "ModalFilterBank",
+    "PhysicalFit",
+    "PhysicalFitIdentifier",
+    "PhysicalModel",
     "RegressionGLR",
     "Resonator",
     "RigidFlexibleIdentifier",
     "RigidGainEstimate",
     "discover_resonators",
+    "fit_physical_model",
     "merge_resonators",
 ]

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 import pytest
 
 from spacecraft_env import DockingScenario
 from spacecraft_lab.cli import build_parser, main
-from spacecraft_lab.control import SCENARIO_NAMES, env_kwargs_for
+from spacecraft_lab.control import CONTROLLER_NAMES, PHYSICAL, SCENARIO_NAMES, env_kwargs_for
 
 
 def test_capture_and_mass_centre_options_build_the_docking_scenario():
@@ -46,3 +47,12 @@ def test_a_refused_workers_value_writes_nothing(tmp_path):
     with pytest.raises(ValueError, match="workers must be a positive integer"):
         run_control("docking", 1, tmp_path / "out", workers=0)
     assert not (tmp_path / "out").exists()
+
+
+def test_the_physical_fit_option_flies_and_stays_out_of_the_default_comparison(tmp_path):
+    assert PHYSICAL not in CONTROLLER_NAMES
+    main(["control", "--scenario", "constant", "--seeds", "1", "--steps", "400",
+          "--controllers", "adaptive-lqg-physical", "--workers", "1",
+          "--out", str(tmp_path / "physical")])
+    table = json.loads((tmp_path / "physical" / "metrics.json").read_text())
+    assert PHYSICAL in json.dumps(table)

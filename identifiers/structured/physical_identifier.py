@@ -1,0 +1,226 @@
+"""The physical model, fitted once to the warm-up record, as a streaming identifier.
+
+:class:`PhysicalFitIdentifier` records the first ``warmup`` samples, fits a
+:class:`~identifiers.structured.physical_model.PhysicalModel` to them by
+output error (:func:`~identifiers.structured.physical_fit.fit_physical_model`)
+and from then on holds that model, with a Kalman filter on it for the
+state. The model is physical by construction (symmetric positive definite
+``J^-1``, passive collocated modes), and output error needs nothing but the
+torques that acted, so closed-loop data do not bias it; but it does not
+follow a plant that changes after the warm-up (docs/design/control.md,
+"What the remaining gap is made of").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identifiers.core.checks import positive_float, positive_int
+from identifiers.core.kalman import KalmanPredictor
+from identifiers.core.online import OnlineIdentifier
+from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
+from identifiers.structured.physical_model import simulate
+from identifiers.structured.rigid_gain import RigidGainEstimate
+from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
+
+__all__ = ["PhysicalFitIdentifier"]
+
+
+class PhysicalFitIdentifier(OnlineIdentifier):
+    """A physical rigid-flexible model fitted to the warm-up by output error, then held.
+
+    Parameters
+    ----------
+    layout : OutputLayout
+        The measured sensor groups, in the order of ``y`` (default: attitude,
+        rate and four tip deflections). Attitude and rate are required.
+    n_modes : int
+        Modes of the fitted model (default 4: those below 0.2 Hz); the
+        model order is ``6 + 2 n_modes``.
+    dt : float
+        Sample time, s.
+    warmup : int
+        Samples recorded before the fit (default 300: the adaptive loop's
+        30 s of excitation).
+    process_torque : float
+        Unmodelled torque (N m per axis) the state's Kalman filter assumes
+        (default 0.05, the baselines' value).
+    grid_hz : sequence of float, optional
+        Starting frequencies of the fit's mode search
+        (see :func:`~identifiers.structured.physical_fit.fit_physical_model`).
+    input_scale, output_scale, max_abs
+        See :class:`~identifiers.core.online.OnlineIdentifier`; defaults:
+        1 N m and the layout's nominal levels.
+
+    Attributes
+    ----------
+    fit : PhysicalFit or None
+        The fit, once the warm-up is over.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from identifiers import PhysicalFitIdentifier
+    >>> ident = PhysicalFitIdentifier(warmup=100)
+    >>> ident.model is None, ident.rigid_states
+    (True, (slice(0, 3, None), slice(3, 6, None)))
+    """
+
+    _SHARED_ITEMS = ("_pending", "_record")
+
+    def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n_modes: int = 4,
+                 dt: float = 0.1, warmup: int = 300, process_torque: float = 0.05,
+                 grid_hz: Sequence[float] | None = None,
+                 input_scale: ArrayLike | None = None, output_scale: ArrayLike | None = None,
+                 max_abs: float = 1e6) -> None:
+        if not isinstance(layout, OutputLayout):
+            raise TypeError(f"layout must be an OutputLayout, got {type(layout).__name__}")
+        self.layout = layout.sensors()
+        missing = [g for g in ("attitude", "rate") if g not in self.layout.names]
+        if missing:
+            raise ValueError(f"the physical model needs the sensor groups {missing}; "
+                             f"the layout holds {self.layout.names}")
+        self.n_modes = positive_int("n_modes", n_modes)
+        self.process_torque = positive_float("process_torque", process_torque)
+        self.grid_hz = None if grid_hz is None else tuple(float(f) for f in grid_hz)
+        super().__init__(6 + 2 * self.n_modes, 1, 1.0, dt=dt,
+                         warmup=positive_int("warmup", warmup),
+                         input_scale=(np.full(3, NOMINAL_TORQUE) if input_scale is None
+                                      else input_scale),
+                         output_scale=self.layout.scales() if output_scale is None
+                         else output_scale, max_abs=max_abs)
+
+    def reset(self) -> None:
+        super().reset()
+        self.fit: PhysicalFit | None = None
+        self._record: list[tuple[np.ndarray, np.ndarray]] = []
+        self._kf: KalmanPredictor | None = None
+        self._mats: tuple[np.ndarray, ...] | None = None
+        self._q = self._r = None
+        self._seen: np.ndarray | None = None
+
+    def restart(self) -> None:
+        """A new record of the same plant: keep the fit, restart the state's filter
+        (``x = 0`` with a vague covariance); before the fit, keep recording."""
+        if self._kf is not None:
+            self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
+
+    def _check_sizes(self, r: int, m: int) -> None:
+        if r != 3:
+            raise ValueError(f"u must hold the 3 body torques, got {r} inputs")
+        if m != self.layout.size:
+            raise ValueError(f"y must have {self.layout.size} entries as the layout "
+                             f"{self.layout.names} says, got {m}")
+
+    def _allocate(self, r: int, m: int) -> None:
+        """Nothing before the fit: the record grows sample by sample."""
+
+    def _output_names(self, m: int) -> tuple[str, ...]:
+        return tuple(f"{name}[{j}]" for name, sl in self.layout
+                     for j in range(sl.stop - sl.start))
+
+    def _process(self, u: np.ndarray, y: np.ndarray) -> None:
+        self._seen = np.isfinite(y)          # a skipped output is not fitted to
+        super()._process(u, y)
+
+    # ------------------------------------------------------------ streaming
+    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
+        y = np.where(seen, y, np.nan)
+        if self.fit is None:
+            self._record.append((u.copy(), y.copy()))
+            if len(self._record) >= self.warmup:
+                self._fit()
+            return
+        a, b, c, _ = self._mats
+        self._kf.update(a, b, c, self._q, self._r, u, y)
+
+    def _fit(self) -> None:
+        """Fit the physical model to the record (physical units), build the
+        normalized model and run the state's filter over the record."""
+        su, sy = self._su, self._sy
+        u = np.array([s[0] for s in self._record])
+        y = np.array([s[1] for s in self._record])
+        fit = fit_physical_model(u * su, y * sy, self.dt, self.layout, n_modes=self.n_modes,
+                                 grid_hz=self.grid_hz)
+        model = fit.model.discrete(self.dt, self.layout)
+        a, b = model.A, model.B * su[None, :]
+        c = model.C / sy[:, None]
+        if not all(np.isfinite(m).all() for m in (a, b, c)):
+            return                    # keep recording; the next sample tries again
+        self.fit = fit
+        self._record = []
+        self._mats = (a, b, c, np.zeros((c.shape[0], 3)))
+        # the filter's noise: the fit's residual per output, and unmodelled torque
+        attitude, rate, q = simulate(fit.model, u * su, self.dt, fit.initial_state)
+        fitted = np.zeros_like(y)
+        for name, rows in self.layout:
+            fitted[:, rows] = {"attitude": attitude, "rate": rate,
+                               "deflection": q @ fit.model.tips.T}[name] / sy[rows]
+        self._r = np.maximum(np.nanmean((y - fitted) ** 2, axis=0), 1e-12)
+        self._q = (self.process_torque / su.mean()) ** 2 * (b @ b.T) \
+            + 1e-12 * np.eye(self.n)
+        self._kf = KalmanPredictor(self.n, initial_covariance=1e-6)
+        self._kf.x = fit.initial_state.copy()
+        for uk, yk in zip(u, y, strict=True):
+            self._kf.update(a, b, c, self._q, self._r, uk, yk)
+
+    # ------------------------------------------------------------ the estimator's state
+    def _state_vector(self) -> np.ndarray | None:
+        return None if self._kf is None else self._kf.x
+
+    def _after_rollback(self) -> None:
+        if self._kf is not None:              # the restored state is up to 10 s old
+            self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))) + 1e-3 * np.eye(self.n))
+
+    def _fill_output(self) -> np.ndarray:
+        if self._kf is None:
+            return np.zeros(self.n_outputs)
+        return self._mats[2] @ self._kf.x
+
+    def _matrices(self) -> tuple[np.ndarray, ...] | None:
+        if self._mats is None:
+            return None
+        gain = self._kf.gain if self._kf.gain is not None else np.zeros((self.n, self.n_outputs))
+        return (*self._mats, gain)
+
+    def _current_state(self) -> np.ndarray | None:
+        return None if self._kf is None else self._kf.x
+
+    # ------------------------------------------------------------ results
+    @property
+    def ready(self) -> bool:
+        """True once the model is fitted."""
+        return self.fit is not None and super().ready
+
+    @property
+    def rigid_states(self) -> tuple[slice, slice]:
+        """Slices of the model state that are the attitude and the body rate."""
+        return slice(0, 3), slice(3, 6)
+
+    @property
+    def rigid_gain(self) -> RigidGainEstimate | None:
+        """``J^-1`` (rad/s^2 per N m) with the fit's covariance; None before the fit."""
+        if self.fit is None:
+            return None
+        return RigidGainEstimate(np.array(self.fit.model.gain), self.fit.gain_covariance)
+
+    def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
+        """``x_{k|k}``: the filter's prediction corrected by ``y_k`` (physical units)."""
+        if self._kf is None:
+            return None
+        y = np.asarray(y, dtype=float).reshape(-1)
+        if y.shape != (self.n_outputs,):
+            raise ValueError(f"y must have {self.n_outputs} entries, got shape {y.shape}")
+        with np.errstate(invalid="ignore", over="ignore"):
+            y_n = y / self._sy
+        return self._kf.filtered(self._mats[2], self._r, y_n)
+
+    def __repr__(self) -> str:
+        modes = [] if self.fit is None else [round(float(f), 4) for f in
+                                             np.sort(self.fit.model.frequencies_hz)]
+        return (f"{type(self).__name__}(n_modes={self.n_modes}, fitted={self.fit is not None}, "
+                f"modes_hz={modes}, samples={self.n_samples})")
