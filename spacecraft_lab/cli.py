@@ -36,6 +36,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -642,8 +643,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         done = (f"; wrote what the completed seeds give to {args.out}"
                 if args.command == "control" and (Path(args.out) / "table.md").exists()
                 else "")
-        parser.exit(130, f"spacecraft {args.command}: interrupted{done}\n")
+        message = f"spacecraft {args.command}: interrupted{done}\n"
+        if _threads_left():
+            # once its workers are stopped, a process pool's own thread can stay blocked
+            # (most likely on a result a worker was stopped while writing), and a normal
+            # exit joins it: 1 interrupt in 8 hung for good (tests/test_reliability.py,
+            # d12). Leave at once, the line written and the streams flushed
+            sys.stdout.flush()
+            sys.stderr.write(message)
+            sys.stderr.flush()
+            os._exit(130)
+        parser.exit(130, message)
     return 2   # not reached: parser.exit raises SystemExit
+
+
+def _threads_left() -> bool:
+    """Whether a thread other than the main one (a process pool's) is still running and
+    would be joined at exit."""
+    return any(t.is_alive() and not t.daemon and t is not threading.main_thread()
+               for t in threading.enumerate())
 
 
 if __name__ == "__main__":
