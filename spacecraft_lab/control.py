@@ -102,7 +102,7 @@ PHYSICAL = "adaptive LQG, physical fit"
 CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", SAME_LAW,
                     ORACLE, "full-state oracle")
 #: Every controller the comparison can fly: the default ones and the options.
-ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES[:5], PHYSICAL, *CONTROLLER_NAMES[5:])
+ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL)
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:

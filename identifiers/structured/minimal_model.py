@@ -16,13 +16,9 @@ import numpy as np
 
 from identifiers.structured.change_detection import ChangeEvent
 from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.state_filter import ATTITUDE_STATES, RATE_STATES
 
-__all__ = ["ATTITUDE_STATES", "RATE_STATES", "MinimalModelExport"]
-
-#: States of the exported model that are the attitude (its first three) and
-#: the body rate (the next three); the flexible modes follow.
-ATTITUDE_STATES = slice(0, 3)
-RATE_STATES = slice(3, 6)
+__all__ = ["MinimalModelExport"]
 
 
 class MinimalModelExport:
@@ -145,16 +141,6 @@ class MinimalModelExport:
         self.__dict__["_export_mode_cache"] = (ranks, (res, rank))
         return res, rank
 
-    def _matrices(self) -> tuple[np.ndarray, ...] | None:
-        if self._mats is None:
-            return None
-        a, b, c, d, _ = self._mats
-        gain = self._kf.gain if self._kf.gain is not None else np.zeros((a.shape[0], c.shape[0]))
-        return a, b, c, d, gain
-
-    def _current_state(self) -> np.ndarray | None:
-        return None if self._mats is None else self._kf.x
-
     def input_uncertainty(self) -> np.ndarray | None:
         """Covariance (3, 3) of the rigid gains' torque directions, from the rate
         regression's RLS (larger = less known), for shaping an excitation;
@@ -169,11 +155,6 @@ class MinimalModelExport:
                 scale = self._scale[rate_cols]
                 return rls.P[np.ix_(where, where)] / np.outer(scale, scale)
         return None
-
-    @property
-    def rigid_states(self) -> tuple[slice, slice]:
-        """Slices of the model state that are the attitude and the body rate."""
-        return ATTITUDE_STATES, RATE_STATES
 
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:

@@ -24,12 +24,13 @@ from identifiers.core.online import OnlineIdentifier
 from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
 from identifiers.structured.physical_model import simulate
 from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.state_filter import ModelFilter
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["PhysicalFitIdentifier"]
 
 
-class PhysicalFitIdentifier(OnlineIdentifier):
+class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
     """A physical rigid-flexible model fitted to the warm-up by output error, then held.
 
     Parameters
@@ -108,23 +109,8 @@ class PhysicalFitIdentifier(OnlineIdentifier):
         if self._kf is not None:
             self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
 
-    def _check_sizes(self, r: int, m: int) -> None:
-        if r != 3:
-            raise ValueError(f"u must hold the 3 body torques, got {r} inputs")
-        if m != self.layout.size:
-            raise ValueError(f"y must have {self.layout.size} entries as the layout "
-                             f"{self.layout.names} says, got {m}")
-
     def _allocate(self, r: int, m: int) -> None:
         """Nothing before the fit: the record grows sample by sample."""
-
-    def _output_names(self, m: int) -> tuple[str, ...]:
-        return tuple(f"{name}[{j}]" for name, sl in self.layout
-                     for j in range(sl.stop - sl.start))
-
-    def _process(self, u: np.ndarray, y: np.ndarray) -> None:
-        self._seen = np.isfinite(y)          # a skipped output is not fitted to
-        super()._process(u, y)
 
     # ------------------------------------------------------------ streaming
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
@@ -135,7 +121,7 @@ class PhysicalFitIdentifier(OnlineIdentifier):
             if len(self._record) >= self.warmup:
                 self._fit()
             return
-        a, b, c, _ = self._mats
+        a, b, c, _, _ = self._mats
         self._kf.update(a, b, c, self._q, self._r, u, y)
 
     def _fit(self) -> None:
@@ -153,7 +139,7 @@ class PhysicalFitIdentifier(OnlineIdentifier):
             return                    # keep recording; the next sample tries again
         self.fit = fit
         self._record = []
-        self._mats = (a, b, c, np.zeros((c.shape[0], 3)))
+        self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
         # the filter's noise: the fit's residual per output, and unmodelled torque
         attitude, rate, q = simulate(fit.model, u * su, self.dt, fit.initial_state)
         fitted = np.zeros_like(y)
@@ -168,28 +154,6 @@ class PhysicalFitIdentifier(OnlineIdentifier):
         for uk, yk in zip(u, y, strict=True):
             self._kf.update(a, b, c, self._q, self._r, uk, yk)
 
-    # ------------------------------------------------------------ the estimator's state
-    def _state_vector(self) -> np.ndarray | None:
-        return None if self._kf is None else self._kf.x
-
-    def _after_rollback(self) -> None:
-        if self._kf is not None:              # the restored state is up to 10 s old
-            self._kf.inflate(np.diag(np.abs(np.diag(self._kf.P))) + 1e-3 * np.eye(self.n))
-
-    def _fill_output(self) -> np.ndarray:
-        if self._kf is None:
-            return np.zeros(self.n_outputs)
-        return self._mats[2] @ self._kf.x
-
-    def _matrices(self) -> tuple[np.ndarray, ...] | None:
-        if self._mats is None:
-            return None
-        gain = self._kf.gain if self._kf.gain is not None else np.zeros((self.n, self.n_outputs))
-        return (*self._mats, gain)
-
-    def _current_state(self) -> np.ndarray | None:
-        return None if self._kf is None else self._kf.x
-
     # ------------------------------------------------------------ results
     @property
     def ready(self) -> bool:
@@ -197,27 +161,11 @@ class PhysicalFitIdentifier(OnlineIdentifier):
         return self.fit is not None and super().ready
 
     @property
-    def rigid_states(self) -> tuple[slice, slice]:
-        """Slices of the model state that are the attitude and the body rate."""
-        return slice(0, 3), slice(3, 6)
-
-    @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """``J^-1`` (rad/s^2 per N m) with the fit's covariance; None before the fit."""
         if self.fit is None:
             return None
         return RigidGainEstimate(np.array(self.fit.model.gain), self.fit.gain_covariance)
-
-    def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
-        """``x_{k|k}``: the filter's prediction corrected by ``y_k`` (physical units)."""
-        if self._kf is None:
-            return None
-        y = np.asarray(y, dtype=float).reshape(-1)
-        if y.shape != (self.n_outputs,):
-            raise ValueError(f"y must have {self.n_outputs} entries, got shape {y.shape}")
-        with np.errstate(invalid="ignore", over="ignore"):
-            y_n = y / self._sy
-        return self._kf.filtered(self._mats[2], self._r, y_n)
 
     def __repr__(self) -> str:
         modes = [] if self.fit is None else [round(float(f), 4) for f in

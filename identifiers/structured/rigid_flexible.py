@@ -309,20 +309,9 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         self._hp_dfree = HighPass(4 * n_res, self.highpass)
         self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
 
-    def _check_sizes(self, r: int, m: int) -> None:
-        if r != 3:
-            raise ValueError(f"u must hold the 3 body torques, got {r} inputs")
-        if m != self.layout.size:
-            raise ValueError(f"y must have {self.layout.size} entries as the layout "
-                             f"{self.layout.names} says, got {m}")
-
     def _memory(self) -> float:
         # the modal tracker forgets; the rigid gains do not (without rigid_drift)
         return 1.0 / (1.0 - self.tracking_memory) if self.track_modes else np.inf
-
-    def _output_names(self, m: int) -> tuple[str, ...]:
-        return tuple(f"{name}[{j}]" for name, sl in self.layout
-                     for j in range(sl.stop - sl.start))
 
     def _allocate(self, r: int, m: int) -> None:
         s = self.layout.scales() if self._user_scales[1] is None else self._user_scales[1]
