@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controllers.acceptance import GainAcceptance, input_disk_margin
-from controllers.base import Controller
+from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
@@ -237,7 +237,7 @@ class AdaptiveLQG(_LQGController):
         self._margin_due = 0
         self._rigid_maps: tuple | None = None
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
-        self._sample: tuple[np.ndarray | None, np.ndarray] | None = None
+        self._sample: tuple[np.ndarray | None, np.ndarray, float | None] | None = None
         self._uncertainty = float("inf")
         self._flying = False
         self._flying_gain: np.ndarray | None = None
@@ -336,9 +336,11 @@ class AdaptiveLQG(_LQGController):
         sequence of operations as at the end of step k-1."""
         if self._sample is None:
             return
-        (x, y), self._sample = self._sample, None
+        (x, y, schedule), self._sample = self._sample, None
         torque = self._applied_torque(info)
         self._remember(x, y, torque)
+        if schedule is not None and hasattr(self.identifier, "set_schedule"):
+            self.identifier.set_schedule(schedule)
         # a non-finite measurement goes to the identifier too: it skips and counts it
         # and keeps its past window aligned in time
         self.identifier.update(torque, y)
@@ -526,5 +528,8 @@ class AdaptiveLQG(_LQGController):
             self.fallback.applied_action = action
         self.stats["excitation_rms_Nm"] = self.excitation.rms
         self._k += 1
-        self._sample = (x, y)          # to the identifier once the applied torque is known
+        # to the identifier once the applied torque is known, with the drive angle
+        # of this sample for an identifier scheduled on it
+        schedule = None if info is None else info.get(PADDLE_ANGLE)
+        self._sample = (x, y, None if schedule is None else float(schedule))
         return action

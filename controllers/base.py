@@ -16,7 +16,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Controller", "PolicyController", "episode_seed"]
+__all__ = ["PADDLE_ANGLE", "Controller", "PolicyController", "episode_seed"]
+
+#: The env's ``info`` key of the paddle drive's encoder (rad): what a scheduled
+#: design or a scheduled identifier reads.
+PADDLE_ANGLE = "paddle_angle"
 
 
 def episode_seed(first_observation: np.ndarray) -> int:

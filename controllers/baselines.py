@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.signal import iirnotch
 
-from controllers.base import Controller
+from controllers.base import PADDLE_ANGLE, Controller
 from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
 from controllers.riccati import RiccatiTracker
 from identifiers import KalmanPredictor, RigidGainEstimate, StateSpaceModel, steady_state_gain
@@ -367,9 +367,9 @@ class ScheduledLQG(_LQGController):
         self.reset()
 
     def _design(self, info: dict[str, Any] | None) -> tuple[np.ndarray, ...]:
-        if info is None or "paddle_angle" not in info:
-            raise ValueError("ScheduledLQG needs the env's info dict with 'paddle_angle'")
-        angle = float(info["paddle_angle"]) % (2 * np.pi)
+        if info is None or PADDLE_ANGLE not in info:
+            raise ValueError(f"ScheduledLQG needs the env's info dict with {PADDLE_ANGLE!r}")
+        angle = float(info[PADDLE_ANGLE]) % (2 * np.pi)
         gap = np.abs((self.angles - angle + np.pi) % (2 * np.pi) - np.pi)
         return self.designs[int(np.argmin(gap))]
 

@@ -12,6 +12,10 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
   definite inverse inertia, passive collocated modes) fitted once to the
   warm-up by output error and held; for a plant that does not change much
   after its warm-up.
+* :class:`ScheduledPhysicalIdentifier`: hub plus one mode per appendage,
+  the turning appendages' couplings and inertia following a drive angle
+  (``set_schedule``), fitted once to the warm-up by output error; for a
+  spacecraft whose paddles turn.
 * :class:`ImprovedRPBSID`: the paper's improved recursive PBSID (affine
   projection sign state update), for reproduction.
 * :class:`MomentRefitRPBSID`: recursive VARX plus batch-equivalent refits of
@@ -70,6 +74,9 @@ from identifiers.structured.physical_identifier import PhysicalFitIdentifier
 from identifiers.structured.physical_model import PhysicalModel
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.scheduled_fit import ScheduledFit, fit_scheduled_model
+from identifiers.structured.scheduled_identifier import ScheduledPhysicalIdentifier
+from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 from identifiers.subspace.batch import PBSIDResult, pbsid
 from identifiers.subspace.classical import ClassicalRPBSID
 from identifiers.subspace.improved import ImprovedRPBSID
@@ -111,6 +118,9 @@ __all__ = [
     "Resonator",
     "RigidFlexibleIdentifier",
     "RigidGainEstimate",
+    "ScheduledFit",
+    "ScheduledPhysicalIdentifier",
+    "ScheduledPhysicalModel",
     "StateSpaceModel",
     "SystemRLSIdentifier",
     "WindowedPBSID",
@@ -119,6 +129,7 @@ __all__ = [
     "default_identifier",
     "discover_resonators",
     "fit_physical_model",
+    "fit_scheduled_model",
     "h_step_predictions",
     "identification_inputs",
     "merge_resonators",

@@ -56,6 +56,7 @@ from spacecraft_env.scenarios import (
 )
 
 __all__ = [
+    "DRIVE_AXIS",
     "FlexibleSpacecraftModel",
     "StateSpaceMatrices",
     "rotation_pitch",
@@ -104,8 +105,13 @@ def skew(r: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
+#: The paddle drive's axis in the body frame: the pitch (y) axis.
+DRIVE_AXIS = (0.0, 1.0, 0.0)
+
+
 def rotation_pitch(theta: float) -> np.ndarray:
-    """Paddle rotation ``T_s(theta)`` of Appendix A: body frame -> paddle frame.
+    """Paddle rotation ``T_s(theta)`` of Appendix A: body frame -> paddle frame, by
+    ``theta`` about :data:`DRIVE_AXIS`.
 
     The paddle's inertia in the body frame is ``T^T J_s T`` and a paddle-fixed
     direction ``d0`` appears in the body frame as ``T^T d0``. With this
@@ -316,6 +322,11 @@ class FlexibleSpacecraftModel:
         self.D.flags.writeable = False
         self.n_outputs = self.C.shape[0]
         self.output_labels = tuple(lab for g in self.outputs for lab in labels[g])
+        #: The appendage of each deflection channel, and whether the paddle drive
+        #: (about :data:`DRIVE_AXIS`) turns each appendage.
+        self.sensor_appendage = tuple(i for i, a in enumerate(p.appendages)
+                                      for _ in a.sensor_positions)
+        self.appendage_turns = tuple(bool(a.rotates) for a in p.appendages)
 
     # --------------------------------------------------------- configuration
     def configuration(self, t: float) -> Configuration:

@@ -40,9 +40,10 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
-from identifiers import PhysicalFitIdentifier
+from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
+    DRIVE_AXIS,
     ENV_IDS,
     SCENARIOS,
     ConstantScenario,
@@ -57,8 +58,8 @@ from spacecraft_lab.reporting import control_table
 from spacecraft_lab.sweeps.backends import check_workers
 
 __all__ = ["ALL_CONTROLLER_NAMES", "CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE",
-           "PHYSICAL", "SAME_LAW", "SCENARIO_NAMES", "control_task", "env_kwargs_for",
-           "run_control"]
+           "PHYSICAL", "SAME_LAW", "SCENARIO_NAMES", "SCHEDULED_PHYSICAL", "control_task",
+           "env_kwargs_for", "run_control", "scheduled_physical_identifier"]
 
 #: Scenarios with a registered environment id.
 SCENARIO_NAMES = tuple(ENV_IDS.values())
@@ -84,6 +85,8 @@ def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
         layout = env.unwrapped.observation_layout.sensors()
         return AdaptiveLQG(env, weights=weights, identifier=PhysicalFitIdentifier(
             layout, dt=env.unwrapped.model.dt))
+    if name == SCHEDULED_PHYSICAL:
+        return AdaptiveLQG(env, weights=weights, identifier=scheduled_physical_identifier(env))
     if name == SAME_LAW:
         return AdaptiveLQG(env, weights=weights, identifier=TrueModelIdentifier(env),
                            excitation=BinaryExcitation(0.0, 0.0))
@@ -98,11 +101,27 @@ def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
 #: (:class:`identifiers.PhysicalFitIdentifier`): not in the default comparison (it
 #: does not follow turning paddles; docs/results/control.md).
 PHYSICAL = "adaptive LQG, physical fit"
+#: The adaptive law on the hub-plus-appendage model fitted to its warm-up, its
+#: paddle couplings and inertia turned with the drive's encoder
+#: (:class:`identifiers.ScheduledPhysicalIdentifier`).
+SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
+
+
+def scheduled_physical_identifier(env: gym.Env) -> ScheduledPhysicalIdentifier:
+    """:class:`~identifiers.ScheduledPhysicalIdentifier` for ``env``: its sensors, its
+    appendages (which the paddle drive turns, which sensor sits on which) and
+    its drive axis, all read from the env's model."""
+    model = env.unwrapped.model
+    return ScheduledPhysicalIdentifier(
+        env.unwrapped.observation_layout.sensors(), turning=model.appendage_turns,
+        sensor_appendage=model.sensor_appendage, drive_axis=DRIVE_AXIS, dt=model.dt)
+
+
 #: The controllers of the default comparison, in their table order.
 CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", SAME_LAW,
                     ORACLE, "full-state oracle")
 #: Every controller the comparison can fly: the default ones and the options.
-ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL)
+ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL)
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
@@ -115,7 +134,8 @@ def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
 CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
-                   "adaptive-lqg-physical": PHYSICAL, "same-law-oracle": SAME_LAW,
+                   "adaptive-lqg-physical": PHYSICAL,
+                   "adaptive-lqg-scheduled": SCHEDULED_PHYSICAL, "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle"}
 
 

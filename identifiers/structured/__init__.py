@@ -18,7 +18,12 @@ module:
 is the other structure-aware identifier: a :class:`PhysicalModel`
 (:mod:`~identifiers.structured.physical_model`: symmetric positive definite
 ``J^-1``, passive collocated modes) fitted once to the warm-up by output
-error (:mod:`~identifiers.structured.physical_fit`) and then held.
+error (:mod:`~identifiers.structured.physical_fit`) and then held;
+:class:`ScheduledPhysicalIdentifier` (:mod:`~identifiers.structured.scheduled_identifier`)
+fits the hub-plus-appendage :class:`ScheduledPhysicalModel`
+(:mod:`~identifiers.structured.scheduled_model`, fitted by
+:mod:`~identifiers.structured.scheduled_fit`) whose turning appendages follow
+a drive angle.
 
 Imports :mod:`identifiers.core` and :mod:`identifiers.subspace` (the mode
 search runs a batch PBSID), never the reverse.
@@ -32,6 +37,9 @@ from identifiers.structured.physical_identifier import PhysicalFitIdentifier
 from identifiers.structured.physical_model import PhysicalModel
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.scheduled_fit import ScheduledFit, fit_scheduled_model
+from identifiers.structured.scheduled_identifier import ScheduledPhysicalIdentifier
+from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 
 __all__ = [
     "ChangeEvent",
@@ -44,7 +52,11 @@ __all__ = [
     "Resonator",
     "RigidFlexibleIdentifier",
     "RigidGainEstimate",
+    "ScheduledFit",
+    "ScheduledPhysicalIdentifier",
+    "ScheduledPhysicalModel",
     "discover_resonators",
     "fit_physical_model",
+    "fit_scheduled_model",
     "merge_resonators",
 ]

@@ -480,3 +480,32 @@ def test_the_oracles_and_the_gain_error_know_the_familys_actuator_efficiency():
     np.testing.assert_allclose(oracle._pending[1], a * base.model.discrete(0.0).B,
                                rtol=1e-12)
     assert FlexibleSpacecraftEnv("constant").actuator_gain == 1.0
+
+
+def test_a_scheduled_identifier_gets_each_samples_drive_angle():
+    """AdaptiveLQG hands a scheduled identifier the encoder reading taken with each
+    sample (``info["paddle_angle"]`` of the step that produced it), not the newer one."""
+    from identifiers import ScheduledPhysicalIdentifier
+    from spacecraft_env import DRIVE_AXIS
+
+    env = FlexibleSpacecraftEnv("paddle_rotation")
+    model = env.model
+    ident = ScheduledPhysicalIdentifier(env.observation_layout.sensors(),
+                                        turning=model.appendage_turns,
+                                        sensor_appendage=model.sensor_appendage,
+                                        drive_axis=DRIVE_AXIS, warmup=1000)
+    ctrl = AdaptiveLQG(env, identifier=ident)
+    obs, info = env.reset(seed=0)
+    ctrl.reset(0)
+    angles = []
+    for _ in range(30):
+        angles.append(info["paddle_angle"])
+        obs, _, _, _, info = env.step(ctrl.act(obs, info))
+    recorded = [sample[2] for sample in ident._record]
+    np.testing.assert_array_equal(recorded, angles[:-1])
+    assert np.ptp(recorded) > 0                      # the paddles turned meanwhile
+    # the identifier's rotation about DRIVE_AXIS is the env's paddle rotation
+    from identifiers.structured.scheduled_model import drive_rotation
+    from spacecraft_env.dynamics import rotation_pitch
+
+    np.testing.assert_allclose(drive_rotation(DRIVE_AXIS, 1.3), rotation_pitch(1.3), atol=1e-15)

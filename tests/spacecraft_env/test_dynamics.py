@@ -325,3 +325,21 @@ def test_scenario_paddle_angle_is_the_configurations(name):
     scenario = SCENARIOS[name]().randomized(rng)
     for t in (0.0, 0.1, 37.3, 150.0, 249.9):
         assert scenario.paddle_angle(t) == scenario.configuration(t).paddle_angle
+
+
+def test_the_drive_axis_and_the_appendage_map_describe_the_model():
+    """``DRIVE_AXIS`` is the axis ``rotation_pitch`` turns about; ``sensor_appendage``
+    and ``appendage_turns`` follow the parameters (what a scheduled identifier reads)."""
+    from spacecraft_env import DRIVE_AXIS, FlexibleSpacecraftModel, ets8_parameters
+    from spacecraft_env.dynamics import rotation_pitch
+
+    for angle in (0.3, 1.7, -2.0):
+        r = rotation_pitch(angle)
+        np.testing.assert_allclose(r @ DRIVE_AXIS, DRIVE_AXIS, atol=1e-15)
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-15)
+        assert np.trace(r) == pytest.approx(1 + 2 * np.cos(angle))
+    params = ets8_parameters(sensor_positions=(0.5, 1.0))
+    model = FlexibleSpacecraftModel(params)
+    assert model.sensor_appendage == (0, 0, 1, 1, 2, 2, 3, 3)
+    assert model.appendage_turns == tuple(a.rotates for a in params.appendages)
+    assert sum(model.appendage_turns) == 2

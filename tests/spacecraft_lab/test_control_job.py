@@ -9,7 +9,13 @@ import pytest
 
 from spacecraft_env import DockingScenario
 from spacecraft_lab.cli import build_parser, main
-from spacecraft_lab.control import CONTROLLER_NAMES, PHYSICAL, SCENARIO_NAMES, env_kwargs_for
+from spacecraft_lab.control import (
+    CONTROLLER_NAMES,
+    PHYSICAL,
+    SCENARIO_NAMES,
+    SCHEDULED_PHYSICAL,
+    env_kwargs_for,
+)
 
 
 def test_capture_and_mass_centre_options_build_the_docking_scenario():
@@ -56,3 +62,12 @@ def test_the_physical_fit_option_flies_and_stays_out_of_the_default_comparison(t
           "--out", str(tmp_path / "physical")])
     table = json.loads((tmp_path / "physical" / "metrics.json").read_text())
     assert PHYSICAL in json.dumps(table)
+
+
+def test_the_scheduled_physical_option_flies_on_turning_paddles(tmp_path):
+    assert SCHEDULED_PHYSICAL not in CONTROLLER_NAMES
+    main(["control", "--scenario", "paddle_rotation", "--seeds", "1", "--steps", "400",
+          "--controllers", "adaptive-lqg-scheduled", "--workers", "1",
+          "--out", str(tmp_path / "scheduled")])
+    table = json.loads((tmp_path / "scheduled" / "metrics.json").read_text())
+    assert SCHEDULED_PHYSICAL in json.dumps(table)

@@ -1,0 +1,326 @@
+"""Fitting a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
+to a record of torques, outputs and drive angles by output error.
+
+Two stages. An equation-error start: each appendage's mode and coupling from a
+linear regression of its deflection's second derivative, then the inertia and
+couplings from the hub's torque balance, all on signals passed through a
+state-variable filter ``1 / (tau s + 1)^3`` (several ``tau``; the best fit
+kept). Then every parameter, the initial state included, by bounded nonlinear
+least squares on the weighted simulation error, the model re-discretized at the
+measured angle every few samples; the tip gains are solved linearly inside
+every evaluation (variable projection). Output error needs nothing but the
+torques that acted, so closed-loop data do not bias it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+from numpy.typing import ArrayLike
+from scipy.optimize import least_squares
+
+from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
+from identifiers.structured.scheduled_model import ScheduledPhysicalModel, drive_rotation
+from spacecraft_conventions import OutputLayout, single_threaded_blas
+
+__all__ = ["ScheduledFit", "fit_scheduled_model", "simulate_scheduled"]
+
+#: Scales of the fitted parameters (they only condition the problem): inertia
+#: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state.
+_INERTIA, _COUPLING, _ANISOTROPY, _STATE = 2e4, 30.0, 1e3, 1e-3
+#: Samples per re-discretization of the simulated model on a turning drive.
+SEGMENT = 5
+
+
+@dataclass(frozen=True)
+class ScheduledFit:
+    """What :func:`fit_scheduled_model` returns.
+
+    Attributes
+    ----------
+    model : ScheduledPhysicalModel
+    initial_state : (6 + 2 N,) ndarray
+        The fitted state at the record's first sample.
+    gain_covariance : (9, 9) ndarray
+        Covariance of ``model.gain(reference_angle)``'s row-major entries,
+        (rad/s^2 per N m)^2, from the least-squares Jacobian and the residual
+        variance (white residuals assumed).
+    cost : float
+        Weighted mean square error per output sample (1 at the noise level
+        the weights assume).
+    """
+
+    model: ScheduledPhysicalModel
+    initial_state: np.ndarray
+    gain_covariance: np.ndarray
+    cost: float
+
+
+def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.ndarray,
+                       dt: float, x0: np.ndarray, segment: int = SEGMENT) -> np.ndarray:
+    """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
+    discretized at each ``segment``-sample block's middle angle (once if the
+    angle never moves)."""
+    steps = u.shape[0]
+    states = np.empty((steps, model.order))
+    x = np.asarray(x0, dtype=float).copy()
+    fixed = bool(np.ptp(angle) == 0.0) if steps else True
+    ad = bd = None
+    block = max(steps, 1) if fixed else segment
+    for s0 in range(0, steps, block):
+        s1 = min(steps, s0 + block)
+        ad, bd = model.zoh(0.5 * (angle[s0] + angle[s1 - 1]), dt)
+        forced = u[s0:s1] @ bd.T
+        for t in range(s0, s1):
+            states[t] = x
+            x = ad @ x + forced[t - s0]
+    return states
+
+
+class _Problem:
+    """The weighted simulation error as a function of ``[tril(log-diagonal Cholesky of
+    S / _INERTIA)] (6); P / _ANISOTROPY (2); log w (N); log zeta (N); v / _COUPLING
+    (3 N); x0 / _STATE (6 + 2 N)]``."""
+
+    def __init__(self, u, y, angle, dt, layout, weights, turning, sensors, axis) -> None:
+        self.u, self.angle, self.dt, self.layout = u, angle, dt, layout
+        self.good = np.all(np.isfinite(y), axis=1)
+        self.y = y[self.good]
+        self.w = weights
+        self.att, self.rate = layout.indices("attitude"), layout.indices("rate")
+        self.defl = layout.indices("deflection") if "deflection" in layout.names \
+            else np.zeros(0, dtype=int)
+        self.turning, self.sensors, self.axis = turning, sensors, axis
+        self.n = turning.size
+        self.reference = float(angle[-1])
+
+    def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
+               ) -> tuple[ScheduledPhysicalModel, np.ndarray]:
+        n = self.n
+        lower = np.zeros((3, 3))
+        lower[np.tril_indices(3)] = p[:6]
+        lower[np.diag_indices(3)] = np.exp(lower[np.diag_indices(3)])
+        model = ScheduledPhysicalModel(
+            _INERTIA * lower @ lower.T, _ANISOTROPY * p[6:8], np.exp(p[8:8 + n]) / (2 * np.pi),
+            np.exp(p[8 + n:8 + 2 * n]), _COUPLING * p[8 + 2 * n:8 + 5 * n].reshape(n, 3),
+            self.turning, np.zeros(self.sensors.size) if tips is None else tips, self.sensors,
+            self.axis, self.reference)
+        return model, _STATE * p[8 + 5 * n:]
+
+    def pack(self, rest, anisotropy, w, zeta, couplings, x0) -> np.ndarray:
+        lower = np.linalg.cholesky(rest / _INERTIA)
+        lower[np.diag_indices(3)] = np.log(lower[np.diag_indices(3)])
+        return np.concatenate([lower[np.tril_indices(3)], np.asarray(anisotropy) / _ANISOTROPY,
+                               np.log(w), np.log(zeta), np.ravel(couplings) / _COUPLING,
+                               np.asarray(x0) / _STATE])
+
+    def evaluate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(weighted residuals, tip gains); residuals of 1e6 where the model breaks."""
+        try:
+            model, x0 = self.unpack(p)
+            x = simulate_scheduled(model, self.u, self.angle, self.dt, x0)[self.good]
+        except (np.linalg.LinAlgError, ValueError):
+            x = None
+        if x is None or not np.all(np.isfinite(x)):
+            return np.full(int(self.good.sum()) * self.layout.size, 1e6), np.zeros(
+                self.sensors.size)
+        y, w = self.y, self.w
+        parts = [((y[:, self.att] - x[:, 0:3]) * w[self.att]).ravel(),
+                 ((y[:, self.rate] - x[:, 3:6]) * w[self.rate]).ravel()]
+        tips = np.zeros(self.sensors.size)
+        for i, (row, k) in enumerate(zip(self.defl, self.sensors, strict=True)):
+            eta = x[:, 6 + k]
+            tips[i] = (eta @ y[:, row]) / max(eta @ eta, 1e-30)
+            parts.append((y[:, row] - tips[i] * eta) * w[row])
+        return np.concatenate(parts), tips
+
+    def bounds(self, size: int) -> tuple[np.ndarray, np.ndarray]:
+        n = self.n
+        lo, hi = np.full(size, -np.inf), np.full(size, np.inf)
+        lo[:6], hi[:6] = -6.0, 6.0
+        lo[8:8 + n], hi[8:8 + n] = np.log(2 * np.pi * np.array(FREQUENCY_BOUNDS_HZ))
+        lo[8 + n:8 + 2 * n], hi[8 + n:8 + 2 * n] = np.log(DAMPING_BOUNDS)
+        return lo, hi
+
+    def solve(self, p0: np.ndarray, max_nfev: int):
+        lo, hi = self.bounds(p0.size)
+        p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
+        return least_squares(lambda p: self.evaluate(p)[0], p0, method="trf", x_scale="jac",
+                             bounds=(lo, hi), max_nfev=max_nfev)
+
+    # ------------------------------------------------------------ the start
+    def _filtered(self, x: np.ndarray, tau: float, order: int) -> np.ndarray:
+        """``s^order / (tau s + 1)^3`` applied to each column of ``x``."""
+        den = np.poly1d([tau, 1.0]) ** 3
+        num = np.zeros(order + 1)
+        num[0] = 1.0
+        system = scipy.signal.cont2discrete((num, den.coeffs), self.dt, method="bilinear")
+        b, a = np.ravel(system[0]), np.ravel(system[1])
+        return scipy.signal.lfilter(b, a, x, axis=0)
+
+    def start(self, y: np.ndarray, tau: float) -> np.ndarray:
+        """Equation-error parameters (see the module docstring) at filter constant tau."""
+        n, rot = self.n, self.turning
+        y = np.where(np.isfinite(y), y, 0.0)
+        first = [int(np.flatnonzero(self.sensors == k)[0]) for k in range(n)]
+        rows = self.defl[first]
+        r = np.stack([drive_rotation(self.axis, a) for a in self.angle])       # (T, 3, 3)
+        om1 = self._filtered(y[:, self.rate], tau, 1)
+        d0, d1, d2 = (self._filtered(y[:, rows], tau, o) for o in (0, 1, 2))
+        uf = self._filtered(self.u, tau, 0)
+        keep = slice(int(6 * tau / self.dt), None)
+        turned = np.einsum("tij,tj->ti", r, om1)
+        w, zeta, g = np.empty(n), np.empty(n), np.empty((n, 3))
+        for k in range(n):
+            reg = np.column_stack([d0[:, k], d1[:, k], turned if rot[k] else om1])[keep]
+            th = np.linalg.lstsq(reg, -d2[keep, k], rcond=None)[0]
+            w[k] = np.sqrt(max(th[0], (2 * np.pi * FREQUENCY_BOUNDS_HZ[0]) ** 2))
+            zeta[k] = np.clip(th[1] / (2 * w[k]), *DAMPING_BOUNDS)
+            g[k] = th[2:]
+        # hub: u = J omega' + sum_k F_k(a) eta_k'' with F_k(a) eta_k = R(a)^T c_k y_k
+        sym = [np.outer(e, f) + np.outer(f, e) - (np.outer(e, e) if i == j else 0.0)
+               for i, e in enumerate(np.eye(3)) for j, f in enumerate(np.eye(3)) if j >= i]
+        cols = [om1 @ s.T for s in sym]
+        for k in range(n):
+            for e in np.eye(3):
+                along = np.einsum("tji,j->ti", r, e) if rot[k] else np.tile(e, (len(y), 1))
+                cols.append(along * d2[:, k:k + 1])
+        design = np.stack([c[keep].ravel() for c in cols], axis=1)
+        th = np.linalg.lstsq(design, uf[keep].ravel(), rcond=None)[0]
+        inertia = sum(t * s for t, s in zip(th[:6], sym, strict=True))
+        couplings = np.empty((n, 3))
+        for k in range(n):
+            c = th[6 + 3 * k:9 + 3 * k]
+            tip = np.sqrt(max(abs(g[k] @ c) / max(c @ c, 1e-30), 1e-12))
+            couplings[k] = np.sign(g[k] @ c or 1.0) * g[k] / tip
+        inertia = 0.5 * (inertia + inertia.T)
+        if np.linalg.eigvalsh(inertia).min() <= 0:
+            inertia = np.diag(np.maximum(np.diag(inertia), 1e3))
+        lowest = np.linalg.eigvalsh(inertia).min()
+        for _ in range(40):           # keep S = J - F F^T well inside the SPD cone
+            rest = inertia - couplings.T @ couplings
+            if np.linalg.eigvalsh(rest).min() > 0.3 * lowest:
+                break
+            couplings *= 0.8
+        x0 = np.zeros(6 + 2 * n)
+        if np.all(np.isfinite(self.y[0])) and self.good[0]:
+            x0[0:3], x0[3:6] = self.y[0, self.att], self.y[0, self.rate]
+        return self.pack(rest, np.zeros(2), w, zeta, couplings, x0)
+
+
+@single_threaded_blas
+def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
+                        layout: OutputLayout, turning: Sequence[bool], *,
+                        sensor_appendage: Sequence[int] | None = None,
+                        drive_axis: ArrayLike = (0.0, 1.0, 0.0),
+                        weights: ArrayLike | None = None,
+                        filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
+                        good_enough: float | None = None,
+                        max_nfev: int = 150) -> ScheduledFit:
+    """Fit a :class:`ScheduledPhysicalModel` to a record by output error.
+
+    Parameters
+    ----------
+    u : (T, 3) array_like
+        Applied torques, N m (what acted).
+    y : (T, m) array_like
+        Outputs in the order of ``layout`` (rad, rad/s, m); rows with a
+        non-finite entry are left out of the error.
+    angle : (T,) array_like
+        The drive angle at each sample, rad (the drive's encoder).
+    dt : float
+        Sample time, s.
+    layout : OutputLayout
+        Attitude, rate and deflection groups, all required.
+    turning : sequence of bool
+        One flag per appendage (one mode each): whether the drive carries it.
+    sensor_appendage : sequence of int, optional
+        The appendage of each deflection sensor (default: sensor i on appendage
+        i); every appendage needs a sensor.
+    drive_axis : (3,) array_like
+        The drive's axis in the body frame (normalized here).
+    weights : (m,) array_like, optional
+        Weight of each output's error (default one over the layout's nominal
+        levels, i.e. one over the noise when every channel has the same SNR).
+    filter_constants : sequence of float
+        The equation-error starts' filter constants, s, tried in turn (a start
+        whose regression fails is passed over).
+    good_enough : float, optional
+        Stop trying starts once the fit's weighted mean square error per
+        output sample (:attr:`ScheduledFit.cost`) is below this; default: keep
+        the first usable start (0 tries them all and keeps the best).
+    max_nfev : int
+        Function evaluations of each least-squares refinement.
+
+    Returns
+    -------
+    ScheduledFit
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match, a layout without the three groups, an
+        appendage without a sensor, non-finite torques or angles.
+    """
+    u, y, angle = (np.asarray(v, dtype=float) for v in (u, y, angle))
+    if u.ndim != 2 or u.shape[1] != 3 or y.shape != (u.shape[0], layout.size) \
+            or angle.shape != (u.shape[0],):
+        raise ValueError(f"u, y and angle must have shapes (T, 3), (T, {layout.size}) and "
+                         f"(T,), got {u.shape}, {y.shape} and {angle.shape}")
+    if set(layout.names) != {"attitude", "rate", "deflection"}:
+        raise ValueError(f"the layout must hold attitude, rate and deflection, "
+                         f"got {layout.names}")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(angle))):
+        raise ValueError("u and angle must be finite (the torques that acted, the encoder)")
+    turning = np.asarray(turning, dtype=bool).reshape(-1)
+    n_tip = layout.indices("deflection").size
+    sensors = np.arange(n_tip) if sensor_appendage is None else \
+        np.asarray(sensor_appendage, dtype=int).reshape(-1)
+    if sensors.shape != (n_tip,) or set(sensors.tolist()) != set(range(turning.size)):
+        raise ValueError(f"sensor_appendage must give each of the {n_tip} deflection sensors "
+                         f"an appendage in [0, {turning.size}), each appendage at least one "
+                         f"sensor; got {sensors.tolist()}")
+    axis = np.asarray(drive_axis, dtype=float).reshape(3)
+    if not np.isfinite(axis).all() or np.linalg.norm(axis) == 0:
+        raise ValueError(f"drive_axis must be a finite non-zero 3-vector, got {axis}")
+    axis = axis / np.linalg.norm(axis)
+    w = 1.0 / layout.scales() if weights is None else np.asarray(weights, dtype=float)
+    problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
+    best = None
+    for tau in filter_constants:
+        try:
+            p0 = problem.start(y, float(tau))
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        solution = problem.solve(p0, max_nfev)
+        if best is None or solution.cost < best.cost:
+            best = solution
+        if good_enough is None or 2 * best.cost / best.fun.size < good_enough:
+            break
+    if best is None:
+        raise np.linalg.LinAlgError("no equation-error start was usable on this record")
+    residuals, tips = problem.evaluate(best.x)
+    model, x0 = problem.unpack(best.x, tips)
+    return ScheduledFit(model, x0, _gain_covariance(problem, best.x, best.jac, residuals),
+                        float(np.mean(residuals**2)))
+
+
+def _gain_covariance(problem: _Problem, p: np.ndarray, jac: np.ndarray,
+                     residuals: np.ndarray) -> np.ndarray:
+    """``sigma^2 (J^T J)^-1`` of the parameters mapped through ``dG / dp`` at the
+    reference angle (central differences over the parameters G depends on)."""
+    dof = max(residuals.size - p.size, 1)
+    sigma2 = float(np.sum(residuals**2)) / dof
+    m = 8 + 5 * problem.n                      # inertia, anisotropy, modes, couplings
+    cov = sigma2 * np.linalg.pinv(jac.T @ jac)[:m, :m]
+
+    def gain(q: np.ndarray) -> np.ndarray:
+        return problem.unpack(q)[0].gain(problem.reference).ravel()
+
+    step = 1e-6
+    dgain = np.column_stack([(gain(p + step * e) - gain(p - step * e)) / (2 * step)
+                             for e in np.eye(p.size)[:m]])
+    return dgain @ cov @ dgain.T

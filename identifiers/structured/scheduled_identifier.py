@@ -1,0 +1,230 @@
+"""The drive-scheduled physical model, fitted to the warm-up, as a streaming identifier.
+
+:class:`ScheduledPhysicalIdentifier` records the first ``warmup`` samples with
+the drive angle of each (:meth:`~ScheduledPhysicalIdentifier.set_schedule`),
+fits a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
+to them by output error
+(:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
+then on exports that model evaluated at the latest angle, with a Kalman filter
+on it for the state. The parameters are held after the fit: the drive's
+rotation is followed through the angle, a change of the plant itself (a
+docking) is not (docs/design/control.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identifiers.core.checks import positive_float, positive_int
+from identifiers.core.kalman import KalmanPredictor
+from identifiers.core.online import OnlineIdentifier
+from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.scheduled_fit import (
+    ScheduledFit,
+    fit_scheduled_model,
+    simulate_scheduled,
+)
+from identifiers.structured.state_filter import ModelFilter
+from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
+
+__all__ = ["ScheduledPhysicalIdentifier"]
+
+
+class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
+    """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up.
+
+    Call :meth:`set_schedule` with the drive angle at a sample before the
+    :meth:`update` that carries it (``controllers.AdaptiveLQG`` does, from the
+    env's ``info["paddle_angle"]``). Without it the angle stays at its last
+    value (0 at first): the model of a drive that does not turn.
+
+    Parameters
+    ----------
+    layout : OutputLayout
+        The measured sensor groups in the order of ``y``: attitude, rate and
+        deflection, all three required (default: the environments' layout).
+    turning : sequence of bool, optional
+        One flag per appendage (one mode each): whether the drive carries it.
+        Default: as many appendages as deflection sensors, none turning. The
+        environments give theirs as ``env.unwrapped.model.appendage_turns``.
+    sensor_appendage : sequence of int, optional
+        The appendage of each deflection sensor (default: sensor i on
+        appendage i; the environments': ``env.unwrapped.model.sensor_appendage``).
+    drive_axis : (3,) array_like
+        The drive's axis in the body frame (default: pitch, the environments'
+        ``spacecraft_env.DRIVE_AXIS``).
+    dt : float
+        Sample time, s.
+    warmup : int
+        Samples recorded before the fit (default 300: the adaptive loop's 30 s).
+    schedule_resolution : float
+        The exported model is re-discretized when the angle has moved this
+        far (rad, default 0.1 deg) since it last was.
+    process_torque : float
+        Unmodelled torque (N m per axis) the state's Kalman filter assumes.
+    input_scale, output_scale, max_abs
+        See :class:`~identifiers.core.online.OnlineIdentifier`.
+
+    Attributes
+    ----------
+    fit : ScheduledFit or None
+        The fit, once the warm-up is over.
+    angle : float
+        The latest drive angle, rad.
+
+    Examples
+    --------
+    >>> from identifiers import ScheduledPhysicalIdentifier
+    >>> ident = ScheduledPhysicalIdentifier(turning=(True, True, False, False))
+    >>> ident.set_schedule(0.5)
+    >>> ident.model is None, ident.angle
+    (True, 0.5)
+    """
+
+    _SHARED_ITEMS = ("_pending", "_record")
+
+    def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *,
+                 turning: Sequence[bool] | None = None,
+                 sensor_appendage: Sequence[int] | None = None,
+                 drive_axis: ArrayLike = (0.0, 1.0, 0.0), dt: float = 0.1,
+                 warmup: int = 300, schedule_resolution: float = np.deg2rad(0.1),
+                 process_torque: float = 0.05, input_scale: ArrayLike | None = None,
+                 output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
+        if not isinstance(layout, OutputLayout):
+            raise TypeError(f"layout must be an OutputLayout, got {type(layout).__name__}")
+        self.layout = layout.sensors()
+        if set(self.layout.names) != {"attitude", "rate", "deflection"}:
+            raise ValueError(f"the scheduled model needs attitude, rate and deflection; "
+                             f"the layout holds {self.layout.names}")
+        n_tip = self.layout.indices("deflection").size
+        self.turning = tuple(bool(t) for t in (turning if turning is not None
+                                               else [False] * n_tip))
+        self.sensor_appendage = tuple(int(k) for k in (sensor_appendage if sensor_appendage
+                                                       is not None else range(n_tip)))
+        if len(self.sensor_appendage) != n_tip or \
+                set(self.sensor_appendage) != set(range(len(self.turning))):
+            raise ValueError(f"sensor_appendage must give each of the {n_tip} deflection "
+                             f"sensors one of the {len(self.turning)} appendages, each "
+                             f"appendage at least one sensor; got {self.sensor_appendage}")
+        axis = np.asarray(drive_axis, dtype=float)
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or not np.any(axis):
+            raise ValueError(f"drive_axis must be a finite non-zero 3-vector, got {drive_axis}")
+        self.drive_axis = tuple(float(v) for v in axis / np.linalg.norm(axis))
+        self.schedule_resolution = positive_float("schedule_resolution", schedule_resolution)
+        self.process_torque = positive_float("process_torque", process_torque)
+        super().__init__(6 + 2 * len(self.turning), 1, 1.0, dt=dt,
+                         warmup=positive_int("warmup", warmup),
+                         input_scale=(np.full(3, NOMINAL_TORQUE) if input_scale is None
+                                      else input_scale),
+                         output_scale=self.layout.scales() if output_scale is None
+                         else output_scale, max_abs=max_abs)
+
+    def reset(self) -> None:
+        super().reset()
+        self.fit: ScheduledFit | None = None
+        self.angle = 0.0
+        self._record: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self._kf: KalmanPredictor | None = None
+        self._mats: tuple[np.ndarray, ...] | None = None
+        self._mats_angle = np.nan
+        self._q = self._r = None
+        self._seen: np.ndarray | None = None
+
+    def restart(self) -> None:
+        """A new record of the same plant: keep the fit, restart the state's filter."""
+        if self._kf is not None:
+            self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
+
+    def set_schedule(self, angle: float) -> None:
+        """The drive angle (rad) at the sample the next :meth:`update` carries; the
+        exported model follows it.
+
+        Raises
+        ------
+        ValueError
+            For a non-finite angle.
+        """
+        angle = float(angle)
+        if not np.isfinite(angle):
+            raise ValueError(f"the drive angle must be finite, got {angle}")
+        self.angle = angle
+
+    def _allocate(self, r: int, m: int) -> None:
+        """Nothing before the fit: the record grows sample by sample."""
+
+    # ------------------------------------------------------------ streaming
+    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
+        y = np.where(seen, y, np.nan)
+        if self.fit is None:
+            self._record.append((u.copy(), y.copy(), self.angle))
+            if len(self._record) >= self.warmup:
+                self._fit()
+            return
+        if abs(self.angle - self._mats_angle) > self.schedule_resolution:
+            self._discretize(self.angle)
+        a, b, c, _, _ = self._mats
+        self._kf.update(a, b, c, self._q, self._r, u, y)
+
+    def _discretize(self, angle: float) -> bool:
+        """Normalized ``(A, B, C)`` of the fitted model at ``angle``; False if not finite."""
+        su, sy = self._su, self._sy
+        model = self.fit.model.discrete(angle, self.dt, self.layout)
+        a, b, c = model.A, model.B * su[None, :], model.C / sy[:, None]
+        if not all(np.isfinite(m).all() for m in (a, b, c)):
+            return False
+        self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
+        self._mats_angle = angle
+        self._q = (self.process_torque / su.mean()) ** 2 * (b @ b.T) + 1e-12 * np.eye(self.n)
+        return True
+
+    def _fit(self) -> None:
+        """Fit the model to the record (physical units), then run the state's filter
+        over the record."""
+        su, sy = self._su, self._sy
+        u = np.array([s[0] for s in self._record]) * su
+        y = np.array([s[1] for s in self._record]) * sy
+        angle = np.array([s[2] for s in self._record])
+        try:
+            fit = fit_scheduled_model(u, y, angle, self.dt, self.layout, self.turning,
+                                      sensor_appendage=self.sensor_appendage,
+                                      drive_axis=self.drive_axis)
+        except np.linalg.LinAlgError:
+            return                       # keep recording; the next sample tries again
+        self.fit = fit
+        if not self._discretize(float(angle[-1])):
+            self.fit = None
+            return
+        states = simulate_scheduled(fit.model, u, angle, self.dt, fit.initial_state)
+        fitted = states @ fit.model.output_matrix(self.layout).T / sy
+        y = y / sy
+        self._r = np.maximum(np.nanmean((y - fitted) ** 2, axis=0), 1e-12)
+        self._record = []
+        self._kf = KalmanPredictor(self.n, initial_covariance=1e-6)
+        self._kf.x = fit.initial_state.copy()
+        a, b, c, _, _ = self._mats
+        for uk, yk in zip(u / su, y, strict=True):
+            self._kf.update(a, b, c, self._q, self._r, uk, yk)
+
+    # ------------------------------------------------------------ results
+    @property
+    def ready(self) -> bool:
+        """True once the model is fitted."""
+        return self.fit is not None and super().ready
+
+    @property
+    def rigid_gain(self) -> RigidGainEstimate | None:
+        """``J(a)^-1`` at the latest angle (rad/s^2 per N m) with the fit's covariance
+        (taken at the fit's last angle); None before the fit."""
+        if self.fit is None:
+            return None
+        return RigidGainEstimate(self.fit.model.gain(self.angle), self.fit.gain_covariance)
+
+    def __repr__(self) -> str:
+        modes = [] if self.fit is None else [round(float(f), 4) for f in
+                                             self.fit.model.frequencies_hz]
+        return (f"{type(self).__name__}(turning={self.turning}, fitted={self.fit is not None}, "
+                f"modes_hz={modes}, angle={self.angle:.4g}, samples={self.n_samples})")

@@ -1,0 +1,235 @@
+"""A flexible spacecraft with a turning drive: hub-plus-appendage model scheduled on
+the drive's angle.
+
+The state is ``x = [theta (3); omega (3); eta (N); eta' (N)]``: the hub's attitude
+and body rate and one cantilever mode per appendage. The mass matrix is that of
+the hybrid (hub + constrained modes) coordinates,
+
+    M(a) = [[J(a), F(a)], [F(a)^T, I]],
+    J(a) omega' + F(a) eta'' = u,
+    F(a)^T omega' + eta'' + 2 Z W eta' + W^2 eta = 0,
+
+where ``a`` is the drive angle (rad), ``F(a)``'s column k is appendage k's
+coupling, turned with the drive for an appendage the drive carries
+(``f_k(a) = R(a)^T v_k``, ``R(a)`` the rotation by ``a`` about the drive axis)
+and constant otherwise, and
+
+    J(a) = S + F(a) F(a)^T + R(a)^T P R(a) - R(a_ref)^T P R(a_ref),
+
+with ``S`` symmetric positive definite and ``P`` the turning appendages'
+inertia anisotropy in the plane of the drive (two numbers). ``M(a)`` is then
+positive definite at the reference angle and the model passive there, as a
+collocated spacecraft is. The outputs are ``attitude = theta``,
+``rate = omega`` and each deflection sensor's ``d_i eta_{k(i)}`` (sensor i on
+appendage k(i)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike
+
+from identifiers.core.model import StateSpaceModel
+from spacecraft_conventions import OutputLayout
+
+__all__ = ["ScheduledPhysicalModel", "drive_rotation", "plane_basis"]
+
+
+def drive_rotation(axis: ArrayLike, angle: float) -> np.ndarray:
+    """``R(a)``: rotation by ``angle`` (rad) about the unit vector ``axis`` (Rodrigues);
+    about the body y axis ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``."""
+    k = np.asarray(axis, dtype=float)
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * (cross @ cross)
+
+
+def plane_basis(axis: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors ``(e1, e2)`` spanning the plane perpendicular to ``axis`` with
+    ``e1 x e2 = axis`` (for the y axis: z and x)."""
+    k = np.asarray(axis, dtype=float)
+    seed = np.eye(3)[int(np.argmin(np.abs(k)))]
+    e1 = np.cross(k, seed)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(k, e1)
+
+
+@dataclass(frozen=True)
+class ScheduledPhysicalModel:
+    """Hub plus one cantilever mode per appendage, scheduled on the drive angle.
+
+    See the module docstring for the equations.
+
+    Parameters
+    ----------
+    rest_inertia : (3, 3) array_like
+        ``S``, kg m^2: the inertia the hub keeps when the modes are free;
+        symmetric positive definite.
+    drive_anisotropy : (2,) array_like
+        ``P = p0 (e1 e1^T - e2 e2^T) + p1 (e1 e2^T + e2 e1^T)`` (kg m^2) in the
+        drive plane's basis ``(e1, e2)`` of :func:`plane_basis`.
+    frequencies_hz, damping : (N,) array_like
+        The cantilever modes' frequencies (Hz) and damping ratios.
+    couplings : (N, 3) array_like
+        ``v_k``, kg^1/2 m: appendage k's coupling, body frame at drive angle 0.
+    turning : (N,) array_like of bool
+        Whether the drive carries appendage k.
+    tips : (n_tip,) array_like
+        ``d_i``: deflection sensor i's reading per unit of its appendage's mode.
+    sensor_appendage : (n_tip,) array_like of int
+        ``k(i)``, the appendage of sensor i.
+    drive_axis : (3,) array_like
+        The drive's unit axis in the body frame.
+    reference_angle : float
+        ``a_ref``, rad: where ``J(a) = S + F F^T``.
+    """
+
+    rest_inertia: np.ndarray
+    drive_anisotropy: np.ndarray
+    frequencies_hz: np.ndarray
+    damping: np.ndarray
+    couplings: np.ndarray
+    turning: np.ndarray
+    tips: np.ndarray
+    sensor_appendage: np.ndarray
+    drive_axis: np.ndarray
+    reference_angle: float = 0.0
+
+    def __post_init__(self) -> None:
+        v = {name: np.array(getattr(self, name), dtype=float) for name in
+             ("rest_inertia", "drive_anisotropy", "frequencies_hz", "damping", "couplings",
+              "tips", "drive_axis")}
+        n = v["frequencies_hz"].reshape(-1).size
+        v["frequencies_hz"] = v["frequencies_hz"].reshape(n)
+        v["tips"] = v["tips"].reshape(-1)
+        turning = np.array(self.turning, dtype=bool).reshape(-1)
+        sensors = np.array(self.sensor_appendage, dtype=int).reshape(-1)
+        for name, shape in (("rest_inertia", (3, 3)), ("drive_anisotropy", (2,)),
+                            ("damping", (n,)), ("couplings", (n, 3)), ("drive_axis", (3,)),
+                            ("tips", sensors.shape)):
+            if v[name].shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {v[name].shape}")
+        if turning.shape != (n,):
+            raise ValueError(f"turning must have one flag per mode ({n}), got {turning.shape}")
+        if sensors.size and (sensors.min() < 0 or sensors.max() >= n):
+            raise ValueError(f"sensor_appendage must be indices in [0, {n}), got {sensors}")
+        if not all(np.all(np.isfinite(x)) for x in v.values()) or \
+                not np.isfinite(self.reference_angle):
+            raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
+        s = v["rest_inertia"]
+        if not np.allclose(s, s.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(s).min() <= 0:
+            raise ValueError("rest_inertia must be symmetric positive definite")
+        if abs(np.linalg.norm(v["drive_axis"]) - 1.0) > 1e-9:
+            raise ValueError(f"drive_axis must be a unit vector, got {v['drive_axis']}")
+        if np.any(v["frequencies_hz"] <= 0) or np.any(v["damping"] < 0):
+            raise ValueError("frequencies_hz must be > 0 and damping >= 0")
+        v["turning"], v["sensor_appendage"] = turning, sensors
+        for name, value in v.items():
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "reference_angle", float(self.reference_angle))
+
+    @property
+    def n_modes(self) -> int:
+        """N, the number of appendage modes."""
+        return int(self.frequencies_hz.size)
+
+    @property
+    def order(self) -> int:
+        """The state dimension, ``6 + 2 N``."""
+        return 6 + 2 * self.n_modes
+
+    def anisotropy_matrix(self) -> np.ndarray:
+        """``P`` (3, 3), kg m^2."""
+        e1, e2 = plane_basis(self.drive_axis)
+        p0, p1 = self.drive_anisotropy
+        return p0 * (np.outer(e1, e1) - np.outer(e2, e2)) + p1 * (np.outer(e1, e2)
+                                                                 + np.outer(e2, e1))
+
+    def coupling(self, angle: float) -> np.ndarray:
+        """``F(a)`` (3, N), kg^1/2 m."""
+        f = self.couplings.T.copy()
+        if self.turning.any():
+            f[:, self.turning] = drive_rotation(self.drive_axis, angle).T @ f[:, self.turning]
+        return f
+
+    def inertia(self, angle: float) -> np.ndarray:
+        """``J(a)`` (3, 3), kg m^2: the whole spacecraft's inertia at drive angle ``a``."""
+        f = self.coupling(angle)
+        return self.rest_inertia + f @ f.T + self._turned(angle)
+
+    def gain(self, angle: float) -> np.ndarray:
+        """``J(a)^-1``, rad/s^2 per N m: the rigid-body gain at drive angle ``a``."""
+        return np.linalg.inv(self.inertia(angle))
+
+    def _turned(self, angle: float) -> np.ndarray:
+        p = self.anisotropy_matrix()
+        r, r0 = (drive_rotation(self.drive_axis, a) for a in (angle, self.reference_angle))
+        return r.T @ p @ r - r0.T @ p @ r0
+
+    def continuous(self, angle: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, B)`` of ``x' = A x + B u`` at drive angle ``a`` (rad).
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            Where ``J(a) - F F^T`` is not positive definite (the anisotropy turned
+            the rest inertia indefinite).
+        """
+        n, size = self.n_modes, self.order
+        f = self.coupling(angle)
+        schur = self.rest_inertia + self._turned(angle)
+        schur_inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(schur), np.eye(3))
+        g = schur_inv @ f
+        w = 2 * np.pi * self.frequencies_hz
+        stiff, damp = -(w**2), -2.0 * self.damping * w
+        h = np.eye(n) + f.T @ g
+        a = np.zeros((size, size))
+        b = np.zeros((size, 3))
+        a[0:3, 3:6] = np.eye(3)
+        a[6:6 + n, 6 + n:] = np.eye(n)
+        # omega' = S^-1 (u - F r), eta'' = -G^T u + (I + F^T G) r, r = -W^2 eta - 2ZW eta'
+        a[3:6, 6:6 + n] = -g * stiff
+        a[3:6, 6 + n:] = -g * damp
+        a[6 + n:, 6:6 + n] = h * stiff
+        a[6 + n:, 6 + n:] = h * damp
+        b[3:6] = schur_inv
+        b[6 + n:] = -g.T
+        return a, b
+
+    def zoh(self, angle: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Zero-order-hold ``(A_d, B_d)`` at sample time ``dt`` (s) and angle ``a``."""
+        a, b = self.continuous(angle)
+        size = a.shape[0]
+        block = np.zeros((size + 3, size + 3))
+        block[:size, :size] = a * dt
+        block[:size, size:] = b * dt
+        e = scipy.linalg.expm(block)
+        return e[:size, :size], e[:size, size:]
+
+    def output_matrix(self, layout: OutputLayout) -> np.ndarray:
+        """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection)."""
+        c = np.zeros((layout.size, self.order))
+        for name, rows in layout:
+            if name == "attitude":
+                c[rows, 0:3] = np.eye(3)
+            elif name == "rate":
+                c[rows, 3:6] = np.eye(3)
+            elif name == "deflection":
+                if rows.stop - rows.start != self.tips.size:
+                    raise ValueError(f"the layout has {rows.stop - rows.start} deflections, "
+                                     f"the model {self.tips.size}")
+                c[np.arange(rows.start, rows.stop), 6 + self.sensor_appendage] = self.tips
+            else:
+                raise ValueError(f"a ScheduledPhysicalModel has no output group {name!r}")
+        return c
+
+    def discrete(self, angle: float, dt: float, layout: OutputLayout) -> StateSpaceModel:
+        """The zero-order-hold model at drive angle ``a`` (rad), sample time ``dt`` (s),
+        outputs of ``layout``; ``D = 0`` and ``K = 0``."""
+        a, b = self.zoh(angle, dt)
+        c = self.output_matrix(layout)
+        return StateSpaceModel(a, b, c, np.zeros((layout.size, 3)),
+                               np.zeros((a.shape[0], layout.size)), dt=dt)
