@@ -351,8 +351,10 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--out", type=_output_directory, default="results/control",
                      help="output directory")
     ctl.add_argument("--controllers", nargs="+", choices=sorted(CONTROLLER_KEYS), default=None,
-                     help="controllers to run (default: all but adaptive-lqg-physical, the "
-                          "adaptive LQG on a physical model fitted to its warm-up)")
+                     help="controllers to run (default: all but the two options "
+                          "adaptive-lqg-physical and adaptive-lqg-scheduled, the adaptive LQG "
+                          "on a physical model fitted to its warm-up, held or scheduled on the "
+                          "paddle angle)")
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "
                           "+-2 deg")

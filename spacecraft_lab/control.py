@@ -337,7 +337,7 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         LQR weights shared by the LQG designs.
     controllers : sequence of str, optional
         Keys of :data:`CONTROLLER_KEYS` (default: those of :data:`CONTROLLER_NAMES`,
-        i.e. all but ``adaptive-lqg-physical``).
+        i.e. all but ``adaptive-lqg-physical`` and ``adaptive-lqg-scheduled``).
     steps : int, optional
         Episode length, steps of 0.1 s (default: the registered 2500).
     save_trajectories : bool

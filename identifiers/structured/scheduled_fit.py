@@ -31,8 +31,9 @@ __all__ = ["ScheduledFit", "fit_scheduled_model", "simulate_scheduled"]
 #: Scales of the fitted parameters (they only condition the problem): inertia
 #: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state.
 _INERTIA, _COUPLING, _ANISOTROPY, _STATE = 2e4, 30.0, 1e3, 1e-3
-#: Samples per re-discretization of the simulated model on a turning drive.
-SEGMENT = 5
+#: Drive travel (rad) over which the simulated model keeps one discretization
+#: (0.25 deg: 0.7 s of the paddle-rotation scenario's 0.36 deg/s).
+RESOLUTION = np.deg2rad(0.25)
 
 
 @dataclass(frozen=True)
@@ -59,19 +60,27 @@ class ScheduledFit:
     cost: float
 
 
+def segments(angle: np.ndarray, resolution: float = RESOLUTION) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]``: consecutive samples whose angle stays within
+    ``resolution`` (rad) of their block's first one."""
+    bounds, start = [], 0
+    for t in range(1, angle.size):
+        if abs(angle[t] - angle[start]) > resolution:
+            bounds.append((start, t))
+            start = t
+    if angle.size:
+        bounds.append((start, angle.size))
+    return bounds
+
+
 def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.ndarray,
-                       dt: float, x0: np.ndarray, segment: int = SEGMENT) -> np.ndarray:
+                       dt: float, x0: np.ndarray,
+                       blocks: list[tuple[int, int]] | None = None) -> np.ndarray:
     """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
-    discretized at each ``segment``-sample block's middle angle (once if the
-    angle never moves)."""
-    steps = u.shape[0]
-    states = np.empty((steps, model.order))
+    discretized once per block of :func:`segments` (default), at its middle angle."""
+    states = np.empty((u.shape[0], model.order))
     x = np.asarray(x0, dtype=float).copy()
-    fixed = bool(np.ptp(angle) == 0.0) if steps else True
-    ad = bd = None
-    block = max(steps, 1) if fixed else segment
-    for s0 in range(0, steps, block):
-        s1 = min(steps, s0 + block)
+    for s0, s1 in (segments(angle) if blocks is None else blocks):
         ad, bd = model.zoh(0.5 * (angle[s0] + angle[s1 - 1]), dt)
         forced = u[s0:s1] @ bd.T
         for t in range(s0, s1):
@@ -95,6 +104,7 @@ class _Problem:
             else np.zeros(0, dtype=int)
         self.turning, self.sensors, self.axis = turning, sensors, axis
         self.n = turning.size
+        self.blocks = segments(angle)
         self.reference = float(angle[-1])
 
     def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
@@ -121,7 +131,7 @@ class _Problem:
         """(weighted residuals, tip gains); residuals of 1e6 where the model breaks."""
         try:
             model, x0 = self.unpack(p)
-            x = simulate_scheduled(model, self.u, self.angle, self.dt, x0)[self.good]
+            x = simulate_scheduled(model, self.u, self.angle, self.dt, x0, self.blocks)[self.good]
         except (np.linalg.LinAlgError, ValueError):
             x = None
         if x is None or not np.all(np.isfinite(x)):
@@ -218,8 +228,7 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
                         drive_axis: ArrayLike = (0.0, 1.0, 0.0),
                         weights: ArrayLike | None = None,
                         filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
-                        good_enough: float | None = None,
-                        max_nfev: int = 150) -> ScheduledFit:
+                        screening_nfev: int = 15, max_nfev: int = 150) -> ScheduledFit:
     """Fit a :class:`ScheduledPhysicalModel` to a record by output error.
 
     Parameters
@@ -246,14 +255,13 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         Weight of each output's error (default one over the layout's nominal
         levels, i.e. one over the noise when every channel has the same SNR).
     filter_constants : sequence of float
-        The equation-error starts' filter constants, s, tried in turn (a start
-        whose regression fails is passed over).
-    good_enough : float, optional
-        Stop trying starts once the fit's weighted mean square error per
-        output sample (:attr:`ScheduledFit.cost`) is below this; default: keep
-        the first usable start (0 tries them all and keeps the best).
+        The equation-error starts' filter constants, s (a start whose
+        regression fails is passed over).
+    screening_nfev : int
+        Function evaluations each start is refined by before the best one is
+        kept (a start in the wrong basin stays worse).
     max_nfev : int
-        Function evaluations of each least-squares refinement.
+        Function evaluations of the kept start's refinement.
 
     Returns
     -------
@@ -289,19 +297,16 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     axis = axis / np.linalg.norm(axis)
     w = 1.0 / layout.scales() if weights is None else np.asarray(weights, dtype=float)
     problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
-    best = None
+    screened = []
     for tau in filter_constants:
         try:
             p0 = problem.start(y, float(tau))
         except (np.linalg.LinAlgError, ValueError):
             continue
-        solution = problem.solve(p0, max_nfev)
-        if best is None or solution.cost < best.cost:
-            best = solution
-        if good_enough is None or 2 * best.cost / best.fun.size < good_enough:
-            break
-    if best is None:
+        screened.append(problem.solve(p0, screening_nfev))
+    if not screened:
         raise np.linalg.LinAlgError("no equation-error start was usable on this record")
+    best = problem.solve(min(screened, key=lambda s: s.cost).x, max_nfev)
     residuals, tips = problem.evaluate(best.x)
     model, x0 = problem.unpack(best.x, tips)
     return ScheduledFit(model, x0, _gain_covariance(problem, best.x, best.jac, residuals),

@@ -27,6 +27,7 @@ appendage k(i)).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
@@ -41,8 +42,8 @@ __all__ = ["ScheduledPhysicalModel", "drive_rotation", "plane_basis"]
 def drive_rotation(axis: ArrayLike, angle: float) -> np.ndarray:
     """``R(a)``: rotation by ``angle`` (rad) about the unit vector ``axis`` (Rodrigues);
     about the body y axis ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``."""
-    k = np.asarray(axis, dtype=float)
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    x, y, z = np.asarray(axis, dtype=float)
+    cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * (cross @ cross)
 
 
@@ -141,12 +142,18 @@ class ScheduledPhysicalModel:
         """The state dimension, ``6 + 2 N``."""
         return 6 + 2 * self.n_modes
 
+    @cached_property
     def anisotropy_matrix(self) -> np.ndarray:
         """``P`` (3, 3), kg m^2."""
         e1, e2 = plane_basis(self.drive_axis)
         p0, p1 = self.drive_anisotropy
         return p0 * (np.outer(e1, e1) - np.outer(e2, e2)) + p1 * (np.outer(e1, e2)
                                                                  + np.outer(e2, e1))
+
+    @cached_property
+    def _reference_turned(self) -> np.ndarray:
+        r0 = drive_rotation(self.drive_axis, self.reference_angle)
+        return r0.T @ self.anisotropy_matrix @ r0
 
     def coupling(self, angle: float) -> np.ndarray:
         """``F(a)`` (3, N), kg^1/2 m."""
@@ -165,9 +172,8 @@ class ScheduledPhysicalModel:
         return np.linalg.inv(self.inertia(angle))
 
     def _turned(self, angle: float) -> np.ndarray:
-        p = self.anisotropy_matrix()
-        r, r0 = (drive_rotation(self.drive_axis, a) for a in (angle, self.reference_angle))
-        return r.T @ p @ r - r0.T @ p @ r0
+        r = drive_rotation(self.drive_axis, angle)
+        return r.T @ self.anisotropy_matrix @ r - self._reference_turned
 
     def continuous(self, angle: float) -> tuple[np.ndarray, np.ndarray]:
         """``(A, B)`` of ``x' = A x + B u`` at drive angle ``a`` (rad).
@@ -181,7 +187,8 @@ class ScheduledPhysicalModel:
         n, size = self.n_modes, self.order
         f = self.coupling(angle)
         schur = self.rest_inertia + self._turned(angle)
-        schur_inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(schur), np.eye(3))
+        np.linalg.cholesky(schur)                   # raises where it is not definite
+        schur_inv = np.linalg.inv(schur)
         g = schur_inv @ f
         w = 2 * np.pi * self.frequencies_hz
         stiff, damp = -(w**2), -2.0 * self.damping * w
