@@ -26,7 +26,7 @@ from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUN
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel, drive_rotation
 from spacecraft_conventions import OutputLayout, single_threaded_blas
 
-__all__ = ["ScheduledFit", "fit_scheduled_model", "simulate_scheduled"]
+__all__ = ["ScheduledFit", "fit_scheduled_model", "noise_floor", "segments", "simulate_scheduled"]
 
 #: Scales of the fitted parameters (they only condition the problem): inertia
 #: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state.
@@ -58,6 +58,20 @@ class ScheduledFit:
     initial_state: np.ndarray
     gain_covariance: np.ndarray
     cost: float
+
+
+def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
+    """Weighted mean square of the outputs' white noise, ``mean_i (w_i sigma_i)^2``:
+    ``sigma_i`` from the median absolute deviation of the second differences
+    (``var(y_{t+1} - 2 y_t + y_{t-1}) = 6 sigma^2`` for white noise; the
+    slow signals of a 0.1 s sample contribute little), rows with a non-finite
+    entry left out."""
+    good = y[np.all(np.isfinite(y), axis=1)]
+    if good.shape[0] < 8:
+        return 0.0
+    second = np.diff(good, n=2, axis=0)
+    mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
+    return float(np.mean((weights * 1.4826 * mad / np.sqrt(6.0)) ** 2))
 
 
 def segments(angle: np.ndarray, resolution: float = RESOLUTION) -> list[tuple[int, int]]:
@@ -228,7 +242,8 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
                         drive_axis: ArrayLike = (0.0, 1.0, 0.0),
                         weights: ArrayLike | None = None,
                         filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
-                        screening_nfev: int = 15, max_nfev: int = 150) -> ScheduledFit:
+                        good_enough: float = 1.5, start_nfev: int = 60,
+                        max_nfev: int = 150) -> ScheduledFit:
     """Fit a :class:`ScheduledPhysicalModel` to a record by output error.
 
     Parameters
@@ -255,13 +270,18 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         Weight of each output's error (default one over the layout's nominal
         levels, i.e. one over the noise when every channel has the same SNR).
     filter_constants : sequence of float
-        The equation-error starts' filter constants, s (a start whose
-        regression fails is passed over).
-    screening_nfev : int
-        Function evaluations each start is refined by before the best one is
-        kept (a start in the wrong basin stays worse).
+        The equation-error starts' filter constants, s, refined in this order
+        (a start whose regression fails is passed over).
+    good_enough : float
+        Stop at the first refined start whose weighted mean square error is
+        below this multiple of the record's noise floor (estimated from the
+        median absolute second difference of each output); otherwise all
+        starts are refined and the best is kept.
+    start_nfev : int
+        Function evaluations of each start's refinement.
     max_nfev : int
-        Function evaluations of the kept start's refinement.
+        Function evaluations in all for the kept start (it continues if its
+        first refinement stopped at ``start_nfev``).
 
     Returns
     -------
@@ -297,16 +317,22 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     axis = axis / np.linalg.norm(axis)
     w = 1.0 / layout.scales() if weights is None else np.asarray(weights, dtype=float)
     problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
-    screened = []
+    floor = noise_floor(y, w)
+    best = None
     for tau in filter_constants:
         try:
             p0 = problem.start(y, float(tau))
         except (np.linalg.LinAlgError, ValueError):
             continue
-        screened.append(problem.solve(p0, screening_nfev))
-    if not screened:
+        solution = problem.solve(p0, start_nfev)
+        if best is None or solution.cost < best.cost:
+            best = solution
+        if 2.0 * best.cost / best.fun.size < good_enough * floor:
+            break
+    if best is None:
         raise np.linalg.LinAlgError("no equation-error start was usable on this record")
-    best = problem.solve(min(screened, key=lambda s: s.cost).x, max_nfev)
+    if best.status == 0 and max_nfev > start_nfev:      # stopped by the budget
+        best = problem.solve(best.x, max_nfev - start_nfev)
     residuals, tips = problem.evaluate(best.x)
     model, x0 = problem.unpack(best.x, tips)
     return ScheduledFit(model, x0, _gain_covariance(problem, best.x, best.jac, residuals),

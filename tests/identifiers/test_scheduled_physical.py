@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import pickle
 
 import numpy as np
@@ -13,7 +14,7 @@ from identifiers import (
     StateSpaceModel,
     fit_scheduled_model,
 )
-from identifiers.structured.scheduled_fit import simulate_scheduled
+from identifiers.structured.scheduled_fit import noise_floor, segments, simulate_scheduled
 from identifiers.structured.scheduled_model import drive_rotation, plane_basis
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
@@ -133,6 +134,24 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
     else:
         std = np.sqrt(np.diag(fit.gain_covariance))
         assert np.all(np.abs(gain - true_gain).ravel() <= 3 * std + 1e-12)
+
+
+def test_the_noise_floor_and_the_segments():
+    """White noise of 0.01 nominal levels on a slow signal reads as a weighted floor of
+    1e-4 (the fit's stopping rule); blocks keep the angle within their resolution."""
+    rng = np.random.default_rng(5)
+    t = 0.1 * np.arange(3000)[:, None]
+    scales = STANDARD_OUTPUTS.scales()
+    slow = np.sin(2 * np.pi * 0.08 * t + np.arange(10)) * scales
+    y = slow + rng.normal(size=slow.shape) * 0.01 * scales
+    assert noise_floor(y, 1.0 / scales) == pytest.approx(1e-4, rel=0.1)
+    assert noise_floor(slow, 1.0 / scales) < 1e-5
+    angle = np.deg2rad(np.linspace(0.0, 2.0, 50))
+    blocks = segments(angle, np.deg2rad(0.25))
+    assert blocks[0][0] == 0 and blocks[-1][1] == 50
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(blocks))
+    assert all(np.ptp(angle[s0:s1]) <= np.deg2rad(0.25) for s0, s1 in blocks)
+    assert segments(np.zeros(20)) == [(0, 20)]
 
 
 def test_the_fit_refuses_records_it_cannot_use():
