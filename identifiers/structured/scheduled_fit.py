@@ -45,10 +45,11 @@ class ScheduledFit:
     model : ScheduledPhysicalModel
     initial_state : (6 + 2 N,) ndarray
         The fitted state at the record's first sample.
-    gain_covariance : (9, 9) ndarray
-        Covariance of ``model.gain(reference_angle)``'s row-major entries,
-        (rad/s^2 per N m)^2, from the least-squares Jacobian and the residual
-        variance (white residuals assumed).
+    inertia_covariance : (8 + 3 N, 8 + 3 N) ndarray
+        Covariance of the parameters ``J(a)`` depends on, ``[S's upper
+        triangle (row-major, 6); the anisotropy (2); the couplings (3 N,
+        row-major)]`` (kg m^2, kg^1/2 m), from the least-squares Jacobian
+        and the residual variance (white residuals assumed).
     cost : float
         Weighted mean square error per output sample (1 at the noise level
         the weights assume).
@@ -56,8 +57,48 @@ class ScheduledFit:
 
     model: ScheduledPhysicalModel
     initial_state: np.ndarray
-    gain_covariance: np.ndarray
+    inertia_covariance: np.ndarray
     cost: float
+
+    def gain_covariance(self, angle: float) -> np.ndarray:
+        """(9, 9) covariance of ``J(a)^-1``'s row-major entries at drive angle ``a``
+        (rad), (rad/s^2 per N m)^2: :attr:`inertia_covariance` through the
+        gain's derivative (central differences), so the band widens where the
+        fitted anisotropy is extrapolated."""
+        theta = _inertia_parameters(self.model)
+        step = 1e-6 * np.maximum(np.abs(theta), 1.0)
+        columns = []
+        for i, h in enumerate(step):
+            up, down = theta.copy(), theta.copy()
+            up[i] += h
+            down[i] -= h
+            columns.append((_with_inertia(self.model, up).gain(angle)
+                            - _with_inertia(self.model, down).gain(angle)).ravel() / (2 * h))
+        d = np.column_stack(columns)
+        return d @ self.inertia_covariance @ d.T
+
+
+def _inertia_parameters(model: ScheduledPhysicalModel) -> np.ndarray:
+    """``[S's upper triangle; anisotropy; couplings]`` (see :class:`ScheduledFit`)."""
+    return np.concatenate([model.rest_inertia[np.triu_indices(3)], model.drive_anisotropy,
+                           model.couplings.ravel()])
+
+
+def _with_inertia(model: ScheduledPhysicalModel, theta: np.ndarray) -> ScheduledPhysicalModel:
+    """``model`` with the parameters of :func:`_inertia_parameters` replaced (the rest
+    inertia is not checked for definiteness: a finite-difference neighbour)."""
+    rest = np.zeros((3, 3))
+    rest[np.triu_indices(3)] = theta[:6]
+    rest = rest + np.triu(rest, 1).T
+    n = model.n_modes
+    clone = object.__new__(ScheduledPhysicalModel)
+    for name in ("frequencies_hz", "damping", "turning", "tips", "sensor_appendage",
+                 "drive_axis", "reference_angle"):
+        object.__setattr__(clone, name, getattr(model, name))
+    object.__setattr__(clone, "rest_inertia", rest)
+    object.__setattr__(clone, "drive_anisotropy", theta[6:8])
+    object.__setattr__(clone, "couplings", theta[8:8 + 3 * n].reshape(n, 3))
+    return clone
 
 
 def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
@@ -335,23 +376,19 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         best = problem.solve(best.x, max_nfev - start_nfev)
     residuals, tips = problem.evaluate(best.x)
     model, x0 = problem.unpack(best.x, tips)
-    return ScheduledFit(model, x0, _gain_covariance(problem, best.x, best.jac, residuals),
+    return ScheduledFit(model, x0, _inertia_covariance(problem, best.x, best.jac, residuals),
                         float(np.mean(residuals**2)))
 
 
-def _gain_covariance(problem: _Problem, p: np.ndarray, jac: np.ndarray,
-                     residuals: np.ndarray) -> np.ndarray:
-    """``sigma^2 (J^T J)^-1`` of the parameters mapped through ``dG / dp`` at the
-    reference angle (central differences over the parameters G depends on)."""
+def _inertia_covariance(problem: _Problem, p: np.ndarray, jac: np.ndarray,
+                        residuals: np.ndarray) -> np.ndarray:
+    """``sigma^2 (J^T J)^-1`` of the parameters mapped to those of
+    :func:`_inertia_parameters` (central differences)."""
     dof = max(residuals.size - p.size, 1)
     sigma2 = float(np.sum(residuals**2)) / dof
-    m = 8 + 5 * problem.n                      # inertia, anisotropy, modes, couplings
-    cov = sigma2 * np.linalg.pinv(jac.T @ jac)[:m, :m]
-
-    def gain(q: np.ndarray) -> np.ndarray:
-        return problem.unpack(q)[0].gain(problem.reference).ravel()
-
+    cov = sigma2 * np.linalg.pinv(jac.T @ jac)
     step = 1e-6
-    dgain = np.column_stack([(gain(p + step * e) - gain(p - step * e)) / (2 * step)
-                             for e in np.eye(p.size)[:m]])
-    return dgain @ cov @ dgain.T
+    d = np.column_stack([(_inertia_parameters(problem.unpack(p + step * e)[0])
+                          - _inertia_parameters(problem.unpack(p - step * e)[0])) / (2 * step)
+                         for e in np.eye(p.size)])
+    return d @ cov @ d.T

@@ -130,6 +130,7 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         self._kf: KalmanPredictor | None = None
         self._mats: tuple[np.ndarray, ...] | None = None
         self._mats_angle = np.nan
+        self._gain_at: tuple[float, RigidGainEstimate] | None = None
         self._q = self._r = None
         self._seen: np.ndarray | None = None
 
@@ -217,11 +218,16 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
 
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
-        """``J(a)^-1`` at the latest angle (rad/s^2 per N m) with the fit's covariance
-        (taken at the fit's last angle); None before the fit."""
+        """``J(a)^-1`` (rad/s^2 per N m) with the fit's covariance, both at the angle of
+        the exported model (:attr:`angle` to within ``schedule_resolution``); None
+        before the fit."""
         if self.fit is None:
             return None
-        return RigidGainEstimate(self.fit.model.gain(self.angle), self.fit.gain_covariance)
+        if self._gain_at is None or self._gain_at[0] != self._mats_angle:
+            angle = self._mats_angle
+            self._gain_at = (angle, RigidGainEstimate(self.fit.model.gain(angle),
+                                                      self.fit.gain_covariance(angle)))
+        return self._gain_at[1]
 
     def __repr__(self) -> str:
         modes = [] if self.fit is None else [round(float(f), 4) for f in

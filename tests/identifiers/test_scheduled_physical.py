@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import pickle
 
@@ -132,8 +133,18 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
         np.testing.assert_allclose(np.sort(fit.model.frequencies_hz),
                                    [0.07, 0.08, 0.09, 0.12], rtol=1e-2)
     else:
-        std = np.sqrt(np.diag(fit.gain_covariance))
+        covariance = fit.gain_covariance(angle[-1])
+        std = np.sqrt(np.diag(covariance))
         assert np.all(np.abs(gain - true_gain).ravel() <= 3 * std + 1e-12)
+        # at the reference angle the anisotropy cancels: its uncertainty adds nothing
+        # there, and it does 90 deg away
+        blind = dataclasses.replace(fit, inertia_covariance=fit.inertia_covariance.copy())
+        blind.inertia_covariance[6:8] = 0.0
+        blind.inertia_covariance[:, 6:8] = 0.0
+        np.testing.assert_allclose(blind.gain_covariance(angle[-1]), covariance,
+                                   rtol=1e-6, atol=1e-9 * np.abs(covariance).max())
+        away = angle[-1] + np.pi / 2
+        assert np.trace(fit.gain_covariance(away)) > np.trace(blind.gain_covariance(away))
 
 
 def test_the_noise_floor_and_the_segments():
