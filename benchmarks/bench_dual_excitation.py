@@ -13,7 +13,11 @@ prints, side by side, the adaptive LQG's and the oracle LQG's common cost from
 100 s and torque RMS over the last 100 s (all axes, N m), with the bars: cost at
 most 1.2x the oracle's, torque RMS at most 1.5x the oracle's + 0.005 N m.
 
-Usage: ``python benchmarks/bench_dual_excitation.py [--seeds 3] [--long 1000]``
+``--identifier scheduled`` flies the drive-scheduled physical fit instead of the
+default identifier (``spacecraft_lab.control.scheduled_physical_identifier``).
+
+Usage: ``python benchmarks/bench_dual_excitation.py [--seeds 3] [--long 1000]
+[--identifier default|scheduled]``
 """
 
 from __future__ import annotations
@@ -25,6 +29,15 @@ import numpy as np
 
 import spacecraft_env  # noqa: F401  (registers the environments)
 from controllers import AdaptiveLQG, OracleLQG, episode_metrics, run_episode
+
+
+def adaptive(env, identifier: str) -> AdaptiveLQG:
+    """The adaptive LQG on ``env`` with the default or the scheduled identifier."""
+    if identifier == "scheduled":
+        from spacecraft_lab.control import scheduled_physical_identifier
+
+        return AdaptiveLQG(env.unwrapped, identifier=scheduled_physical_identifier(env))
+    return AdaptiveLQG(env.unwrapped)
 
 
 def windows(traj, events) -> dict[str, float]:
@@ -48,23 +61,24 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--long", type=float, default=1000.0,
                         help="length of the constant-plant run, s (0: skip it)")
+    parser.add_argument("--identifier", choices=("default", "scheduled"), default="default")
     args = parser.parse_args()
     print("excitation RMS (N m, all axes), median [worst] over seeds")
     for env_id in ("FlexibleSpacecraft-v2", "FlexibleSpacecraftDocking-v2"):
         rows = []
         for seed in range(args.seeds):
             env = gym.make(env_id, task="slew")
-            traj = run_episode(env, AdaptiveLQG(env.unwrapped), seed=seed)
+            traj = run_episode(env, adaptive(env, args.identifier), seed=seed)
             rows.append(windows(traj, env.unwrapped.scenario.event_times()))
         print(env_id)
         for name in rows[0]:
             values = np.array([r[name] for r in rows])
             print(f"  {name:<26}{np.median(values):8.3f} [{values.max():.3f}]")
     if args.long > 0:
-        long_run(args.seeds, args.long)
+        long_run(args.seeds, args.long, args.identifier)
 
 
-def long_run(seeds: int, seconds: float) -> None:
+def long_run(seeds: int, seconds: float, identifier: str = "default") -> None:
     """The constant plant over ``seconds``: cost and late torque, adaptive beside oracle."""
     steps = round(seconds / 0.1)
     print(f"constant plant over {seconds:.0f} s: adaptive / oracle LQG, paired seeds")
@@ -73,8 +87,9 @@ def long_run(seeds: int, seconds: float) -> None:
     for seed in range(seeds):
         env = gym.make("FlexibleSpacecraft-v2", task="slew", max_episode_steps=steps)
         out = {}
-        for name, make in (("adaptive", AdaptiveLQG), ("oracle", OracleLQG)):
-            traj = run_episode(env, make(env.unwrapped), seed=seed)
+        for name, make in (("adaptive", lambda e: adaptive(e, identifier)),
+                           ("oracle", lambda e: OracleLQG(e.unwrapped))):
+            traj = run_episode(env, make(env), seed=seed)
             late = traj.time > traj.time[-1] - 100.0
             out[name] = (episode_metrics(traj, env.unwrapped.model)["cost_after_100s"],
                          float(np.sqrt(np.mean(np.sum(traj.torque[late] ** 2, axis=1)))))
