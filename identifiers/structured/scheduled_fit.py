@@ -93,7 +93,7 @@ def _with_inertia(model: ScheduledPhysicalModel, theta: np.ndarray) -> Scheduled
     n = model.n_modes
     clone = object.__new__(ScheduledPhysicalModel)
     for name in ("frequencies_hz", "damping", "turning", "tips", "sensor_appendage",
-                 "drive_axis", "reference_angle"):
+                 "drive_axis"):
         object.__setattr__(clone, name, getattr(model, name))
     object.__setattr__(clone, "rest_inertia", rest)
     object.__setattr__(clone, "drive_anisotropy", theta[6:8])
@@ -160,7 +160,6 @@ class _Problem:
         self.turning, self.sensors, self.axis = turning, sensors, axis
         self.n = turning.size
         self.blocks = segments(angle)
-        self.reference = float(angle[-1])
 
     def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
                ) -> tuple[ScheduledPhysicalModel, np.ndarray]:
@@ -172,7 +171,7 @@ class _Problem:
             _INERTIA * lower @ lower.T, _ANISOTROPY * p[6:8], np.exp(p[8:8 + n]) / (2 * np.pi),
             np.exp(p[8 + n:8 + 2 * n]), _COUPLING * p[8 + 2 * n:8 + 5 * n].reshape(n, 3),
             self.turning, np.zeros(self.sensors.size) if tips is None else tips, self.sensors,
-            self.axis, self.reference)
+            self.axis)
         return model, _STATE * p[8 + 5 * n:]
 
     def pack(self, rest, anisotropy, w, zeta, couplings, x0) -> np.ndarray:

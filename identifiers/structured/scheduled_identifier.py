@@ -166,14 +166,17 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
                 self._fit()
             return
         if abs(self.angle - self._mats_angle) > self.schedule_resolution:
-            self._discretize(self.angle)
+            self._discretize(self.angle)      # on failure the last model is kept
         a, b, c, _, _ = self._mats
         self._kf.update(a, b, c, self._q, self._r, u, y)
 
     def _discretize(self, angle: float) -> bool:
         """Normalized ``(A, B, C)`` of the fitted model at ``angle``; False if not finite."""
         su, sy = self._su, self._sy
-        model = self.fit.model.discrete(angle, self.dt, self.layout)
+        try:
+            model = self.fit.model.discrete(angle, self.dt, self.layout)
+        except (np.linalg.LinAlgError, ValueError):
+            return False
         a, b, c = model.A, model.B * su[None, :], model.C / sy[:, None]
         if not all(np.isfinite(m).all() for m in (a, b, c)):
             return False

@@ -14,12 +14,16 @@ coupling, turned with the drive for an appendage the drive carries
 (``f_k(a) = R(a)^T v_k``, ``R(a)`` the rotation by ``a`` about the drive axis)
 and constant otherwise, and
 
-    J(a) = S + F(a) F(a)^T + R(a)^T P R(a) - R(a_ref)^T P R(a_ref),
+    J(a) = S + R(a)^T (|P| Pi + P) R(a) + F(a) F(a)^T,
 
-with ``S`` symmetric positive definite and ``P`` the turning appendages'
-inertia anisotropy in the plane of the drive (two numbers). ``M(a)`` is then
-positive definite at the reference angle and the model passive there, as a
-collocated spacecraft is. The outputs are ``attitude = theta``,
+with ``S`` symmetric positive definite, ``P`` the turning appendages'
+inertia anisotropy in the plane of the drive (traceless there: two numbers),
+``Pi`` the projector onto that plane and ``|P|`` its eigenvalue: the
+turning part ``|P| Pi + P`` is positive semidefinite (in-plane eigenvalues
+``2 |P|`` and 0; an isotropic in-plane part does not change with the angle
+and belongs to ``S``). ``M(a)`` is then positive definite and the model
+passive at every angle, as a collocated spacecraft is, also at angles the
+fit never saw. The outputs are ``attitude = theta``,
 ``rate = omega`` and each deflection sensor's ``d_i eta_{k(i)}`` (sensor i on
 appendage k(i)).
 """
@@ -66,11 +70,12 @@ class ScheduledPhysicalModel:
     Parameters
     ----------
     rest_inertia : (3, 3) array_like
-        ``S``, kg m^2: the inertia the hub keeps when the modes are free;
-        symmetric positive definite.
+        ``S``, kg m^2: the inertia that does not turn with the drive and is
+        not the modes'; symmetric positive definite.
     drive_anisotropy : (2,) array_like
         ``P = p0 (e1 e1^T - e2 e2^T) + p1 (e1 e2^T + e2 e1^T)`` (kg m^2) in the
-        drive plane's basis ``(e1, e2)`` of :func:`plane_basis`.
+        drive plane's basis ``(e1, e2)`` of :func:`plane_basis`, at drive
+        angle 0.
     frequencies_hz, damping : (N,) array_like
         The cantilever modes' frequencies (Hz) and damping ratios.
     couplings : (N, 3) array_like
@@ -83,8 +88,6 @@ class ScheduledPhysicalModel:
         ``k(i)``, the appendage of sensor i.
     drive_axis : (3,) array_like
         The drive's unit axis in the body frame.
-    reference_angle : float
-        ``a_ref``, rad: where ``J(a) = S + F F^T``.
     """
 
     rest_inertia: np.ndarray
@@ -96,7 +99,6 @@ class ScheduledPhysicalModel:
     tips: np.ndarray
     sensor_appendage: np.ndarray
     drive_axis: np.ndarray
-    reference_angle: float = 0.0
 
     def __post_init__(self) -> None:
         v = {name: np.array(getattr(self, name), dtype=float) for name in
@@ -116,8 +118,7 @@ class ScheduledPhysicalModel:
             raise ValueError(f"turning must have one flag per mode ({n}), got {turning.shape}")
         if sensors.size and (sensors.min() < 0 or sensors.max() >= n):
             raise ValueError(f"sensor_appendage must be indices in [0, {n}), got {sensors}")
-        if not all(np.all(np.isfinite(x)) for x in v.values()) or \
-                not np.isfinite(self.reference_angle):
+        if not all(np.all(np.isfinite(x)) for x in v.values()):
             raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
         s = v["rest_inertia"]
         if not np.allclose(s, s.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(s).min() <= 0:
@@ -130,7 +131,6 @@ class ScheduledPhysicalModel:
         for name, value in v.items():
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        object.__setattr__(self, "reference_angle", float(self.reference_angle))
 
     @property
     def n_modes(self) -> int:
@@ -143,17 +143,15 @@ class ScheduledPhysicalModel:
         return 6 + 2 * self.n_modes
 
     @cached_property
-    def anisotropy_matrix(self) -> np.ndarray:
-        """``P`` (3, 3), kg m^2."""
+    def turning_inertia_at_zero(self) -> np.ndarray:
+        """``|P| Pi + P`` (3, 3), kg m^2: the turning part of the inertia at angle 0,
+        positive semidefinite."""
         e1, e2 = plane_basis(self.drive_axis)
         p0, p1 = self.drive_anisotropy
-        return p0 * (np.outer(e1, e1) - np.outer(e2, e2)) + p1 * (np.outer(e1, e2)
-                                                                 + np.outer(e2, e1))
-
-    @cached_property
-    def _reference_turned(self) -> np.ndarray:
-        r0 = drive_rotation(self.drive_axis, self.reference_angle)
-        return r0.T @ self.anisotropy_matrix @ r0
+        anisotropy = p0 * (np.outer(e1, e1) - np.outer(e2, e2)) + p1 * (np.outer(e1, e2)
+                                                                       + np.outer(e2, e1))
+        plane = np.outer(e1, e1) + np.outer(e2, e2)
+        return np.hypot(p0, p1) * plane + anisotropy
 
     def coupling(self, angle: float) -> np.ndarray:
         """``F(a)`` (3, N), kg^1/2 m."""
@@ -173,21 +171,17 @@ class ScheduledPhysicalModel:
 
     def _turned(self, angle: float) -> np.ndarray:
         r = drive_rotation(self.drive_axis, angle)
-        return r.T @ self.anisotropy_matrix @ r - self._reference_turned
+        return r.T @ self.turning_inertia_at_zero @ r
 
     def continuous(self, angle: float) -> tuple[np.ndarray, np.ndarray]:
         """``(A, B)`` of ``x' = A x + B u`` at drive angle ``a`` (rad).
 
-        Raises
-        ------
-        numpy.linalg.LinAlgError
-            Where ``J(a) - F F^T`` is not positive definite (the anisotropy turned
-            the rest inertia indefinite).
+        ``J(a) - F F^T = S + R^T (|P| Pi + P) R`` is positive definite at every
+        angle by construction.
         """
         n, size = self.n_modes, self.order
         f = self.coupling(angle)
         schur = self.rest_inertia + self._turned(angle)
-        np.linalg.cholesky(schur)                   # raises where it is not definite
         schur_inv = np.linalg.inv(schur)
         g = schur_inv @ f
         w = 2 * np.pi * self.frequencies_hz

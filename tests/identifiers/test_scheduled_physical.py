@@ -25,11 +25,11 @@ COUPLINGS = np.array([[40.0, 5.0, 20.0], [-40.0, 5.0, -20.0], [10.0, 30.0, 0.0],
                       [0.0, -25.0, 15.0]])
 
 
-def _model(reference: float = 0.0, anisotropy=(800.0, -300.0)) -> ScheduledPhysicalModel:
+def _model(anisotropy=(800.0, -300.0)) -> ScheduledPhysicalModel:
     return ScheduledPhysicalModel(REST, anisotropy, [0.07, 0.08, 0.09, 0.12],
                                   [0.01, 0.02, 0.01, 0.005], COUPLINGS, TURNING,
                                   [0.01, -0.012, 0.008, 0.01], [0, 1, 2, 3],
-                                  (0.0, 1.0, 0.0), reference)
+                                  (0.0, 1.0, 0.0))
 
 
 def _record(model, steps, rng, rate=0.017453292519943295, start=0.3):
@@ -76,9 +76,19 @@ def test_the_drive_turns_only_what_it_carries():
     f0, f1 = model.coupling(0.0), model.coupling(1.2)
     np.testing.assert_array_equal(f0[:, 2:], f1[:, 2:])
     np.testing.assert_allclose(f1[:, :2], drive_rotation((0, 1, 0), 1.2).T @ f0[:, :2])
-    # at the reference angle the inertia is S + F F^T; elsewhere the anisotropy turns
-    np.testing.assert_allclose(model.inertia(0.0), REST + f0 @ f0.T)
-    assert not np.allclose(model.inertia(1.2), REST + f1 @ f1.T)
+    # the turning inertia is R^T (|P| Pi + P) R: in-plane eigenvalues 2 |P| and 0
+    for angle in (0.0, 1.2, 4.0):
+        f = model.coupling(angle)
+        turning = model.inertia(angle) - REST - f @ f.T
+        np.testing.assert_allclose(np.linalg.eigvalsh(turning),
+                                   [0.0, 0.0, 2 * np.hypot(800.0, 300.0)], atol=1e-9)
+        np.testing.assert_allclose(turning @ [0.0, 1.0, 0.0], 0.0, atol=1e-12)
+    assert not np.allclose(model.inertia(0.0), model.inertia(1.2))
+    # an anisotropy as large as the rest inertia still leaves M(a) definite everywhere
+    heavy = _model(anisotropy=(3e4, 2e4))
+    for angle in np.linspace(0, 2 * np.pi, 13):
+        a, _ = heavy.continuous(angle)
+        assert np.all(np.isfinite(a))
     still = _model(anisotropy=(0.0, 0.0))
     fixed = ScheduledPhysicalModel(REST, (0.0, 0.0), still.frequencies_hz, still.damping,
                                    COUPLINGS, (False,) * 4, still.tips, [0, 1, 2, 3],
@@ -121,7 +131,7 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
     the last angle is within 0.1 % and the frequencies within 1 %; at 40 dB the
     gain is within 10 % and the truth inside the reported 3-sigma band."""
     rng = np.random.default_rng(1)
-    truth = _model(reference=0.3 + np.deg2rad(1.0) * 29.9)
+    truth = _model()
     u, y, angle = _record(truth, 300, rng)
     if snr_db is not None:
         y = y + rng.normal(size=y.shape) * STANDARD_OUTPUTS.scales() * 10 ** (-snr_db / 20)
@@ -136,15 +146,14 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
         covariance = fit.gain_covariance(angle[-1])
         std = np.sqrt(np.diag(covariance))
         assert np.all(np.abs(gain - true_gain).ravel() <= 3 * std + 1e-12)
-        # at the reference angle the anisotropy cancels: its uncertainty adds nothing
-        # there, and it does 90 deg away
-        blind = dataclasses.replace(fit, inertia_covariance=fit.inertia_covariance.copy())
-        blind.inertia_covariance[6:8] = 0.0
-        blind.inertia_covariance[:, 6:8] = 0.0
-        np.testing.assert_allclose(blind.gain_covariance(angle[-1]), covariance,
-                                   rtol=1e-6, atol=1e-9 * np.abs(covariance).max())
-        away = angle[-1] + np.pi / 2
-        assert np.trace(fit.gain_covariance(away)) > np.trace(blind.gain_covariance(away))
+        # the delta method: symmetric, positive semidefinite, linear in the parameters'
+        # covariance
+        np.testing.assert_allclose(covariance, covariance.T, rtol=0,
+                                   atol=1e-9 * np.abs(covariance).max())
+        assert np.linalg.eigvalsh(covariance).min() > -1e-9 * np.abs(covariance).max()
+        doubled = dataclasses.replace(fit, inertia_covariance=4.0 * fit.inertia_covariance)
+        np.testing.assert_allclose(doubled.gain_covariance(angle[-1]), 4.0 * covariance,
+                                   rtol=1e-9)
 
 
 def test_the_noise_floor_and_the_segments():
@@ -178,7 +187,7 @@ def test_the_fit_refuses_records_it_cannot_use():
 
 def test_the_identifier_follows_the_drive_after_its_fit():
     rng = np.random.default_rng(2)
-    truth = _model(reference=0.3 + np.deg2rad(1.0) * 19.9)
+    truth = _model()
     u, y, angle = _record(truth, 260, rng)
     ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=200)
     for k in range(199):
