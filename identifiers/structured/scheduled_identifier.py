@@ -65,6 +65,10 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         far (rad, default 0.1 deg) since it last was.
     process_torque : float
         Unmodelled torque (N m per axis) the state's Kalman filter assumes.
+    fit_options : dict, optional
+        Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
+        (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``),
+        e.g. fewer starts for speed; default: its defaults.
     input_scale, output_scale, max_abs
         See :class:`~identifiers.core.online.OnlineIdentifier`.
 
@@ -91,7 +95,8 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
                  sensor_appendage: Sequence[int] | None = None,
                  drive_axis: ArrayLike = (0.0, 1.0, 0.0), dt: float = 0.1,
                  warmup: int = 300, schedule_resolution: float = np.deg2rad(0.1),
-                 process_torque: float = 0.05, input_scale: ArrayLike | None = None,
+                 process_torque: float = 0.05, fit_options: dict | None = None,
+                 input_scale: ArrayLike | None = None,
                  output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
         if not isinstance(layout, OutputLayout):
             raise TypeError(f"layout must be an OutputLayout, got {type(layout).__name__}")
@@ -115,6 +120,11 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         self.drive_axis = tuple(float(v) for v in axis / np.linalg.norm(axis))
         self.schedule_resolution = positive_float("schedule_resolution", schedule_resolution)
         self.process_torque = positive_float("process_torque", process_torque)
+        allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev"}
+        self.fit_options = dict(fit_options or {})
+        if not set(self.fit_options) <= allowed:
+            raise ValueError(f"fit_options may hold {sorted(allowed)}, got "
+                             f"{sorted(set(self.fit_options) - allowed)}")
         super().__init__(6 + 2 * len(self.turning), 1, 1.0, dt=dt,
                          warmup=positive_int("warmup", warmup),
                          input_scale=(np.full(3, NOMINAL_TORQUE) if input_scale is None
@@ -195,7 +205,7 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         try:
             fit = fit_scheduled_model(u, y, angle, self.dt, self.layout, self.turning,
                                       sensor_appendage=self.sensor_appendage,
-                                      drive_axis=self.drive_axis)
+                                      drive_axis=self.drive_axis, **self.fit_options)
         except np.linalg.LinAlgError:
             return                       # keep recording; the next sample tries again
         self.fit = fit
