@@ -29,6 +29,7 @@ from spacecraft_conventions import (
     DEG_PER_RAD,
     NOMINAL_SCALE,
     CostWeights,
+    exit_with_parent,
     output_cost_weights,
     single_threaded_blas,
 )
@@ -837,7 +838,8 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
                     bar.update()
             else:
                 pool = ProcessPoolExecutor(min(workers, len(seeds)),
-                                           mp_context=multiprocessing.get_context("spawn"))
+                                           mp_context=multiprocessing.get_context("spawn"),
+                                           initializer=exit_with_parent)
                 futures = {pool.submit(_run_seed, controllers, make_env, seed, options): seed
                            for seed in seeds}
                 for future in as_completed(futures):

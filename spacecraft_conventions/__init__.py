@@ -13,6 +13,8 @@ on each other.
 * :mod:`spacecraft_conventions.outputs`: the sensor groups, their order,
   their channel labels and :class:`OutputLayout`, which gives each group's
   rows of an output or observation vector by name.
+* :mod:`spacecraft_conventions.processes`: pool workers that end with their
+  driver, and SIGTERM handled as Ctrl-C.
 """
 
 from spacecraft_conventions.blas import single_threaded_blas
@@ -28,6 +30,7 @@ from spacecraft_conventions.outputs import (
     OutputLayout,
     match_groups,
 )
+from spacecraft_conventions.processes import exit_with_parent, sigterm_as_interrupt
 from spacecraft_conventions.sensors import NOMINAL_SCALE, NOMINAL_TORQUE, nominal_scale
 from spacecraft_conventions.units import DEG_PER_RAD, RAD_PER_DEG
 from spacecraft_conventions.version import __version__
@@ -48,8 +51,10 @@ __all__ = [
     "CostWeights",
     "OutputLayout",
     "__version__",
+    "exit_with_parent",
     "match_groups",
     "nominal_scale",
     "output_cost_weights",
+    "sigterm_as_interrupt",
     "single_threaded_blas",
 ]

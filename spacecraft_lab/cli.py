@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from controllers import LQRWeights
-from spacecraft_conventions import __version__
+from spacecraft_conventions import __version__, sigterm_as_interrupt
 from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
 from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
@@ -632,7 +632,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         _probe_outputs(args)
-        return COMMANDS[args.command](args)
+        with sigterm_as_interrupt():       # kill / a scheduler's SIGTERM: as Ctrl-C
+            return COMMANDS[args.command](args)
     except (ValueError, FileNotFoundError, PermissionError, SweepLockedError,
             ImportError) as exc:
         parser.exit(2, f"spacecraft {args.command}: error: {exc}\n")

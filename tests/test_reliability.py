@@ -463,9 +463,58 @@ def test_d12_ctrl_c_prints_one_line_and_exits_130(tmp_path):
         buffer += char
     os.kill(proc.pid, signal.SIGINT)
     _, rest = proc.communicate(timeout=120)
-    assert proc.returncode == 130
+    assert proc.returncode == 130, rest[-2000:]
     assert "Traceback" not in rest
     assert rest.strip().splitlines()[-1].startswith("spacecraft control: interrupted")
+
+
+def _children(pid: int) -> list[int]:
+    """Process ids whose parent is ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_d12_a_killed_comparison_leaves_no_worker_behind(tmp_path, sig):
+    """``kill`` (SIGTERM: unwinds as Ctrl-C, exit 130) or SIGKILL on a comparison running
+    on a process pool: its workers end too (they stayed as orphans before)."""
+    proc = subprocess.Popen([sys.executable, "-m", "spacecraft_lab.cli", "control", "--seeds",
+                             "1000", "--controllers", "pd", "--steps", "2000", "--workers", "2",
+                             "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    buffer = ""
+    while not re.search(r"\b[1-9]\d*/1000\b", buffer):      # the pool is up and working
+        char = proc.stderr.read(1)
+        assert char, "the command ended before it started its work"
+        buffer += char
+    workers = _children(proc.pid)
+    assert workers
+    os.kill(proc.pid, sig)
+    _, rest = proc.communicate(timeout=120)
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 130
+        assert "spacecraft control: interrupted" in rest and "Traceback" not in rest
+    deadline = time.monotonic() + 10.0
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not any(_alive(w) for w in workers)
 
 
 def test_d13_an_unwritable_out_fails_before_any_work(tmp_path):

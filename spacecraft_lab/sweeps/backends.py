@@ -22,8 +22,6 @@ from __future__ import annotations
 import itertools
 import multiprocessing
 import os
-import threading
-import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -35,6 +33,7 @@ import identifiers
 import spacecraft_conventions
 import spacecraft_env
 import spacecraft_lab
+from spacecraft_conventions import exit_with_parent
 from spacecraft_lab.sweeps.tasks import THREAD_ENV
 
 __all__ = ["BACKENDS", "LocalBackend", "RayBackend", "SerialBackend", "check_workers",
@@ -49,16 +48,9 @@ def _top_up(pending: dict[Any, Any], source: Iterator[Any], limit: int,
         pending[submit(item)] = item
 
 
-def _watch_parent(parent: int) -> None:
-    while True:
-        time.sleep(1.0)
-        if os.getppid() != parent:  # the driver died (even by SIGKILL): stop
-            os._exit(1)
-
-
 def _init_worker() -> None:
     os.environ.update(THREAD_ENV)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    exit_with_parent()
 
 
 class SerialBackend:

@@ -23,18 +23,15 @@ file.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import signal
-import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from filelock import FileLock, Timeout
 from tqdm import tqdm
 
+from spacecraft_conventions import sigterm_as_interrupt
 from spacecraft_lab.sweeps.backends import make_backend
 from spacecraft_lab.sweeps.config import SweepConfig, Task, load_config
 from spacecraft_lab.sweeps.store import ResultStore
@@ -80,25 +77,6 @@ class SweepReport:
     backend: str
     workers: int
     out: Path
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """While running, SIGTERM (``kill``, a batch scheduler) unwinds like
-    Ctrl-C, so the backend stops its workers; records already written stay."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
-        yield
-        return
-
-    def handler(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def pending_tasks(tasks: list[Task], store: ResultStore,
@@ -193,7 +171,7 @@ def _run_locked(config: SweepConfig, out: Path, backend: str, workers: int | Non
     ok = errors = 0
     runner = make_backend(backend, workers, address, ship_code)
     if todo:
-        with _sigterm_as_interrupt(), runner, tqdm(total=len(tasks), initial=len(tasks) - len(todo),
+        with sigterm_as_interrupt(), runner, tqdm(total=len(tasks), initial=len(tasks) - len(todo),
                           desc=f"sweep {config.name} ({backend})", unit="task",
                           disable=not progress) as bar:
             for item, outcome in runner.imap_unordered(execute, [t.to_dict() for t in todo]):

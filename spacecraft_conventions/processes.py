@@ -1,0 +1,57 @@
+"""Worker processes that do not outlive their driver, and a driver that stops on SIGTERM.
+
+Both the closed-loop comparison (:func:`controllers.compare`) and the sweeps run
+seeds on a ``spawn`` process pool. A pool's workers wait on a pipe for their
+next task; when the driver dies without shutting the pool down (``kill``,
+a batch scheduler's SIGTERM or SIGKILL, a crash) they used to stay behind as
+orphans. :func:`exit_with_parent`, a pool initializer, ends each worker
+within a second of its parent's death; :func:`sigterm_as_interrupt` makes
+SIGTERM unwind a driver like Ctrl-C, so it stops its pool and keeps what it
+finished.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+
+__all__ = ["exit_with_parent", "sigterm_as_interrupt"]
+
+
+def _watch(parent: int, period: float) -> None:
+    while True:
+        time.sleep(period)
+        if os.getppid() != parent:        # re-parented: the driver is gone
+            os._exit(1)
+
+
+def exit_with_parent(period: float = 1.0) -> None:
+    """Pool initializer: end this process within ``period`` seconds (``os._exit(1)``)
+    once its parent has died, by whatever means (a daemon thread polls the parent
+    process id)."""
+    threading.Thread(target=_watch, args=(os.getppid(), float(period)), daemon=True,
+                     name="exit-with-parent").start()
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside, SIGTERM raises ``KeyboardInterrupt`` in the main thread (as
+    Ctrl-C does); outside the main thread, or when a SIGTERM handler is already
+    installed, it changes nothing."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
