@@ -22,7 +22,8 @@ error (:mod:`~identifiers.structured.physical_fit`) and then held;
 :class:`ScheduledPhysicalIdentifier` (:mod:`~identifiers.structured.scheduled_identifier`)
 fits the hub-plus-appendage :class:`ScheduledPhysicalModel`
 (:mod:`~identifiers.structured.scheduled_model`, fitted by
-:mod:`~identifiers.structured.scheduled_fit`) whose turning appendages follow
+:mod:`~identifiers.structured.scheduled_fit` from the starts of
+:mod:`~identifiers.structured.scheduled_start`) whose turning appendages follow
 a drive angle.
 
 Imports :mod:`identifiers.core` and :mod:`identifiers.subspace` (the mode

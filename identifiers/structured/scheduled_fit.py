@@ -1,15 +1,17 @@
 """Fitting a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
 to a record of torques, outputs and drive angles by output error.
 
-Two stages. An equation-error start: each appendage's mode and coupling from a
-linear regression of its deflection's second derivative, then the inertia and
-couplings from the hub's torque balance, all on signals passed through a
-state-variable filter ``1 / (tau s + 1)^3`` (several ``tau``; the best fit
-kept). Then every parameter, the initial state included, by bounded nonlinear
-least squares on the weighted simulation error, the model re-discretized at the
-measured angle every few samples; the tip gains are solved linearly inside
-every evaluation (variable projection). Output error needs nothing but the
-torques that acted, so closed-loop data do not bias it.
+Two stages. Equation-error starts
+(:mod:`~identifiers.structured.scheduled_start`): each appendage's mode and
+coupling from a linear regression of its deflection's second derivative, then
+the inertia and couplings from the hub's torque balance, on signals passed
+through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
+from each start, every parameter, the initial state included, by bounded
+nonlinear least squares on the weighted simulation error (the model
+re-discretized per :data:`RESOLUTION` of drive travel; the tip gains solved
+linearly inside every evaluation, variable projection), the best kept. Output
+error needs nothing but the torques that acted, so closed-loop data do not
+bias it.
 """
 
 from __future__ import annotations
@@ -18,12 +20,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
-from identifiers.structured.scheduled_model import ScheduledPhysicalModel, drive_rotation
+from identifiers.structured.scheduled_model import ScheduledPhysicalModel
+from identifiers.structured.scheduled_start import equation_error_start
 from spacecraft_conventions import OutputLayout, single_threaded_blas
 
 __all__ = ["ScheduledFit", "fit_scheduled_model", "noise_floor", "segments", "simulate_scheduled"]
@@ -220,65 +222,6 @@ class _Problem:
         return least_squares(lambda p: self.evaluate(p)[0], p0, method="trf", x_scale="jac",
                              bounds=(lo, hi), max_nfev=max_nfev)
 
-    # ------------------------------------------------------------ the start
-    def _filtered(self, x: np.ndarray, tau: float, order: int) -> np.ndarray:
-        """``s^order / (tau s + 1)^3`` applied to each column of ``x``."""
-        den = np.poly1d([tau, 1.0]) ** 3
-        num = np.zeros(order + 1)
-        num[0] = 1.0
-        system = scipy.signal.cont2discrete((num, den.coeffs), self.dt, method="bilinear")
-        b, a = np.ravel(system[0]), np.ravel(system[1])
-        return scipy.signal.lfilter(b, a, x, axis=0)
-
-    def start(self, y: np.ndarray, tau: float) -> np.ndarray:
-        """Equation-error parameters (see the module docstring) at filter constant tau."""
-        n, rot = self.n, self.turning
-        y = np.where(np.isfinite(y), y, 0.0)
-        first = [int(np.flatnonzero(self.sensors == k)[0]) for k in range(n)]
-        rows = self.defl[first]
-        r = np.stack([drive_rotation(self.axis, a) for a in self.angle])       # (T, 3, 3)
-        om1 = self._filtered(y[:, self.rate], tau, 1)
-        d0, d1, d2 = (self._filtered(y[:, rows], tau, o) for o in (0, 1, 2))
-        uf = self._filtered(self.u, tau, 0)
-        keep = slice(int(6 * tau / self.dt), None)
-        turned = np.einsum("tij,tj->ti", r, om1)
-        w, zeta, g = np.empty(n), np.empty(n), np.empty((n, 3))
-        for k in range(n):
-            reg = np.column_stack([d0[:, k], d1[:, k], turned if rot[k] else om1])[keep]
-            th = np.linalg.lstsq(reg, -d2[keep, k], rcond=None)[0]
-            w[k] = np.sqrt(max(th[0], (2 * np.pi * FREQUENCY_BOUNDS_HZ[0]) ** 2))
-            zeta[k] = np.clip(th[1] / (2 * w[k]), *DAMPING_BOUNDS)
-            g[k] = th[2:]
-        # hub: u = J omega' + sum_k F_k(a) eta_k'' with F_k(a) eta_k = R(a)^T c_k y_k
-        sym = [np.outer(e, f) + np.outer(f, e) - (np.outer(e, e) if i == j else 0.0)
-               for i, e in enumerate(np.eye(3)) for j, f in enumerate(np.eye(3)) if j >= i]
-        cols = [om1 @ s.T for s in sym]
-        for k in range(n):
-            for e in np.eye(3):
-                along = np.einsum("tji,j->ti", r, e) if rot[k] else np.tile(e, (len(y), 1))
-                cols.append(along * d2[:, k:k + 1])
-        design = np.stack([c[keep].ravel() for c in cols], axis=1)
-        th = np.linalg.lstsq(design, uf[keep].ravel(), rcond=None)[0]
-        inertia = sum(t * s for t, s in zip(th[:6], sym, strict=True))
-        couplings = np.empty((n, 3))
-        for k in range(n):
-            c = th[6 + 3 * k:9 + 3 * k]
-            tip = np.sqrt(max(abs(g[k] @ c) / max(c @ c, 1e-30), 1e-12))
-            couplings[k] = np.sign(g[k] @ c or 1.0) * g[k] / tip
-        inertia = 0.5 * (inertia + inertia.T)
-        if np.linalg.eigvalsh(inertia).min() <= 0:
-            inertia = np.diag(np.maximum(np.diag(inertia), 1e3))
-        lowest = np.linalg.eigvalsh(inertia).min()
-        for _ in range(40):           # keep S = J - F F^T well inside the SPD cone
-            rest = inertia - couplings.T @ couplings
-            if np.linalg.eigvalsh(rest).min() > 0.3 * lowest:
-                break
-            couplings *= 0.8
-        x0 = np.zeros(6 + 2 * n)
-        if np.all(np.isfinite(self.y[0])) and self.good[0]:
-            x0[0:3], x0[3:6] = self.y[0, self.att], self.y[0, self.rate]
-        return self.pack(rest, np.zeros(2), w, zeta, couplings, x0)
-
 
 @single_threaded_blas
 def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
@@ -369,7 +312,7 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     best = None
     for tau in filter_constants:
         try:
-            p0 = problem.start(y, float(tau))
+            p0 = equation_error_start(problem, y, float(tau))
         except (np.linalg.LinAlgError, ValueError):
             continue
         solution = problem.solve(p0, start_nfev)
