@@ -30,9 +30,14 @@ def _watch(parent: int, period: float) -> None:
 
 
 def exit_with_parent(period: float = 1.0) -> None:
-    """Pool initializer: end this process within ``period`` seconds (``os._exit(1)``)
-    once its parent has died, by whatever means (a daemon thread polls the parent
-    process id)."""
+    """Pool initializer: end this process (``os._exit(1)``) once its parent has died,
+    by whatever means (a daemon thread polls the parent process id).
+
+    Parameters
+    ----------
+    period : float
+        Seconds between polls: the process ends at most this long after its parent.
+    """
     threading.Thread(target=_watch, args=(os.getppid(), float(period)), daemon=True,
                      name="exit-with-parent").start()
 
@@ -41,7 +46,13 @@ def exit_with_parent(period: float = 1.0) -> None:
 def sigterm_as_interrupt() -> Iterator[None]:
     """While inside, SIGTERM raises ``KeyboardInterrupt`` in the main thread (as
     Ctrl-C does); outside the main thread, or when a SIGTERM handler is already
-    installed, it changes nothing."""
+    installed, it changes nothing.
+
+    Returns
+    -------
+    contextlib.AbstractContextManager
+        A context manager; the default SIGTERM disposition is restored on exit.
+    """
     if (threading.current_thread() is not threading.main_thread()
             or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
         yield
