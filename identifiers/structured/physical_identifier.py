@@ -98,6 +98,7 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
         super().reset()
         self.fit: PhysicalFit | None = None
         self._record: list[tuple[np.ndarray, np.ndarray]] = []
+        self._retry_at = 0
         self._kf: KalmanPredictor | None = None
         self._mats: tuple[np.ndarray, ...] | None = None
         self._q = self._r = None
@@ -118,7 +119,7 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
         y = np.where(seen, y, np.nan)
         if self.fit is None:
             self._record.append((u.copy(), y.copy()))
-            if len(self._record) >= self.warmup:
+            if len(self._record) >= max(self.warmup, self._retry_at):
                 self._fit()
             return
         a, b, c, _, _ = self._mats
@@ -136,7 +137,9 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
         a, b = model.A, model.B * su[None, :]
         c = model.C / sy[:, None]
         if not all(np.isfinite(m).all() for m in (a, b, c)):
-            return                    # keep recording; the next sample tries again
+            # keep recording; try again once the record is half a warm-up longer
+            self._retry_at = len(self._record) + max(self.warmup // 2, 1)
+            return
         self.fit = fit
         self._record = []
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)

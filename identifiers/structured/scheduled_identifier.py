@@ -137,6 +137,7 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         self.fit: ScheduledFit | None = None
         self.angle = 0.0
         self._record: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self._retry_at = 0
         self._kf: KalmanPredictor | None = None
         self._mats: tuple[np.ndarray, ...] | None = None
         self._mats_angle = np.nan
@@ -172,7 +173,7 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
         y = np.where(seen, y, np.nan)
         if self.fit is None:
             self._record.append((u.copy(), y.copy(), self.angle))
-            if len(self._record) >= self.warmup:
+            if len(self._record) >= max(self.warmup, self._retry_at):
                 self._fit()
             return
         if abs(self.angle - self._mats_angle) > self.schedule_resolution:
@@ -207,10 +208,12 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
                                       sensor_appendage=self.sensor_appendage,
                                       drive_axis=self.drive_axis, **self.fit_options)
         except np.linalg.LinAlgError:
-            return                       # keep recording; the next sample tries again
+            fit = None
         self.fit = fit
-        if not self._discretize(float(angle[-1])):
+        if fit is None or not self._discretize(float(angle[-1])):
+            # keep recording; try again once the record is half a warm-up longer
             self.fit = None
+            self._retry_at = len(self._record) + max(self.warmup // 2, 1)
             return
         states = simulate_scheduled(fit.model, u, angle, self.dt, fit.initial_state)
         fitted = states @ fit.model.output_matrix(self.layout).T / sy

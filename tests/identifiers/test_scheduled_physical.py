@@ -234,3 +234,21 @@ def test_the_identifier_refuses_what_it_cannot_identify():
         ident.set_schedule(np.nan)
     with pytest.raises(ValueError, match="3 body torques"):
         ident.update(np.zeros(2), np.zeros(10))
+
+
+def test_a_failed_fit_is_retried_after_half_a_warmup_not_every_sample(monkeypatch):
+    import identifiers.structured.scheduled_identifier as module
+
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(len(args[0]))
+        raise np.linalg.LinAlgError("no usable start")
+
+    monkeypatch.setattr(module, "fit_scheduled_model", failing)
+    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40)
+    rng = np.random.default_rng(6)
+    for _ in range(79):
+        ident.update(rng.normal(size=3), rng.normal(size=10) * STANDARD_OUTPUTS.scales())
+    assert calls == [40, 60]                      # at the warm-up, then 20 samples later
+    assert ident.model is None and ident.fit is None
