@@ -19,18 +19,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
-from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.online import OnlineIdentifier
-from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
+from identifiers.structured.physical_fit import fit_physical_model
 from identifiers.structured.physical_model import simulate
 from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.state_filter import ModelFilter
+from identifiers.structured.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["PhysicalFitIdentifier"]
 
 
-class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
+class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
     """A physical rigid-flexible model fitted to the warm-up by output error, then held.
 
     Parameters
@@ -70,8 +69,6 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
     (True, (slice(0, 3, None), slice(3, 6, None)))
     """
 
-    _SHARED_ITEMS = ("_pending", "_record")
-
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n_modes: int = 4,
                  dt: float = 0.1, warmup: int = 300, process_torque: float = 0.05,
                  grid_hz: Sequence[float] | None = None,
@@ -94,40 +91,10 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
                          output_scale=self.layout.scales() if output_scale is None
                          else output_scale, max_abs=max_abs)
 
-    def reset(self) -> None:
-        super().reset()
-        self.fit: PhysicalFit | None = None
-        self._record: list[tuple[np.ndarray, np.ndarray]] = []
-        self._retry_at = 0
-        self._kf: KalmanPredictor | None = None
-        self._mats: tuple[np.ndarray, ...] | None = None
-        self._q = self._r = None
-        self._seen: np.ndarray | None = None
-
-    def restart(self) -> None:
-        """A new record of the same plant: keep the fit, restart the state's filter
-        (``x = 0`` with a vague covariance); before the fit, keep recording."""
-        if self._kf is not None:
-            self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
-
-    def _allocate(self, r: int, m: int) -> None:
-        """Nothing before the fit: the record grows sample by sample."""
-
-    # ------------------------------------------------------------ streaming
-    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
-        seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
-        y = np.where(seen, y, np.nan)
-        if self.fit is None:
-            self._record.append((u.copy(), y.copy()))
-            if len(self._record) >= max(self.warmup, self._retry_at):
-                self._fit()
-            return
-        a, b, c, _, _ = self._mats
-        self._kf.update(a, b, c, self._q, self._r, u, y)
-
-    def _fit(self) -> None:
+    def _fit(self) -> bool:
         """Fit the physical model to the record (physical units), build the
-        normalized model and run the state's filter over the record."""
+        normalized model and start the state's filter over the record; False if the
+        model is not finite."""
         su, sy = self._su, self._sy
         u = np.array([s[0] for s in self._record])
         y = np.array([s[1] for s in self._record])
@@ -137,32 +104,20 @@ class PhysicalFitIdentifier(ModelFilter, OnlineIdentifier):
         a, b = model.A, model.B * su[None, :]
         c = model.C / sy[:, None]
         if not all(np.isfinite(m).all() for m in (a, b, c)):
-            # keep recording; try again once the record is half a warm-up longer
-            self._retry_at = len(self._record) + max(self.warmup // 2, 1)
-            return
+            return False
         self.fit = fit
-        self._record = []
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
-        # the filter's noise: the fit's residual per output, and unmodelled torque
+        self._q = self._process_noise(b)
+        # the filter's measurement noise: the fit's residual per output
         attitude, rate, q = simulate(fit.model, u * su, self.dt, fit.initial_state)
         fitted = np.zeros_like(y)
         for name, rows in self.layout:
             fitted[:, rows] = {"attitude": attitude, "rate": rate,
                                "deflection": q @ fit.model.tips.T}[name] / sy[rows]
-        self._r = np.maximum(np.nanmean((y - fitted) ** 2, axis=0), 1e-12)
-        self._q = (self.process_torque / su.mean()) ** 2 * (b @ b.T) \
-            + 1e-12 * np.eye(self.n)
-        self._kf = KalmanPredictor(self.n, initial_covariance=1e-6)
-        self._kf.x = fit.initial_state.copy()
-        for uk, yk in zip(u, y, strict=True):
-            self._kf.update(a, b, c, self._q, self._r, uk, yk)
+        self._start_filter(fit.initial_state, u, y, fitted)
+        return True
 
     # ------------------------------------------------------------ results
-    @property
-    def ready(self) -> bool:
-        """True once the model is fitted."""
-        return self.fit is not None and super().ready
-
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """``J^-1`` (rad/s^2 per N m) with the fit's covariance; None before the fit."""

@@ -19,21 +19,19 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
-from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.online import OnlineIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.scheduled_fit import (
-    ScheduledFit,
     fit_scheduled_model,
     simulate_scheduled,
 )
-from identifiers.structured.state_filter import ModelFilter
+from identifiers.structured.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["ScheduledPhysicalIdentifier"]
 
 
-class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
+class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up.
 
     Call :meth:`set_schedule` with the drive angle at a sample before the
@@ -88,8 +86,6 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
     (True, 0.5)
     """
 
-    _SHARED_ITEMS = ("_pending", "_record")
-
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *,
                  turning: Sequence[bool] | None = None,
                  sensor_appendage: Sequence[int] | None = None,
@@ -134,21 +130,9 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
 
     def reset(self) -> None:
         super().reset()
-        self.fit: ScheduledFit | None = None
         self.angle = 0.0
-        self._record: list[tuple[np.ndarray, np.ndarray, float]] = []
-        self._retry_at = 0
-        self._kf: KalmanPredictor | None = None
-        self._mats: tuple[np.ndarray, ...] | None = None
         self._mats_angle = np.nan
         self._gain_at: tuple[float, RigidGainEstimate] | None = None
-        self._q = self._r = None
-        self._seen: np.ndarray | None = None
-
-    def restart(self) -> None:
-        """A new record of the same plant: keep the fit, restart the state's filter."""
-        if self._kf is not None:
-            self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
 
     def set_schedule(self, angle: float) -> None:
         """The drive angle (rad) at the sample the next :meth:`update` carries; the
@@ -164,22 +148,13 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
             raise ValueError(f"the drive angle must be finite, got {angle}")
         self.angle = angle
 
-    def _allocate(self, r: int, m: int) -> None:
-        """Nothing before the fit: the record grows sample by sample."""
-
     # ------------------------------------------------------------ streaming
-    def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
-        seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
-        y = np.where(seen, y, np.nan)
-        if self.fit is None:
-            self._record.append((u.copy(), y.copy(), self.angle))
-            if len(self._record) >= max(self.warmup, self._retry_at):
-                self._fit()
-            return
+    def _record_item(self, u: np.ndarray, y: np.ndarray) -> tuple:
+        return (u.copy(), y.copy(), self.angle)
+
+    def _follow(self) -> None:
         if abs(self.angle - self._mats_angle) > self.schedule_resolution:
             self._discretize(self.angle)      # on failure the last model is kept
-        a, b, c, _, _ = self._mats
-        self._kf.update(a, b, c, self._q, self._r, u, y)
 
     def _discretize(self, angle: float) -> bool:
         """Normalized ``(A, B, C)`` of the fitted model at ``angle``; False if not finite."""
@@ -193,12 +168,12 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
             return False
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
         self._mats_angle = angle
-        self._q = (self.process_torque / su.mean()) ** 2 * (b @ b.T) + 1e-12 * np.eye(self.n)
+        self._q = self._process_noise(b)
         return True
 
-    def _fit(self) -> None:
-        """Fit the model to the record (physical units), then run the state's filter
-        over the record."""
+    def _fit(self) -> bool:
+        """Fit the model to the record (physical units), then start the state's filter
+        over the record; False if no fit or no finite model came out."""
         su, sy = self._su, self._sy
         u = np.array([s[0] for s in self._record]) * su
         y = np.array([s[1] for s in self._record]) * sy
@@ -208,30 +183,16 @@ class ScheduledPhysicalIdentifier(ModelFilter, OnlineIdentifier):
                                       sensor_appendage=self.sensor_appendage,
                                       drive_axis=self.drive_axis, **self.fit_options)
         except np.linalg.LinAlgError:
-            fit = None
+            return False
         self.fit = fit
-        if fit is None or not self._discretize(float(angle[-1])):
-            # keep recording; try again once the record is half a warm-up longer
-            self.fit = None
-            self._retry_at = len(self._record) + max(self.warmup // 2, 1)
-            return
+        if not self._discretize(float(angle[-1])):
+            return False
         states = simulate_scheduled(fit.model, u, angle, self.dt, fit.initial_state)
         fitted = states @ fit.model.output_matrix(self.layout).T / sy
-        y = y / sy
-        self._r = np.maximum(np.nanmean((y - fitted) ** 2, axis=0), 1e-12)
-        self._record = []
-        self._kf = KalmanPredictor(self.n, initial_covariance=1e-6)
-        self._kf.x = fit.initial_state.copy()
-        a, b, c, _, _ = self._mats
-        for uk, yk in zip(u / su, y, strict=True):
-            self._kf.update(a, b, c, self._q, self._r, uk, yk)
+        self._start_filter(fit.initial_state, u / su, y / sy, fitted)
+        return True
 
     # ------------------------------------------------------------ results
-    @property
-    def ready(self) -> bool:
-        """True once the model is fitted."""
-        return self.fit is not None and super().ready
-
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """``J(a)^-1`` (rad/s^2 per N m) with the fit's covariance, both at the angle of
