@@ -14,7 +14,7 @@ on each other.
   their channel labels and :class:`OutputLayout`, which gives each group's
   rows of an output or observation vector by name.
 * :mod:`spacecraft_conventions.processes`: pool workers that end with their
-  driver, and SIGTERM handled as Ctrl-C.
+  driver, SIGTERM handled as Ctrl-C, and a driver's exit that joins nothing.
 """
 
 from spacecraft_conventions.blas import single_threaded_blas
@@ -30,7 +30,7 @@ from spacecraft_conventions.outputs import (
     OutputLayout,
     match_groups,
 )
-from spacecraft_conventions.processes import exit_with_parent, sigterm_as_interrupt
+from spacecraft_conventions.processes import exit_now, exit_with_parent, sigterm_as_interrupt
 from spacecraft_conventions.sensors import NOMINAL_SCALE, NOMINAL_TORQUE, nominal_scale
 from spacecraft_conventions.units import DEG_PER_RAD, RAD_PER_DEG
 from spacecraft_conventions.version import __version__
@@ -51,6 +51,7 @@ __all__ = [
     "CostWeights",
     "OutputLayout",
     "__version__",
+    "exit_now",
     "exit_with_parent",
     "match_groups",
     "nominal_scale",

@@ -7,19 +7,22 @@ a batch scheduler's SIGTERM or SIGKILL, a crash) they used to stay behind as
 orphans. :func:`exit_with_parent`, a pool initializer, ends each worker
 within a second of its parent's death; :func:`sigterm_as_interrupt` makes
 SIGTERM unwind a driver like Ctrl-C, so it stops its pool and keeps what it
-finished.
+finished; :func:`exit_now` ends a driver whose pool thread cannot be joined.
 """
 
 from __future__ import annotations
 
 import contextlib
+import multiprocessing.util
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
+from typing import NoReturn
 
-__all__ = ["exit_with_parent", "sigterm_as_interrupt"]
+__all__ = ["exit_now", "exit_with_parent", "sigterm_as_interrupt"]
 
 
 def _watch(parent: int, period: float) -> None:
@@ -66,3 +69,32 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def exit_now(status: int, message: str = "") -> NoReturn:
+    """End this process at once with ``status``, ``message`` the last line on stderr.
+
+    For a driver whose stopped pool left a thread blocked for good (a normal exit
+    would join it and hang). Nothing is joined, but multiprocessing's own
+    non-blocking exit work runs first: the semaphores of the pool's queues are
+    unlinked, so its resource tracker does not print a "leaked semaphore
+    objects" warning after ``message``.
+
+    Parameters
+    ----------
+    status : int
+        The exit status (130 after an interrupt).
+    message : str
+        Written to stderr as is (end it with a newline) after stdout is flushed.
+    """
+    # the finalizers of priority >= 0 are what multiprocessing's exit runs before it
+    # joins anything: queues closed, semaphores unlinked and unregistered. Private
+    # to multiprocessing, so a Python without it only loses the tidy-up
+    run_finalizers = getattr(multiprocessing.util, "_run_finalizers", None)
+    if run_finalizers is not None:
+        with contextlib.suppress(Exception):
+            run_finalizers(0)
+    sys.stdout.flush()
+    sys.stderr.write(message)
+    sys.stderr.flush()
+    os._exit(status)

@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from controllers import LQRWeights
-from spacecraft_conventions import __version__, sigterm_as_interrupt
+from spacecraft_conventions import __version__, exit_now, sigterm_as_interrupt
 from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
 from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
@@ -652,10 +652,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             # (most likely on a result a worker was stopped while writing), and a normal
             # exit joins it: 1 interrupt in 8 hung for good (tests/test_reliability.py,
             # d12). Leave at once, the line written and the streams flushed
-            sys.stdout.flush()
-            sys.stderr.write(message)
-            sys.stderr.flush()
-            os._exit(130)
+            exit_now(130, message)
         parser.exit(130, message)
     return 2   # not reached: parser.exit raises SystemExit
 

@@ -468,6 +468,23 @@ def test_d12_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     assert rest.strip().splitlines()[-1].startswith("spacecraft control: interrupted")
 
 
+def test_d12_leaving_at_once_after_an_interrupt_leaks_no_semaphore():
+    """The interrupt's last resort (a pool thread that cannot be joined: exit at once)
+    still unlinks the pool's semaphores: multiprocessing's resource tracker printed a
+    "leaked semaphore objects" warning after the interrupted line (1 CI run in about 16;
+    the warning came on every such exit while the pool's queues were still referenced)."""
+    code = ("import multiprocessing\n"
+            "from spacecraft_conventions import exit_now\n"
+            "if __name__ == '__main__':\n"
+            "    queue = multiprocessing.get_context('spawn').Queue()\n"
+            "    queue.put(1)\n"
+            "    exit_now(130, 'spacecraft control: interrupted\\n')\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 130
+    assert proc.stderr.strip().splitlines() == ["spacecraft control: interrupted"], proc.stderr
+
+
 def _children(pid: int) -> list[int]:
     """Process ids whose parent is ``pid`` (from /proc)."""
     found = []
