@@ -86,6 +86,11 @@ def exit_now(status: int, message: str = "") -> NoReturn:
         The exit status (130 after an interrupt).
     message : str
         Written to stderr as is (end it with a newline) after stdout is flushed.
+
+    Returns
+    -------
+    NoReturn
+        Never: the process ends (``os._exit``).
     """
     # the finalizers of priority >= 0 are what multiprocessing's exit runs before it
     # joins anything: queues closed, semaphores unlinked and unregistered. Private

@@ -184,10 +184,56 @@ def test_adaptive_lqg_runs_and_counts_its_safeguards():
     traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
     assert stats["steps"] == 650
-    assert stats["fallback_steps"] >= ctrl.identifier.warmup - 1   # robust LQG until warmed up
+    assert stats["fallback_steps"] >= ctrl.identifier.warmup - 1   # not identified until warm
     assert stats["redesigns"] + stats["rejected"] + stats["failed_designs"] > 0
     assert np.all(np.isfinite(traj.actions))
     assert stats["excitation_rms_Nm"] > 0
+
+
+class _RecordedPD(PD):
+    """A PD that records the step of every call and the action it returned."""
+
+    def reset(self, seed=None):
+        super().reset(seed)
+        self.calls: list[tuple[int, np.ndarray]] = []
+
+    def act(self, obs, info=None):
+        action = super().act(obs, info)
+        self.calls.append((len(self.calls), np.array(action, dtype=float)))
+        return action
+
+
+def test_the_warmup_controller_flies_until_the_identifier_has_a_model():
+    """A gentle PD flies the identifier's warm-up (the robust design's faster loop left
+    the start's manoeuvre ringing in the modes), then never again: the robust design
+    covers the rejections after that (a PD without integral must not fly on when no
+    identified gain passes: see the integral test below)."""
+    env = gym.make("FlexibleSpacecraftDocking-v2", task="slew")
+    warm = _RecordedPD(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped, warmup_controller=warm)
+    handed = []
+    transfer = ctrl._transfer_integral
+    ctrl._transfer_integral = lambda to_identified: (handed.append(to_identified),
+                                                     transfer(to_identified))
+    traj = run_episode(env, ctrl, seed=0, max_steps=700)
+    assert ctrl._warm and ctrl.stats["redesigns"] > 0
+    first = len(warm.calls)                  # the first step with a model
+    assert ctrl.identifier.warmup - 1 <= first <= ctrl.identifier.warmup + 1
+    pd_torque = np.array([a for _, a in warm.calls[:first - 1]]) * ctrl.max_torque
+    np.testing.assert_allclose(traj.torque[:first - 1], pd_torque + traj.excitation[:first - 1],
+                               rtol=0, atol=1e-5)          # float32 actions
+    # the robust design, whose filter and integral ran on all along, flies from the
+    # model's arrival until the first gain passes the acceptance test; its integral is
+    # handed over then, as at every later switch
+    assert handed and handed[0] is True and ctrl.stats["fallback_steps"] > first
+    # one controller for both roles: the robust design flies the warm-up
+    robust = RobustLQG(env.unwrapped)
+    both = AdaptiveLQG(env.unwrapped, fallback=robust, warmup_controller=robust,
+                       excitation=BinaryExcitation(0.0, 0.0))
+    alone = RobustLQG(env.unwrapped)
+    a = run_episode(env, both, seed=0, max_steps=100).actions
+    np.testing.assert_allclose(a, run_episode(env, alone, seed=0, max_steps=100).actions,
+                               rtol=0, atol=1e-12)
 
 
 def test_disk_margin_of_a_scalar_observer_loop_closed_form():
