@@ -27,8 +27,8 @@ Every control step k (docs/design/control.md):
    warm-up) a gentle attitude PD flies instead (``warmup_controller``):
    the robust design's faster rigid-body loop flew the start's slew or
    attitude correction without damping the modes, and what it left
-   ringing was most of what the loop cost after 100 s. A supervisor also takes the identified design
-   off for :data:`SUPERVISOR_HOLD_S` when the measured envelope grows
+   ringing was most of what the loop cost after 100 s. A supervisor also
+   takes the identified design off for :data:`SUPERVISOR_HOLD_S` when the measured envelope grows
    (:meth:`AdaptiveLQG._supervise`): a stale model can pass every test on
    itself;
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
@@ -141,8 +141,8 @@ class AdaptiveLQG(_LQGController):
         the same law handed the true model after the 30 s warm-up cost
         1.54x the oracle LQG from 100 s behind it and 0.73x behind the PD
         (constant plant at 120 deg, slew, 4 seeds), 4.73x against 1.77x on
-        paddle-rotation regulation (docs/design/control.md). Pass
-        ``self.fallback``'s design to keep one controller for both roles.
+        paddle-rotation regulation (docs/design/control.md). Pass the same
+        object as ``fallback`` to keep one controller for both roles.
     bridge_s : float
         Seconds after a detected change during which the fallback flies
         (default 0: the acceptance test, which reads the identifier's

@@ -191,15 +191,15 @@ def test_adaptive_lqg_runs_and_counts_its_safeguards():
 
 
 class _RecordedPD(PD):
-    """A PD that records the step of every call and the action it returned."""
+    """A PD that records every action it returned."""
 
     def reset(self, seed=None):
         super().reset(seed)
-        self.calls: list[tuple[int, np.ndarray]] = []
+        self.actions: list[np.ndarray] = []
 
     def act(self, obs, info=None):
         action = super().act(obs, info)
-        self.calls.append((len(self.calls), np.array(action, dtype=float)))
+        self.actions.append(np.array(action, dtype=float))
         return action
 
 
@@ -217,9 +217,9 @@ def test_the_warmup_controller_flies_until_the_identifier_has_a_model():
                                                      transfer(to_identified))
     traj = run_episode(env, ctrl, seed=0, max_steps=700)
     assert ctrl._warm and ctrl.stats["redesigns"] > 0
-    first = len(warm.calls)                  # the first step with a model
+    first = len(warm.actions)                # the first step with a model
     assert ctrl.identifier.warmup - 1 <= first <= ctrl.identifier.warmup + 1
-    pd_torque = np.array([a for _, a in warm.calls[:first - 1]]) * ctrl.max_torque
+    pd_torque = np.array(warm.actions[:first - 1]) * ctrl.max_torque
     np.testing.assert_allclose(traj.torque[:first - 1], pd_torque + traj.excitation[:first - 1],
                                rtol=0, atol=1e-5)          # float32 actions
     # the robust design, whose filter and integral ran on all along, flies from the
