@@ -16,6 +16,9 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
   the turning appendages' couplings and inertia following a drive angle
   (``set_schedule``), fitted once to the warm-up by output error; for a
   spacecraft whose paddles turn.
+* :class:`StructuredRPBSID`: the paper's improved recursive PBSID on the
+  flexible part, beside an exact rigid block with the recursively estimated
+  inverse inertia (the paper's algorithm with the rigid body known).
 * :class:`ImprovedRPBSID`: the paper's improved recursive PBSID (affine
   projection sign state update), for reproduction.
 * :class:`MomentRefitRPBSID`: recursive VARX plus batch-equivalent refits of
@@ -72,11 +75,13 @@ from identifiers.structured.modal_discovery import discover_resonators, merge_re
 from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
 from identifiers.structured.physical_identifier import PhysicalFitIdentifier
 from identifiers.structured.physical_model import PhysicalModel
+from identifiers.structured.rigid_block import RigidBlock
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.scheduled_fit import ScheduledFit, fit_scheduled_model
 from identifiers.structured.scheduled_identifier import ScheduledPhysicalIdentifier
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
+from identifiers.structured.structured_rpbsid import StructuredRPBSID
 from identifiers.subspace.batch import PBSIDResult, pbsid
 from identifiers.subspace.classical import ClassicalRPBSID
 from identifiers.subspace.improved import ImprovedRPBSID
@@ -116,12 +121,14 @@ __all__ = [
     "RecursiveVARXIdentifier",
     "RegressionGLR",
     "Resonator",
+    "RigidBlock",
     "RigidFlexibleIdentifier",
     "RigidGainEstimate",
     "ScheduledFit",
     "ScheduledPhysicalIdentifier",
     "ScheduledPhysicalModel",
     "StateSpaceModel",
+    "StructuredRPBSID",
     "SystemRLSIdentifier",
     "WindowedPBSID",
     "__version__",

@@ -351,10 +351,11 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--out", type=_output_directory, default="results/control",
                      help="output directory")
     ctl.add_argument("--controllers", nargs="+", choices=sorted(CONTROLLER_KEYS), default=None,
-                     help="controllers to run (default: all but the two options "
+                     help="controllers to run (default: all but the three options "
                           "adaptive-lqg-physical and adaptive-lqg-scheduled, the adaptive LQG "
                           "on a physical model fitted to its warm-up, held or scheduled on the "
-                          "paddle angle)")
+                          "paddle angle, and adaptive-lqg-structured-rpbsid, on the paper's "
+                          "improved RPBSID with an exact rigid block)")
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "
                           "+-2 deg")

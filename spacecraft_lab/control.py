@@ -40,7 +40,7 @@ from controllers import (
     episode_metrics,
     run_episode,
 )
-from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier
+from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier, StructuredRPBSID
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
     DRIVE_AXIS,
@@ -58,7 +58,8 @@ from spacecraft_lab.reporting import control_table
 from spacecraft_lab.sweeps.backends import check_workers
 
 __all__ = ["ALL_CONTROLLER_NAMES", "CONTROLLERS", "CONTROLLER_KEYS", "CONTROLLER_NAMES", "ORACLE",
-           "PHYSICAL", "SAME_LAW", "SCENARIO_NAMES", "SCHEDULED_PHYSICAL", "control_task",
+           "PHYSICAL", "SAME_LAW", "SCENARIO_NAMES", "SCHEDULED_PHYSICAL", "STRUCTURED_RPBSID",
+           "control_task",
            "env_kwargs_for", "run_control", "scheduled_physical_identifier"]
 
 #: Scenarios with a registered environment id.
@@ -87,6 +88,9 @@ def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
             layout, dt=env.unwrapped.model.dt))
     if name == SCHEDULED_PHYSICAL:
         return AdaptiveLQG(env, weights=weights, identifier=scheduled_physical_identifier(env))
+    if name == STRUCTURED_RPBSID:
+        return AdaptiveLQG(env, weights=weights, identifier=StructuredRPBSID(
+            env.unwrapped.observation_layout.sensors(), dt=env.unwrapped.model.dt))
     if name == SAME_LAW:
         return AdaptiveLQG(env, weights=weights, identifier=TrueModelIdentifier(env),
                            excitation=BinaryExcitation(0.0, 0.0))
@@ -105,6 +109,9 @@ PHYSICAL = "adaptive LQG, physical fit"
 #: paddle couplings and inertia turned with the drive's encoder
 #: (:class:`identifiers.ScheduledPhysicalIdentifier`).
 SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
+#: The adaptive law on the paper's improved RPBSID with an exact rigid block
+#: (:class:`identifiers.StructuredRPBSID`): the source paper's algorithm in the loop.
+STRUCTURED_RPBSID = "adaptive LQG, structured RPBSID"
 
 
 def scheduled_physical_identifier(env: gym.Env) -> ScheduledPhysicalIdentifier:
@@ -121,7 +128,7 @@ def scheduled_physical_identifier(env: gym.Env) -> ScheduledPhysicalIdentifier:
 CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", SAME_LAW,
                     ORACLE, "full-state oracle")
 #: Every controller the comparison can fly: the default ones and the options.
-ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL)
+ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL, STRUCTURED_RPBSID)
 
 
 def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
@@ -135,7 +142,8 @@ def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
 CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
                    "adaptive-lqg-physical": PHYSICAL,
-                   "adaptive-lqg-scheduled": SCHEDULED_PHYSICAL, "same-law-oracle": SAME_LAW,
+                   "adaptive-lqg-scheduled": SCHEDULED_PHYSICAL,
+                   "adaptive-lqg-structured-rpbsid": STRUCTURED_RPBSID, "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle"}
 
 
@@ -337,7 +345,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         LQR weights shared by the LQG designs.
     controllers : sequence of str, optional
         Keys of :data:`CONTROLLER_KEYS` (default: those of :data:`CONTROLLER_NAMES`,
-        i.e. all but ``adaptive-lqg-physical`` and ``adaptive-lqg-scheduled``).
+        i.e. all but ``adaptive-lqg-physical``, ``adaptive-lqg-scheduled`` and
+        ``adaptive-lqg-structured-rpbsid``).
     steps : int, optional
         Episode length, steps of 0.1 s (default: the registered 2500).
     save_trajectories : bool

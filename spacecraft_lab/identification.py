@@ -54,6 +54,7 @@ from identifiers import (
     MomentRefitRPBSID,
     OnlineIdentifier,
     PredictorRPBSID,
+    StructuredRPBSID,
     WindowedPBSID,
     add_measurement_noise,
     default_identifier,
@@ -124,6 +125,13 @@ def _rigid_flexible(truth: FlexibleSpacecraftModel, preset: str,
     return default_identifier(truth.output_layout, n=truth.n, dt=truth.dt, **options)
 
 
+def _structured(truth: FlexibleSpacecraftModel, preset: str,
+                **options: Any) -> OnlineIdentifier:
+    kwargs = {**nominal_scales(truth), "dt": truth.dt, **options}
+    build = StructuredRPBSID.paper if preset == "paper" else StructuredRPBSID
+    return build(truth.output_layout, n=truth.n, **kwargs)
+
+
 def _windowed(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> OnlineIdentifier:
     kwargs = {**nominal_scales(truth), "dt": truth.dt, **options}
     if preset != "paper":
@@ -138,6 +146,7 @@ METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
     "moment-refit": _recursive(MomentRefitRPBSID),
     "predictor": _recursive(PredictorRPBSID),
     "improved": _recursive(ImprovedRPBSID),
+    "structured-rpbsid": _structured,
     "classical": _recursive(ClassicalRPBSID),
     "windowed-svd": _windowed,
 }

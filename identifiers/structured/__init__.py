@@ -26,6 +26,11 @@ fits the hub-plus-appendage :class:`ScheduledPhysicalModel`
 :mod:`~identifiers.structured.scheduled_start`) whose turning appendages follow
 a drive angle.
 
+:class:`StructuredRPBSID` (:mod:`~identifiers.structured.structured_rpbsid`) is
+the paper's improved RPBSID on the flexible part beside an exact
+:class:`RigidBlock` (ZOH double integrators with the recursively estimated
+gain): the source paper's algorithm with the rigid body known.
+
 Imports :mod:`identifiers.core` and :mod:`identifiers.subspace` (the mode
 search runs a batch PBSID), never the reverse.
 """
@@ -36,11 +41,13 @@ from identifiers.structured.modal_discovery import discover_resonators, merge_re
 from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
 from identifiers.structured.physical_identifier import PhysicalFitIdentifier
 from identifiers.structured.physical_model import PhysicalModel
+from identifiers.structured.rigid_block import RigidBlock
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.scheduled_fit import ScheduledFit, fit_scheduled_model
 from identifiers.structured.scheduled_identifier import ScheduledPhysicalIdentifier
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
+from identifiers.structured.structured_rpbsid import StructuredRPBSID
 
 __all__ = [
     "ChangeEvent",
@@ -51,11 +58,13 @@ __all__ = [
     "PhysicalModel",
     "RegressionGLR",
     "Resonator",
+    "RigidBlock",
     "RigidFlexibleIdentifier",
     "RigidGainEstimate",
     "ScheduledFit",
     "ScheduledPhysicalIdentifier",
     "ScheduledPhysicalModel",
+    "StructuredRPBSID",
     "discover_resonators",
     "fit_physical_model",
     "fit_scheduled_model",

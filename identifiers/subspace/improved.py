@@ -132,6 +132,15 @@ class ImprovedRPBSID(SystemRLSIdentifier):
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         if learn:
             self._varx.update(self._phi, y)
+        self._state_step(u, y, learn)
+
+    def _markov(self) -> np.ndarray:
+        """The VARX's Markov parameters ``[Xi_1, ..., Xi_p]`` (m x p (r + m))."""
+        return self._varx.theta
+
+    def _state_step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
+        """Everything after the VARX update: the past window, the state step (Eq.
+        41-42), the RLS on Gamma (Eq. 43-46) and on the system matrices (Eq. 47-55)."""
         self._push(u, y)
         fut = self._future
         fut[:-1] = fut[1:]
@@ -141,7 +150,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
             return
         r = self.n_inputs
         zbar = fut[1:]                                           # z_k .. z_{k+p}, k = K - p
-        h_zbar = toeplitz_windows(zbar, self.p) @ self._varx.theta.T      # (p + 1, m)
+        h_zbar = toeplitz_windows(zbar, self.p) @ self._markov().T      # (p + 1, m)
         tau = (zbar[:, r:] - h_zbar).ravel()                     # ybar_k - H_k zbar_k
         gamma = self._gamma.theta
         x_prev = self._x

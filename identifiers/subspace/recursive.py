@@ -143,8 +143,12 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         """Current VARX matrix ``[Xi_1, ..., Xi_p]`` (m x p (r + m)), normalized units."""
         return None if self._varx is None else self._varx.theta.copy()
 
-    def _fill_output(self) -> np.ndarray:
+    def _predict_output(self) -> np.ndarray:
+        """The VARX's one-step prediction of the next output sample (normalized)."""
         return self._varx.predict(self._phi)
+
+    def _fill_output(self) -> np.ndarray:
+        return self._predict_output()
 
     def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:
         """The outlier guard on the normalized one-step innovation.
@@ -158,7 +162,7 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
         """
         if self.outlier_threshold is None or self._k < self.p:
             return True
-        innovation_sq = (y - self._varx.predict(self._phi)) ** 2
+        innovation_sq = (y - self._predict_output()) ** 2
         ms = self._innovation_ms
         if ms is not None and self._k >= self.warmup:
             inside = innovation_sq <= self.outlier_threshold**2 * ms

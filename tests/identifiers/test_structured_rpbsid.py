@@ -1,0 +1,138 @@
+"""The paper's improved RPBSID with an exact rigid block: exact where physics is
+exact, a calibrated gain on the spacecraft, the streaming API."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from identifiers import (
+    RigidGainEstimate,
+    StructuredRPBSID,
+    add_measurement_noise,
+    h_step_predictions,
+    identification_inputs,
+    persistence_predictions,
+    prediction_vaf,
+    relative_gain_error,
+    rigid_body_gain,
+)
+from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
+from spacecraft_env import FlexibleSpacecraftModel
+
+RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
+RATE = STANDARD_OUTPUTS.slice("rate")
+INERTIA = np.array([[30_000.0, 500.0, 0.0], [500.0, 20_000.0, 0.0], [0.0, 0.0, 22_000.0]])
+
+
+def _rigid_body(n_samples: int = 1500, dt: float = 0.1):
+    """Noise-free ZOH double integrators ``psi'' = J^-1 u`` from a non-zero start."""
+    rng = np.random.default_rng(0)
+    g = np.linalg.inv(INERTIA)
+    u = identification_inputs(n_samples, rng, dt)
+    psi, omega = np.array([0.01, -0.02, 0.005]), np.array([1e-4, 0.0, -2e-4])
+    y = np.empty((n_samples, 6))
+    for k in range(n_samples):
+        y[k] = np.concatenate((psi, omega))
+        psi = psi + dt * omega + 0.5 * dt * dt * g @ u[k]
+        omega = omega + dt * g @ u[k]
+    return u, y
+
+
+def _spacecraft(scenario: str, seed: int = 0, n_samples: int = 2500, snr_db: float = 40.0):
+    truth = FlexibleSpacecraftModel(scenario=scenario)
+    rng = np.random.default_rng(seed)
+    u = identification_inputs(n_samples, rng, truth.dt)
+    _, y0 = truth.simulate(u)
+    return truth, u, add_measurement_noise(y0, snr_db, rng)
+
+
+def test_the_rigid_block_is_exact_on_a_noise_free_rigid_body():
+    u, y = _rigid_body()
+    ident = StructuredRPBSID(RIGID, n=8, detect_changes=False)
+    seq = ident.fit(u, y)
+    model = seq[len(seq) - 1]
+    g = np.linalg.inv(INERTIA)
+    assert relative_gain_error(ident.rigid_gain.gain, g) < 1e-3
+    # the exported model (refreshed every 10 samples) carries that gain in exact ZOH
+    # double integrators
+    np.testing.assert_allclose(np.linalg.eigvals(model.A[:6, :6]), 1.0, atol=1e-12)
+    assert relative_gain_error(rigid_body_gain(model, slice(3, 6)), g) < 1e-3
+
+
+@pytest.mark.parametrize("scenario, tolerance", [("constant", 0.02), ("docking", 0.1)])
+def test_on_the_spacecraft_the_gain_is_found_under_the_flexible_modes(scenario, tolerance):
+    """With the attitude and rate levels in the predictor's window the regression
+    absorbs any gain error into an integrator of its own (measured: 34-47 % on the
+    constant plant, noise-free); without them, and with the docking detected, the
+    gain is within a few per cent (0.4 % constant, 4.8 % docking at 250 s)."""
+    truth, u, y = _spacecraft(scenario)
+    ident = StructuredRPBSID(truth.output_layout)
+    ident.fit(u, y)
+    truth_gain = np.linalg.inv(truth.inertia(250.0))
+    estimate = ident.rigid_gain
+    assert isinstance(estimate, RigidGainEstimate)
+    assert relative_gain_error(estimate.gain, truth_gain) < tolerance
+    assert (len(ident.events) > 0) == (scenario == "docking")
+    assert ident.model.A.shape == (ident.order, ident.order) == (22, 22)
+
+
+def test_the_model_predicts_attitude_and_rates_10_s_ahead_better_than_persistence():
+    """The rigid block carries these; the deflections' 10 s prediction is about
+    persistence's on this short record (docs/results/identification.md)."""
+    truth, u, y = _spacecraft("constant", n_samples=1500)
+    ident = StructuredRPBSID(truth.output_layout)
+    seq = ident.fit(u, y)
+    model = prediction_vaf(y, h_step_predictions(seq, u, (100,)), 1000)[100]
+    persistence = prediction_vaf(y, persistence_predictions(y, (100,)), 1000)[100]
+    for group in ("attitude", "rate"):
+        rows = truth.output_layout.slice(group)
+        assert np.median(model[rows]) > np.median(persistence[rows]) + 10, group
+
+
+def test_restart_keeps_what_was_learnt():
+    truth, u, y = _spacecraft("constant", n_samples=800)
+    ident = StructuredRPBSID(truth.output_layout)
+    ident.fit(u, y)
+    gain = ident.rigid_gain.gain.copy()
+    ident.restart()
+    assert ident.model is not None
+    np.testing.assert_array_equal(ident.rigid_gain.gain, gain)
+    ident.update(u[0], y[0])
+    assert np.all(np.isfinite(ident.state))
+
+
+def test_pickle_mid_run_continues_identically_and_runs_are_deterministic():
+    truth, u, y = _spacecraft("constant", n_samples=700)
+    first = StructuredRPBSID(truth.output_layout)
+    first.fit(u[:600], y[:600])
+    copy = pickle.loads(pickle.dumps(first))
+    first.fit(u[600:], y[600:])
+    copy.fit(u[600:], y[600:])
+    np.testing.assert_array_equal(first.model.A, copy.model.A)
+    again = StructuredRPBSID(truth.output_layout)
+    again.fit(u, y)
+    np.testing.assert_array_equal(again.model.B, first.model.B)
+
+
+@pytest.mark.parametrize("kwargs, error", [
+    (dict(layout=OutputLayout.of(("attitude",), n_sensors=0)), ValueError),
+    (dict(layout="standard"), TypeError),
+    (dict(n=6), ValueError),
+    (dict(highpass=1.0), ValueError),
+    (dict(process_torque=0.0), ValueError),
+])
+def test_bad_constructor_arguments(kwargs, error):
+    with pytest.raises(error):
+        StructuredRPBSID(**kwargs)
+
+
+def test_wrong_input_sizes_are_refused_with_the_expected_shape():
+    ident = StructuredRPBSID()
+    with pytest.raises(ValueError, match="3 torque inputs"):
+        ident.update(np.zeros(2), np.zeros(STANDARD_OUTPUTS.size))
+    ident = StructuredRPBSID()
+    with pytest.raises(ValueError, match="entries"):
+        ident.update(np.zeros(3), np.zeros(5))
