@@ -54,6 +54,7 @@ from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
 from identifiers.structured.modal_basis import HighPass
+from identifiers.structured.resonant import resonant_part
 from identifiers.structured.rigid_block import (
     N_RIGID_REGRESSORS,
     RIGID_ORDER,
@@ -65,7 +66,7 @@ from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.subspace.improved import ImprovedRPBSID
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
-__all__ = ["RIGID_PRIOR", "StructuredRPBSID", "resonant_part"]
+__all__ = ["RIGID_PRIOR", "StructuredRPBSID"]
 
 #: Initial covariance of the initial-condition coefficients (unit-peak regressors,
 #: units of the noise variance): vague, so no prior pulls them.
@@ -73,31 +74,6 @@ RIGID_PRIOR = 1e6
 
 #: Samples between refreshes of the combined model the Kalman filter runs on.
 _REFRESH = 10
-
-
-
-def resonant_part(a: np.ndarray, b: np.ndarray, c: np.ndarray, dt: float, min_hz: float
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The part of ``(A, B, C)`` that is lightly damped resonance above ``min_hz``.
-
-    Flexible modes are stable resonators; what a subspace method places at real
-    poles, outside the unit circle or below ``min_hz`` (where high-passed data
-    carry no information) is not a mode of the plant, yet it shapes the slow
-    response. The spectral projection ``P`` onto the kept eigenvalues removes
-    the rest from the input-output map and makes it inert: ``(A P, P B, C P)``
-    (same order; the removed eigenvalues become 0). Returned unchanged when no
-    eigenvalue is removed or the eigenvectors are too ill-conditioned to
-    project with.
-    """
-    lam, vec = np.linalg.eig(a)
-    hz = np.abs(np.angle(lam)) / (2.0 * np.pi * dt)
-    keep = (np.abs(lam.imag) > 1e-9) & (np.abs(lam) < 1.0) & (hz >= min_hz)
-    if keep.all():
-        return a, b, c
-    if np.linalg.cond(vec) > 1e8:
-        return a, b, c
-    proj = np.real(vec[:, keep] @ np.linalg.inv(vec)[keep, :])
-    return a @ proj, proj @ b, c @ proj
 
 
 class StructuredRPBSID(ImprovedRPBSID):
@@ -136,7 +112,8 @@ class StructuredRPBSID(ImprovedRPBSID):
         Lowest frequency (Hz) of a flexible mode the exported model keeps
         (default: the high-pass's corner ``(1 - highpass) / (2 pi dt)``, below
         which the data carry no information); non-oscillatory and unstable
-        poles of the flexible part are removed too (:func:`resonant_part`).
+        poles of the flexible part are removed too
+        (:func:`~identifiers.structured.resonant.resonant_part`).
     change_threshold, discount : float
         Alarm level (a multiple of the test's degrees of freedom) and the
         covariance factor at an alarm (defaults 10 and 10). The modal

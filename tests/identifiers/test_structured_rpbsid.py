@@ -140,3 +140,38 @@ def test_wrong_input_sizes_are_refused_with_the_expected_shape():
     ident = StructuredRPBSID()
     with pytest.raises(ValueError, match="entries"):
         ident.update(np.zeros(3), np.zeros(5))
+
+
+def _resonator(hz: float, zeta: float, dt: float = 0.1) -> np.ndarray:
+    r = np.exp(-zeta * 2 * np.pi * hz * dt)
+    th = 2 * np.pi * hz * dt * np.sqrt(1 - zeta**2)
+    return r * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+
+
+def test_resonant_part_keeps_exactly_the_modes_above_the_corner():
+    """A 0.2 Hz mode kept; a real pole, an unstable pair and a 0.01 Hz pair removed:
+    the projected model's response equals the 0.2 Hz mode's alone, same order."""
+    from identifiers.structured.resonant import resonant_part
+    blocks = [_resonator(0.2, 0.01), np.array([[0.99]]), 1.01 * _resonator(0.3, 0.0),
+              _resonator(0.01, 0.01)]
+    n = sum(b.shape[0] for b in blocks)
+    a = np.zeros((n, n))
+    i = 0
+    for block in blocks:
+        a[i:i + block.shape[0], i:i + block.shape[0]] = block
+        i += block.shape[0]
+    rng = np.random.default_rng(0)
+    t = rng.normal(size=(n, n))                 # hide the blocks in other coordinates
+    a = t @ a @ np.linalg.inv(t)
+    b, c = t @ rng.normal(size=(n, 2)), rng.normal(size=(3, n)) @ np.linalg.inv(t)
+    a_k, b_k, c_k = resonant_part(a, b, c, dt=0.1, min_hz=0.05)
+    assert a_k.shape == a.shape
+    kept = np.sort_complex(np.linalg.eigvals(a_k)[np.abs(np.linalg.eigvals(a_k)) > 1e-9])
+    np.testing.assert_allclose(kept, np.sort_complex(np.linalg.eigvals(_resonator(0.2, 0.01))),
+                               atol=1e-9)
+    tinv = np.linalg.inv(t)
+    b_mode, c_mode = (tinv @ b)[:2], (c @ t)[:, :2]
+    for z in np.exp(1j * np.array([0.01, 0.1, 1.0])):
+        want = c_mode @ np.linalg.solve(z * np.eye(2) - blocks[0], b_mode)
+        got = c_k @ np.linalg.solve(z * np.eye(n) - a_k, b_k)
+        np.testing.assert_allclose(got, want, atol=1e-9)
