@@ -151,7 +151,8 @@ METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
     "windowed-svd": _windowed,
 }
 #: Methods run when none are named (the sliding-window SVD takes ~30 s a run).
-DEFAULT_METHODS = ("rigid-flexible", "moment-refit", "predictor", "improved", "classical")
+DEFAULT_METHODS = ("rigid-flexible", "structured-rpbsid", "moment-refit", "predictor", "improved",
+                   "classical")
 
 
 def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "default",

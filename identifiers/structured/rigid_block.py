@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from identifiers.structured.modal_basis import HighPass, ModalFilterBank
+from identifiers.structured.rigid_gain import RigidGainEstimate
 from spacecraft_conventions import OutputLayout
 
 __all__ = ["N_RIGID_REGRESSORS", "RIGID_ORDER", "RigidBlock", "highpass_offset"]
@@ -111,6 +112,27 @@ class RigidBlock:
         """``G`` in normalized units (rate output per integrated torque) from the
         regression's rigid coefficients ``theta`` (m x 8): the rate rows' block."""
         return theta[np.ix_(self._rate, np.arange(3, 6))] / self.scale[3:6]
+
+    def estimate(self, theta: np.ndarray, p: np.ndarray, error_variance: np.ndarray,
+                 output_scale: np.ndarray, input_scale: np.ndarray) -> RigidGainEstimate:
+        """``G`` in physical units with its calibrated covariance, from a regression whose
+        first 8 columns are :meth:`regressor`'s.
+
+        Parameters
+        ----------
+        theta : (m, d) ndarray
+            The regression's estimate (normalized units).
+        p : (d, d) ndarray
+            Its covariance in units of the error variance.
+        error_variance : (m,) ndarray
+            Variance of each output's regression errors (normalized units).
+        output_scale, input_scale : (m,), (3,) ndarray
+            Physical units of one normalized output and torque unit.
+        """
+        rate, cols = self._rate, np.arange(3, 6)
+        return RigidGainEstimate.from_regression(
+            theta[np.ix_(rate, cols)], p[np.ix_(cols, cols)], error_variance[rate],
+            output_scale[rate], self.scale[3:6] * input_scale)
 
     def matrices(self, g: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The exact ZOH rigid block in normalized units, state ``[psi_n; omega_n]``.

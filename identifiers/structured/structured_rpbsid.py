@@ -1,45 +1,32 @@
 """The paper's improved RPBSID with the rigid body known: a structure-aware RPBSID.
 
 A black-box recursive PBSID must place the rigid body's three double
-integrators (a Jordan block at ``z = 1``) from noisy data, and the test
-responses the paper scores tolerate almost no error there (a gain error of
-5 % already costs 5 % test error; see ``docs/results/paper.md``). Physics
-fixes that block up to the inverse inertia ``G = J^-1``, so
-:class:`StructuredRPBSID` keeps it exact and gives the subspace method only
-what physics does not fix, the flexible part:
+integrators (a Jordan block at ``z = 1``) from noisy data, and the paper's
+test responses tolerate almost no error there (docs/results/paper.md).
+Physics fixes that block up to the inverse inertia ``G = J^-1``, so
+:class:`StructuredRPBSID` keeps it exact
+(:class:`~identifiers.structured.rigid_block.RigidBlock`) and gives the
+paper's algorithm only the flexible part:
 
-1. **The rigid block** (:class:`~identifiers.structured.rigid_block.RigidBlock`):
-   the torques integrated once and twice (ZOH) are the rigid body's response
-   per unit of ``G``; with the outputs and the torques through the same
-   high-pass ``((1 - z^-1) / (1 - rho z^-1))^2`` (constants and ramps of the
-   unknown initial attitude and rate removed exactly), every output is
-   ``y_f = Theta_r rho_k + flexible + noise``: linear in the rigid
-   coefficients ``Theta_r`` (``G`` is the rate rows' block).
-2. **One regression for both** (the VARX of the paper, Eq. 20-24, extended):
-   ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k``. The past window holds
-   the high-passed torques, the outputs that see no rigid body (the tip
-   deflections) and the first differences of the rates' flexible part
-   ``w = y_f - Theta_r rho`` (the rigid response removed with the estimate of
-   the time). The predictor terms explain the flexible response, so the gain
-   is not biased by it. No attitude or rate *level* enters the window: with
-   one, the predictor builds an integrator of its own and absorbs any error
-   of the gain (measured: 34-47 % gain error on a noise-free constant plant,
-   0.1 % without). The rate rows' block of the regression's covariance,
-   scaled by the measured error variance, is the gain's calibrated
-   uncertainty (:attr:`StructuredRPBSID.rigid_gain`); a change test on the
-   rate rows discounts the rigid block at an alarm (a docking).
-3. **The flexible part**: the improved RPBSID's state step (Eq. 25-46, with
-   the predict step of :class:`~identifiers.subspace.improved.ImprovedRPBSID`)
-   and its RLS for the system matrices (Eq. 47-55) on ``(u_f, w)``. Filtering
-   input and output by the same filter leaves the transfer function
-   unchanged, so this is the flexible part's model ``(A_f, B_f, C_f, D_f)``.
-4. **The model and its state**: ``A = diag(A_r, A_f)``, ``B = [B_r; B_f]``,
-   ``C = [C_r, C_f]`` with the exact ZOH rigid block ``(A_r, B_r(G), C_r)``;
-   a Kalman filter on that model and the raw signals (the high-passed state
-   of step 3 is not the plant's) gives the state and the model's ``K``.
+1. **One regression** (the paper's VARX, Eq. 20-24, extended):
+   ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k`` on high-passed signals,
+   ``rho`` the rigid regressors (``G`` is the rate rows' block of ``Theta_r``,
+   its covariance the gain's calibrated band). The past window holds the
+   torques, the tip deflections and the rates' first differences, never an
+   attitude or rate *level*: with one, the predictor builds an integrator of
+   its own and absorbs the gain's error (34-47 % on a noise-free constant
+   plant, 0.1 % without). A change test on the rate rows discounts the rigid
+   block at an alarm (a docking).
+2. **The flexible part**: the improved RPBSID's state step (Eq. 25-46) and
+   system regressions (Eq. 47-55) on the torques and the outputs with the
+   rigid response removed, ``w = y_f - Theta_r rho``; only its stable
+   resonances above the high-pass's corner are exported
+   (:func:`~identifiers.structured.resonant.resonant_part`).
+3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``,
+   ``C = [C_r, C_f]``; a Kalman filter on it and the raw signals gives the
+   state and ``K``.
 
-The design, and what it reaches against the modal identifier:
-``docs/design/identification.md``.
+Design and measurements: ``docs/design/identification.md``.
 """
 
 from __future__ import annotations
@@ -142,7 +129,25 @@ class StructuredRPBSID(ImprovedRPBSID):
 
     Examples
     --------
-    XXX
+    The gain of a noise-free rigid body (three ZOH double integrators) from 100 s
+    of multisine torques:
+
+    >>> import numpy as np
+    >>> from identifiers import StructuredRPBSID, identification_inputs, relative_gain_error
+    >>> from spacecraft_conventions import OutputLayout
+    >>> layout = OutputLayout.of(("attitude", "rate"), n_sensors=0)
+    >>> g = np.diag([1 / 30_000, 1 / 20_000, 1 / 22_000])    # J^-1, rad/s^2 per N m
+    >>> u = identification_inputs(1000, np.random.default_rng(0))
+    >>> psi, omega, y = np.zeros(3), np.zeros(3), []
+    >>> for u_k in u:
+    ...     y.append(np.concatenate((psi, omega)))
+    ...     psi, omega = psi + 0.1 * omega + 0.005 * g @ u_k, omega + 0.1 * g @ u_k
+    >>> ident = StructuredRPBSID(layout, n=8)
+    >>> _ = ident.fit(u, np.array(y))
+    >>> bool(relative_gain_error(ident.rigid_gain.gain, g) < 1e-3)
+    True
+    >>> ident.model.A.shape          # 6 rigid states and the flexible part's 2
+    (8, 8)
     """
 
     _SIGNAL_STATE: ClassVar[tuple[str, ...]] = (
@@ -195,8 +200,7 @@ class StructuredRPBSID(ImprovedRPBSID):
         self._hp_y = self._hp_u = None
         self._kf: KalmanPredictor | None = None
         self._combined: tuple[np.ndarray, ...] | None = None
-        self._errvar: np.ndarray | None = None
-        self._sigvar: np.ndarray | None = None
+        self._errvar = self._sigvar = None      # running mean squares: errors, signals
         self._detector = RegressionGLR(threshold=self.change_threshold, dt=self.dt)
         self.events: list[ChangeEvent] = self._detector.events
 
@@ -377,11 +381,8 @@ class StructuredRPBSID(ImprovedRPBSID):
         covariance, from the rate rows of the regression; None before warm-up."""
         if self._varx is None or self._errvar is None or self._k < self.warmup:
             return None
-        rate = self.layout.indices("rate")
-        cols = np.arange(3, 6)
-        return RigidGainEstimate.from_regression(
-            self._varx.theta[np.ix_(rate, cols)], self._varx.P[np.ix_(cols, cols)],
-            self._errvar[rate], self._sy[rate], self._rigid.scale[3:6] * self._su)
+        return self._rigid.estimate(self._varx.theta, self._varx.P, self._errvar, self._sy,
+                                    self._su)
 
     def restart(self) -> None:
         """Begin a new record (a new episode): the estimates are kept, the signals'
@@ -395,6 +396,5 @@ class StructuredRPBSID(ImprovedRPBSID):
         self._tau[:] = 0.0
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}(order={self.order}, p={self.p}, "
-                f"forgetting={self.forgetting}, samples={self.n_samples}, "
-                f"skipped={self.n_skipped})")
+        return (f"{type(self).__name__}(order={self.order}, p={self.p}, forgetting="
+                f"{self.forgetting}, samples={self.n_samples}, skipped={self.n_skipped})")
