@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from identifiers import (
+    IdentifierHealthWarning,
     RigidGainEstimate,
     StructuredRPBSID,
     add_measurement_noise,
@@ -175,3 +176,28 @@ def test_resonant_part_keeps_exactly_the_modes_above_the_corner():
         want = c_mode @ np.linalg.solve(z * np.eye(2) - blocks[0], b_mode)
         got = c_k @ np.linalg.solve(z * np.eye(n) - a_k, b_k)
         np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_bad_samples_are_skipped_and_a_quiet_spell_leaves_everything_finite():
+    """NaN, inf and a wild outlier are skipped and counted; 5000 samples of sensor
+    noise without torque (a loop holding still) leave the covariances bounded and
+    the model finite, and the health report says the input response is being
+    forgotten."""
+    truth, u, y = _spacecraft("constant", n_samples=800)
+    y, u = y.copy(), u.copy()
+    y[600, 2] = np.nan
+    u[650, 1] = np.inf
+    y[700, 4] = 1e3 * truth.output_layout.scales()[4]        # a glitch: 1000 nominal levels
+    ident = StructuredRPBSID(truth.output_layout)
+    ident.fit(u, y)
+    assert ident.n_skipped == 3 and ident.n_outliers == 1 and ident.n_samples == 800
+    rng = np.random.default_rng(1)
+    noise = 1e-2 * np.sqrt(np.nanmean(y[:500] ** 2, axis=0))     # 40 dB, as recorded
+    with pytest.warns(IdentifierHealthWarning, match="unexcited"):
+        for _ in range(5000):
+            ident.update(np.zeros(3), y[-1] + noise * rng.standard_normal(noise.size))
+    assert np.all(np.isfinite(ident._varx.P)) and np.trace(ident._varx.P) < 1e8
+    assert np.all(np.isfinite(ident.model.A)) and np.all(np.isfinite(ident.state))
+    health = ident.health
+    assert not health.healthy and any("forgotten" in fault for fault in health.faults)
+    assert health.rollbacks == 0 and health.restarts == 0
