@@ -66,7 +66,7 @@ from numpy.typing import ArrayLike
 from controllers.acceptance import GainAcceptance, input_disk_margin
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
-from controllers.excitation import BinaryExcitation, warmup_amplitude
+from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.lqg import LQRWeights, equilibrium_state
 from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
@@ -119,10 +119,8 @@ class AdaptiveLQG(_LQGController):
         :data:`identifiers.CLOSED_LOOP_SETTINGS`.
     weights : LQRWeights
     excitation : BinaryExcitation, optional
-        The signal: default during the identifier's warm-up 1 N m per axis at
-        the paper's sensor noise (40 dB), proportionally more with noisier
-        rate sensors (:func:`~controllers.excitation.warmup_amplitude`), then
-        driven by the uncertainty (see step 4).
+        The signal: default 1 N m per axis during the identifier's warm-up,
+        then driven by the uncertainty (see step 4).
     uncertainty_tolerance : float
         Relative standard deviation of the identified rigid-body gain the
         design tolerates without excitation (default 0.1: a 2-sigma band of
@@ -207,12 +205,7 @@ class AdaptiveLQG(_LQGController):
         self.rigid_state = rigid_state
         self.identifier = identifier
         warm = int(getattr(identifier, "warmup", 500))
-        rate = self.measured_layout.indices("rate")
-        self.excitation = excitation or BinaryExcitation(
-            warmup_amplitude=warmup_amplitude(np.sqrt(self._noise_var[rate]),
-                                              self.measured_layout.scales()[rate],
-                                              self.max_torque),
-            warmup_steps=warm, amplitude=0.0)
+        self.excitation = excitation or BinaryExcitation(warmup_steps=warm, amplitude=0.0)
         for name, value in (("uncertainty_tolerance", uncertainty_tolerance),
                             ("excitation_budget", excitation_budget)):
             if not (np.isfinite(value) and value >= 0):

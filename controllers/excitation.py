@@ -15,44 +15,8 @@ excitation torque applied so far.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from spacecraft_conventions import PAPER_SNR_DB
-
-__all__ = ["WARMUP_EXCITATION", "WARMUP_SHARE", "BinaryExcitation", "warmup_amplitude"]
-
-#: Warm-up excitation per axis at the paper's sensor noise (40 dB), N m.
-WARMUP_EXCITATION = 1.0
-#: Largest share of the actuator the warm-up excitation may take (the warm-up
-#: controller keeps the rest).
-WARMUP_SHARE = 0.3
-
-
-def warmup_amplitude(rate_noise_std: ArrayLike, rate_scale: ArrayLike,
-                     max_torque: float) -> float:
-    """Warm-up excitation per axis (N m) for rate sensors of the given noise.
-
-    The identifier learns the rigid-body gain from the rates' response to the
-    excitation, so the information a warm-up gathers goes as (excitation /
-    noise)^2. :data:`WARMUP_EXCITATION` at the paper's 40 dB, proportionally
-    more above it (3.16 N m at 30 dB), never less (cleaner data need no
-    smaller signal: at 50 dB and noise-free 0.1-0.32 N m measured no better
-    than 1 N m), at most :data:`WARMUP_SHARE` of the actuator.
-
-    Parameters
-    ----------
-    rate_noise_std : (3,) array_like
-        Standard deviation of the rate sensors' noise, rad/s (0: noise-free).
-    rate_scale : (3,) array_like
-        Their nominal levels, rad/s (the paper's noise is 40 dB below them).
-    max_torque : float
-        Actuator limit per axis, N m.
-    """
-    noise = np.asarray(rate_noise_std, dtype=float)
-    reference = np.asarray(rate_scale, dtype=float) * 10.0 ** (-PAPER_SNR_DB / 20.0)
-    ratio = float(np.median(noise / reference))
-    return float(np.clip(WARMUP_EXCITATION * ratio, WARMUP_EXCITATION,
-                         max(WARMUP_EXCITATION, WARMUP_SHARE * max_torque)))
+__all__ = ["BinaryExcitation"]
 
 
 class BinaryExcitation:
@@ -70,7 +34,7 @@ class BinaryExcitation:
         Mean samples between sign flips (>= 1).
     """
 
-    def __init__(self, warmup_amplitude: float = WARMUP_EXCITATION, amplitude: float = 0.1,
+    def __init__(self, warmup_amplitude: float = 1.0, amplitude: float = 0.1,
                  warmup_steps: int = 300, hold: float = 10.0) -> None:
         for name, value in (("warmup_amplitude", warmup_amplitude), ("amplitude", amplitude)):
             if not (np.isfinite(value) and value >= 0):

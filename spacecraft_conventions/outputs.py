@@ -35,17 +35,11 @@ __all__ = [
     "MEASURES",
     "OBSERVATION_GROUPS",
     "OUTPUT_GROUPS",
-    "PAPER_SNR_DB",
     "STANDARD_OUTPUTS",
     "TASK_GROUPS",
     "OutputLayout",
     "match_groups",
 ]
-
-#: The source paper's measurement noise, dB below each channel's nominal level
-#: (:meth:`OutputLayout.scales`): 0.01 deg, 0.001 deg/s and 0.1 mm of white noise;
-#: the environments' default.
-PAPER_SNR_DB = 40.0
 
 #: Sensor groups of the plant, in the order they are stacked.
 OUTPUT_GROUPS: tuple[str, ...] = ("attitude", "rate", "deflection")

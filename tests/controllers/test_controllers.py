@@ -555,17 +555,3 @@ def test_a_scheduled_identifier_gets_each_samples_drive_angle():
     from spacecraft_env.dynamics import rotation_pitch
 
     np.testing.assert_allclose(drive_rotation(DRIVE_AXIS, 1.3), rotation_pitch(1.3), atol=1e-15)
-
-
-@pytest.mark.parametrize("snr_db, amplitude", [(40.0, 1.0), (34.0, 10 ** 0.3), (30.0, 3.0),
-                                               (50.0, 1.0), (None, 1.0)])
-def test_the_warmup_excitation_grows_with_the_rate_sensors_noise(snr_db, amplitude):
-    """1 N m at the paper's 40 dB, proportional to the rate noise above it (34 dB:
-    10^0.3 N m), capped at 30 % of the 10 N m actuator, never below 1 N m."""
-    from controllers.excitation import warmup_amplitude
-    env = FlexibleSpacecraftEnv(snr_db=snr_db)
-    ctrl = AdaptiveLQG(env)
-    assert ctrl.excitation.warmup_amplitude == pytest.approx(amplitude, rel=1e-12)
-    rate = env.observation_layout.sensors().indices("rate")
-    scale = env.observation_layout.sensors().scales()[rate]
-    assert warmup_amplitude(2 * scale * 0.01, scale, 10.0) == pytest.approx(2.0)
