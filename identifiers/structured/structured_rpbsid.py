@@ -50,6 +50,7 @@ from identifiers.structured.rigid_block import (
 )
 from identifiers.structured.rigid_flexible import RESOLUTION
 from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.structured.state_filter import ModelFilter
 from identifiers.subspace.improved import ImprovedRPBSID
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
@@ -205,12 +206,11 @@ class StructuredRPBSID(ImprovedRPBSID):
         self.events: list[ChangeEvent] = self._detector.events
 
     def _check_sizes(self, r: int, m: int) -> None:
+        ModelFilter._check_sizes(self, r, m)      # 3 torques, the layout's outputs
         super()._check_sizes(r, m)
-        if r != 3:
-            raise ValueError(f"the structure-aware RPBSID needs 3 torque inputs, got {r}")
-        if m != self.layout.size:
-            raise ValueError(f"y must have {self.layout.size} entries ({self.layout.names}), "
-                             f"got {m}")
+
+    #: Health messages name the channels by the layout (``rate[1]``, not ``y[4]``).
+    _output_names = ModelFilter._output_names
 
     def _allocate(self, r: int, m: int) -> None:
         super()._allocate(r, m)

@@ -136,7 +136,7 @@ def test_bad_constructor_arguments(kwargs, error):
 
 def test_wrong_input_sizes_are_refused_with_the_expected_shape():
     ident = StructuredRPBSID()
-    with pytest.raises(ValueError, match="3 torque inputs"):
+    with pytest.raises(ValueError, match="3 body torques"):
         ident.update(np.zeros(2), np.zeros(STANDARD_OUTPUTS.size))
     ident = StructuredRPBSID()
     with pytest.raises(ValueError, match="entries"):
