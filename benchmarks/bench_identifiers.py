@@ -41,7 +41,8 @@ from spacecraft_lab.paper import PAPER_TABLE5
 PAPER = {n: (PAPER_TABLE5["classical"][n], PAPER_TABLE5["improved"][n],
              PAPER_TABLE5["windowed-svd"][n]) for n in PAPER_TABLE5["classical"]}
 #: (method, preset) in print order.
-METHODS = (("rigid-flexible", "default"), ("moment-refit", "default"), ("improved", "paper"),
+METHODS = (("rigid-flexible", "default"), ("structured-rpbsid", "default"),
+           ("moment-refit", "default"), ("improved", "paper"),
            ("classical", "paper"), ("windowed-svd", "paper"))
 
 
@@ -91,16 +92,17 @@ def main() -> None:
         times = run(args.orders)
     names = [m for m, _ in METHODS]
     print("seconds per 2500-sample record (preset in brackets)")
-    print(f"{'n':>4}" + "".join(f"{f'{m} [{p}]':>27}" for m, p in METHODS))
+    print(f"{'n':>4}" + "".join(f"{f'{m} [{p}]':>30}" for m, p in METHODS))
     for n, row in times.items():
-        print(f"{n:>4}" + "".join(f"{row[m]:>26.3f}s" for m in names))
+        print(f"{n:>4}" + "".join(f"{row[m]:>29.3f}s" for m in names))
     print(f"\n{'n':>4}{'improved/classical':>20}{'paper':>7}{'improved/SVD':>14}{'paper':>7}"
-          f"{'default/classical':>19}")
+          f"{'default/classical':>19}{'structured/improved':>21}")
     for n, row in times.items():
         c, i, s = PAPER.get(n, (np.nan,) * 3)
         print(f"{n:>4}{row['improved'] / row['classical']:>20.2f}{i / c:>7.2f}"
               f"{row['improved'] / row['windowed-svd']:>14.3f}{i / s:>7.2f}"
-              f"{row['rigid-flexible'] / row['classical']:>19.2f}")
+              f"{row['rigid-flexible'] / row['classical']:>19.2f}"
+              f"{row['structured-rpbsid'] / row['improved']:>21.2f}")
 
     print("\nmicroseconds per update (2500 updates; bare RLS: the improved's VARX, d "
           "regressors, m outputs)")
