@@ -150,11 +150,12 @@ def _resonator(hz: float, zeta: float, dt: float = 0.1) -> np.ndarray:
 
 
 def test_resonant_part_keeps_exactly_the_modes_above_the_corner():
-    """A 0.2 Hz mode kept; a real pole, an unstable pair and a 0.01 Hz pair removed:
-    the projected model's response equals the 0.2 Hz mode's alone, same order."""
+    """A 0.2 Hz mode kept; a real pole, an unstable pair, a 0.01 Hz pair and a pair
+    damped at 0.5 removed: the projected response equals the 0.2 Hz mode's alone,
+    same order."""
     from identifiers.structured.resonant import resonant_part
     blocks = [_resonator(0.2, 0.01), np.array([[0.99]]), 1.01 * _resonator(0.3, 0.0),
-              _resonator(0.01, 0.01)]
+              _resonator(0.01, 0.01), _resonator(0.3, 0.5)]
     n = sum(b.shape[0] for b in blocks)
     a = np.zeros((n, n))
     i = 0
