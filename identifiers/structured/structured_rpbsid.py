@@ -20,8 +20,8 @@ paper's algorithm only the flexible part:
 2. **The flexible part**: the improved RPBSID's state step (Eq. 25-46) and
    system regressions (Eq. 47-55) on the torques and the outputs with the
    rigid response removed, ``w = y_f - Theta_r rho``; only its stable
-   resonances above the high-pass's corner are exported
-   (:func:`~identifiers.structured.resonant.resonant_part`).
+   resonances above the high-pass's corner, damped at most 0.3, are
+   exported (:func:`~identifiers.structured.resonant.resonant_part`).
 3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``,
    ``C = [C_r, C_f]``; a Kalman filter on it and the raw signals gives the
    state and ``K``.
@@ -99,9 +99,9 @@ class StructuredRPBSID(ImprovedRPBSID):
     min_mode_hz : float, optional
         Lowest frequency (Hz) of a flexible mode the exported model keeps
         (default: the high-pass's corner ``(1 - highpass) / (2 pi dt)``, below
-        which the data carry no information); non-oscillatory and unstable
-        poles of the flexible part are removed too
-        (:func:`~identifiers.structured.resonant.resonant_part`).
+        which the data carry no information); non-oscillatory, unstable and
+        heavily damped (above 0.3) poles of the flexible part are removed
+        too (:func:`~identifiers.structured.resonant.resonant_part`).
     change_threshold, discount : float
         Alarm level (a multiple of the test's degrees of freedom) and the
         covariance factor at an alarm (defaults 10 and 10). The modal
