@@ -12,10 +12,8 @@ from identifiers import (
     ImprovedRPBSID,
     Resonator,
     RigidFlexibleIdentifier,
-    add_measurement_noise,
     default_identifier,
     h_step_predictions,
-    identification_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
@@ -24,37 +22,22 @@ from identifiers import (
 )
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_env import FlexibleSpacecraftModel
+from spacecraft_lab.identification import identification_records
 
 RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
 RATE = STANDARD_OUTPUTS.slice("rate")
 
 
-def _rigid_body(inertia: np.ndarray, n_samples: int = 1500, dt: float = 0.1):
-    """Noise-free ZOH double integrators psi'' = J^-1 u (the rigid body alone)."""
-    rng = np.random.default_rng(0)
-    g = np.linalg.inv(inertia)
-    u = identification_inputs(n_samples, rng, dt)
-    psi, omega = np.zeros(3), np.zeros(3)
-    y = np.empty((n_samples, 6))
-    for k in range(n_samples):
-        y[k] = np.concatenate((psi, omega))
-        psi = psi + dt * omega + 0.5 * dt * dt * g @ u[k]
-        omega = omega + dt * g @ u[k]
-    return u, y
-
-
 def _spacecraft(scenario: str, seed: int, n_samples: int = 2500, snr_db: float | None = 40.0):
     truth = FlexibleSpacecraftModel(scenario=scenario)
-    rng = np.random.default_rng(seed)
-    u = identification_inputs(n_samples, rng, truth.dt)
-    _states, y0 = truth.simulate(u)
-    return truth, u, y0, add_measurement_noise(y0, snr_db, rng)
+    record = identification_records(truth, seed, n_samples, snr_db)
+    return truth, record.u, record.y_clean, record.y
 
 
 # --------------------------------------------------------------------- exact cases
-def test_rigid_body_gain_and_model_are_exact_on_a_noise_free_rigid_body():
+def test_rigid_body_gain_and_model_are_exact_on_a_noise_free_rigid_body(rigid_body_record):
     inertia = np.array([[30_000.0, 500.0, 0.0], [500.0, 20_000.0, 0.0], [0.0, 0.0, 22_000.0]])
-    u, y = _rigid_body(inertia)
+    u, y = rigid_body_record(inertia)
     ident = RigidFlexibleIdentifier(RIGID, n=6, detect_changes=False)
     seq = ident.fit(u, y)
     model = seq[len(seq) - 1]

@@ -12,9 +12,7 @@ from identifiers import (
     IdentifierHealthWarning,
     RigidGainEstimate,
     StructuredRPBSID,
-    add_measurement_noise,
     h_step_predictions,
-    identification_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
@@ -22,36 +20,22 @@ from identifiers import (
 )
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_env import FlexibleSpacecraftModel
+from spacecraft_lab.identification import identification_records
 
 RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
-RATE = STANDARD_OUTPUTS.slice("rate")
 INERTIA = np.array([[30_000.0, 500.0, 0.0], [500.0, 20_000.0, 0.0], [0.0, 0.0, 22_000.0]])
 
 
-def _rigid_body(n_samples: int = 1500, dt: float = 0.1):
-    """Noise-free ZOH double integrators ``psi'' = J^-1 u`` from a non-zero start."""
-    rng = np.random.default_rng(0)
-    g = np.linalg.inv(INERTIA)
-    u = identification_inputs(n_samples, rng, dt)
-    psi, omega = np.array([0.01, -0.02, 0.005]), np.array([1e-4, 0.0, -2e-4])
-    y = np.empty((n_samples, 6))
-    for k in range(n_samples):
-        y[k] = np.concatenate((psi, omega))
-        psi = psi + dt * omega + 0.5 * dt * dt * g @ u[k]
-        omega = omega + dt * g @ u[k]
-    return u, y
-
-
-def _spacecraft(scenario: str, seed: int = 0, n_samples: int = 2500, snr_db: float = 40.0):
+def _spacecraft(scenario: str, n_samples: int = 2500):
+    """Seed 0's identification record of ``scenario`` at 40 dB: ``(truth, u, y)``."""
     truth = FlexibleSpacecraftModel(scenario=scenario)
-    rng = np.random.default_rng(seed)
-    u = identification_inputs(n_samples, rng, truth.dt)
-    _, y0 = truth.simulate(u)
-    return truth, u, add_measurement_noise(y0, snr_db, rng)
+    record = identification_records(truth, 0, n_samples)
+    return truth, record.u, record.y
 
 
-def test_the_rigid_block_is_exact_on_a_noise_free_rigid_body():
-    u, y = _rigid_body()
+def test_the_rigid_block_is_exact_on_a_noise_free_rigid_body(rigid_body_record):
+    """From a non-zero start (attitude and rate)."""
+    u, y = rigid_body_record(INERTIA, psi0=[0.01, -0.02, 0.005], omega0=[1e-4, 0.0, -2e-4])
     ident = StructuredRPBSID(RIGID, n=8, detect_changes=False)
     seq = ident.fit(u, y)
     model = seq[len(seq) - 1]
