@@ -279,9 +279,9 @@ class StructuredRPBSID(ImprovedRPBSID):
         u_f = self._hp_u(u)
         full = np.concatenate((rho, self._phi[self._window], self._dwin))
         if learn:
-            err = y_f - self._varx.predict(full)
-            self._varx.update(full, y_f)
-            self._watch(rho, err, y_f)
+            err = self._varx.update(full, y_f)          # the a-priori error; None if refused
+            if err is not None:
+                self._watch(rho, err, y_f)
         # the rigid response removed where physics puts one (attitude and rate)
         w = y_f.copy()
         rows = self._rigid_rows
