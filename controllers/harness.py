@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
 import zipfile
 import zlib
 from collections.abc import Callable, Sequence
@@ -839,7 +840,8 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
             else:
                 pool = ProcessPoolExecutor(min(workers, len(seeds)),
                                            mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=exit_with_parent)
+                                           initializer=exit_with_parent,
+                                           initargs=(1.0, os.getpid()))
                 futures = {pool.submit(_run_seed, controllers, make_env, seed, options): seed
                            for seed in seeds}
                 for future in as_completed(futures):

@@ -32,7 +32,7 @@ def _watch(parent: int, period: float) -> None:
             os._exit(1)
 
 
-def exit_with_parent(period: float = 1.0) -> None:
+def exit_with_parent(period: float = 1.0, parent: int | None = None) -> None:
     """Pool initializer: end this process (``os._exit(1)``) once its parent has died,
     by whatever means (a daemon thread polls the parent process id).
 
@@ -40,8 +40,18 @@ def exit_with_parent(period: float = 1.0) -> None:
     ----------
     period : float
         Seconds between polls: the process ends at most this long after its parent.
+    parent : int, optional
+        The driver's process id, passed by the driver
+        (``initargs=(period, os.getpid())``). A worker whose driver dies while it
+        is still starting up (a ``spawn`` worker imports for seconds before its
+        initializer runs) is already re-parented when it gets here, so the id it
+        would read now is not its driver's and it would never notice; given the
+        driver's id, it ends at once. Default: the parent at the time of the call.
     """
-    threading.Thread(target=_watch, args=(os.getppid(), float(period)), daemon=True,
+    parent = os.getppid() if parent is None else int(parent)
+    if os.getppid() != parent:            # the driver died while this worker started
+        os._exit(1)
+    threading.Thread(target=_watch, args=(parent, float(period)), daemon=True,
                      name="exit-with-parent").start()
 
 

@@ -485,6 +485,20 @@ def test_d12_leaving_at_once_after_an_interrupt_leaks_no_semaphore():
     assert proc.stderr.strip().splitlines() == ["spacecraft control: interrupted"], proc.stderr
 
 
+def test_d12_a_worker_whose_driver_died_while_it_started_ends_at_once():
+    """A ``spawn`` worker imports for seconds before its initializer runs; if the driver
+    dies meanwhile (SIGKILL right after the first seed: 1 CI run in several), the worker
+    is already re-parented there, so the parent it read then was not its driver and it
+    stayed behind. Given the driver's id it ends at once (exit 1, nothing after)."""
+    code = ("import os\n"
+            "from spacecraft_conventions import exit_with_parent\n"
+            "exit_with_parent(parent=os.getpid())   # any id but its parent's\n"
+            "print('still running')\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 1 and not proc.stdout and not proc.stderr, proc.stderr
+
+
 def _children(pid: int) -> list[int]:
     """Process ids whose parent is ``pid`` (from /proc)."""
     found = []

@@ -48,9 +48,9 @@ def _top_up(pending: dict[Any, Any], source: Iterator[Any], limit: int,
         pending[submit(item)] = item
 
 
-def _init_worker() -> None:
+def _init_worker(driver: int) -> None:
     os.environ.update(THREAD_ENV)
-    exit_with_parent()
+    exit_with_parent(parent=driver)
 
 
 class SerialBackend:
@@ -97,7 +97,8 @@ class LocalBackend:
     def _start(self) -> None:
         self._pool = ProcessPoolExecutor(self.workers,
                                          mp_context=multiprocessing.get_context("spawn"),
-                                         initializer=_init_worker)
+                                         initializer=_init_worker,
+                                         initargs=(os.getpid(),))
 
     def __enter__(self) -> LocalBackend:
         self._start()
