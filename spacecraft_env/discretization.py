@@ -123,23 +123,40 @@ class AnglePanels:
         """
         thetas = np.asarray(thetas, dtype=float)
         out = np.empty((thetas.shape[0], self._n, self._n + 3))
-        flat = out.reshape(thetas.shape[0], -1)
         groups: dict = {}
         for row, group in enumerate(zip(keys, np.floor(thetas / self._width).tolist(),
                                         strict=True)):
             groups.setdefault(group, []).append(row)
         for (key, index), rows in groups.items():
-            nodes, values = self._panel(key, int(index))
-            d = thetas[rows, None] - nodes
-            at_node = d == 0.0
-            d[at_node] = 1.0
-            w = self._bary / d
-            hit = at_node.any(axis=1)
-            w[hit] = at_node[hit]
-            w /= w.sum(axis=1, keepdims=True)
-            with single_threaded_blas:
-                flat[rows] = w @ values
+            self._interpolate(key, int(index), thetas, np.asarray(rows), out)
         return out
+
+    def evaluate_along(self, key: Hashable, thetas: Sequence[float]) -> np.ndarray:
+        """:meth:`evaluate` of one configuration ``key`` at every angle of ``thetas``.
+
+        The same rows, bit for bit, as ``evaluate([key] * len(thetas), thetas)``,
+        without hashing the configuration once per angle.
+        """
+        thetas = np.asarray(thetas, dtype=float)
+        out = np.empty((thetas.shape[0], self._n, self._n + 3))
+        index = np.floor(thetas / self._width)
+        for i in dict.fromkeys(index.tolist()):
+            self._interpolate(key, int(i), thetas, np.flatnonzero(index == i), out)
+        return out
+
+    def _interpolate(self, key: Hashable, index: int, thetas: np.ndarray, rows: np.ndarray,
+                     out: np.ndarray) -> None:
+        """Write panel ``index`` of ``key``'s interpolant at ``thetas[rows]`` into ``out[rows]``."""
+        nodes, values = self._panel(key, index)
+        d = thetas[rows, None] - nodes
+        at_node = d == 0.0
+        d[at_node] = 1.0
+        w = self._bary / d
+        hit = at_node.any(axis=1)
+        w[hit] = at_node[hit]
+        w /= w.sum(axis=1, keepdims=True)
+        with single_threaded_blas:
+            out.reshape(out.shape[0], -1)[rows] = w @ values
 
     def clear(self) -> None:
         """Forget every panel."""

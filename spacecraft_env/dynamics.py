@@ -46,12 +46,10 @@ from spacecraft_env.discretization import AnglePanels, zoh_exponential
 from spacecraft_env.modes import cantilever_moments, coupling_matrix, sensor_mode_shapes
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.scenarios import (
-    CombinedScenario,
     Configuration,
     ConstantScenario,
     DockingScenario,
     Scenario,
-    SolarRotationScenario,
     make_scenario,
 )
 
@@ -149,21 +147,19 @@ def _inv3_spd(s: np.ndarray) -> np.ndarray | None:
 
 
 def _scenario_key(scenario: Scenario):
-    """Cheap hashable keys for the matrix cache: ``(t -> key, (t, cfg) -> key)``.
+    """A cheap hashable key of the plant at time ``t`` (s) for the matrix cache.
 
-    The second form gives the same key from a configuration already at hand.
+    Docking: the number of events passed (one entry per docked configuration).
+    A continuously varying plant (a turning paddle): ``t`` itself, since its
+    matrices change every step. Any other piecewise-constant scenario: its
+    configuration.
     """
     if isinstance(scenario, DockingScenario):
         times = scenario.event_times()
-        return (lambda t: bisect_right(times, t)), (lambda t, cfg: bisect_right(times, t))
-    if isinstance(scenario, SolarRotationScenario):
-        return (lambda t: scenario.configuration(t).paddle_angle), (lambda t, cfg: cfg.paddle_angle)
-    if isinstance(scenario, CombinedScenario):
-        times = scenario.event_times()
-        rot = scenario.rotation
-        return ((lambda t: (bisect_right(times, t), rot.configuration(t).paddle_angle)),
-                (lambda t, cfg: (bisect_right(times, t), cfg.paddle_angle)))
-    return scenario.configuration, (lambda t, cfg: cfg)
+        return lambda t: bisect_right(times, t)
+    if not scenario.piecewise_constant:
+        return float
+    return scenario.configuration
 
 
 class FlexibleSpacecraftModel:
@@ -229,7 +225,7 @@ class FlexibleSpacecraftModel:
         self.scenario = make_scenario(scenario)
         self.outputs = tuple(o for o in OUTPUT_GROUPS if o in outputs)
         self.dt = dt
-        self._key, self._key_of = _scenario_key(self.scenario)
+        self._key = _scenario_key(self.scenario)
         self._build_constant_parts()
         if cache_size is None:
             per_entry = 8 * self.n * (self.n + 3)
@@ -567,15 +563,33 @@ class FlexibleSpacecraftModel:
             ts = [(start + j) * dt for j in range(_BLOCK_STEPS)]
         else:
             ts = [t]
-        cfgs = [self.configuration(tj) for tj in ts]
-        phis = self._shared.panels.evaluate([dataclasses.replace(c, paddle_angle=0.0)
-                                             for c in cfgs], [c.paddle_angle for c in cfgs])
+        phis = self._zoh_along(ts)
         phis.flags.writeable = False
         cache = self._cache
-        key_of = self._key_of
-        for tj, cfg, phi in zip(ts, cfgs, phis, strict=True):
-            cache[key_of(tj, cfg)] = (phi[:, :n], phi[:, n:])
+        for tj, phi in zip(ts, phis, strict=True):
+            cache[tj] = (phi[:, :n], phi[:, n:])
         return cache[key]
+
+    def _zoh_along(self, ts: list[float]) -> np.ndarray:
+        """Interpolated ``[A_d, B_d]`` at the increasing times ``ts`` (s), ``(len(ts), n, n + 3)``.
+
+        Where the block holds no event and its ends agree on everything but
+        the paddle angle, only the angle changes inside it (the
+        :meth:`~spacecraft_env.scenarios.Scenario.event_times` contract):
+        one configuration and a list of angles, without building a
+        configuration per step. The interpolant's rows are the same either
+        way (the same panel groups).
+        """
+        scenario = self.scenario
+        base = dataclasses.replace(self.configuration(ts[0]), paddle_angle=0.0)
+        if (len(ts) > 1
+                and dataclasses.replace(self.configuration(ts[-1]), paddle_angle=0.0) == base
+                and not any(ts[0] < e <= ts[-1] for e in scenario.event_times())):
+            return self._shared.panels.evaluate_along(
+                base, [scenario.paddle_angle(tj) for tj in ts])
+        cfgs = [self.configuration(tj) for tj in ts]
+        return self._shared.panels.evaluate([dataclasses.replace(c, paddle_angle=0.0)
+                                             for c in cfgs], [c.paddle_angle for c in cfgs])
 
     def discrete(self, t: float) -> StateSpaceMatrices:
         """True zero-order-hold ``(A_d, B_d, C, D)`` for the step starting at ``t``."""
@@ -587,7 +601,7 @@ class FlexibleSpacecraftModel:
         new = object.__new__(FlexibleSpacecraftModel)
         new.__dict__.update(self.__dict__)
         new.scenario = make_scenario(scenario)
-        new._key, new._key_of = _scenario_key(new.scenario)
+        new._key = _scenario_key(new.scenario)
         new._cache = OrderedDict()
         return new
 
@@ -703,12 +717,12 @@ class FlexibleSpacecraftModel:
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_cache"] = OrderedDict()  # rebuilt on demand; keeps pickles small
-        del state["_key"], state["_key_of"], state["_shared"]
+        del state["_key"], state["_shared"]
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self._key, self._key_of = _scenario_key(self.scenario)
+        self._key = _scenario_key(self.scenario)
         self._shared = _shared_discretization(self)
 
 

@@ -249,11 +249,20 @@ class DockingModule:
             object.__setattr__(self, "angular_momentum", momentum)
 
     def inertia_about_system_centre(self) -> np.ndarray:
-        """Own cuboid inertia plus the parallel-axis term, (3, 3), kg m^2."""
-        a, b, c = self.dimensions
-        own = self.mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
-        r = np.asarray(self.position)
-        return own + self.mass * (r @ r * np.eye(3) - np.outer(r, r))
+        """Own cuboid inertia plus the parallel-axis term, (3, 3), kg m^2 (read-only).
+
+        Computed once per module: the truth model adds it at every
+        interpolation node of a docked configuration.
+        """
+        cached = self.__dict__.get("_inertia_cache")
+        if cached is None:
+            a, b, c = self.dimensions
+            own = self.mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+            r = np.asarray(self.position)
+            cached = own + self.mass * (r @ r * np.eye(3) - np.outer(r, r))
+            cached.flags.writeable = False
+            object.__setattr__(self, "_inertia_cache", cached)
+        return cached
 
 
 @dataclass(frozen=True)

@@ -97,7 +97,12 @@ class Scenario(ABC):
         return self.configuration(t).paddle_angle
 
     def event_times(self) -> tuple[float, ...]:
-        """Instants (s) at which the dynamics jump (docking events)."""
+        """Instants (s) at which the dynamics jump (docking events).
+
+        Between two of them only the paddle angle may change; the truth
+        model relies on it to interpolate a block of steps from one
+        configuration (a block holding an event is evaluated step by step).
+        """
         return ()
 
     def randomized(self, rng: np.random.Generator) -> Scenario:

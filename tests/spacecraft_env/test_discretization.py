@@ -117,3 +117,20 @@ def test_pickled_model_rebuilds_its_caches():
     clone = pickle.loads(pickle.dumps(model))
     assert len(clone._cache) == 0 and clone._shared is model._shared
     np.testing.assert_array_equal(clone._discrete_ab(12.3)[0], a)
+
+
+def test_one_configuration_along_many_angles_is_the_general_evaluation():
+    """``evaluate_along`` (the rotation blocks' path) gives the general path's rows, bit
+    for bit (the same panel groups, so the same products), across a panel edge."""
+    model = FlexibleSpacecraftModel(scenario=SolarRotationScenario(rate_deg_s=0.5))
+    panels = model._shared.panels
+    edge = math.radians(PANEL_WIDTH_DEG)
+    thetas = np.concatenate([edge + np.linspace(-0.01, 0.01, 63), [edge]])
+    key = Configuration()
+    along = panels.evaluate_along(key, thetas)
+    general = panels.evaluate([key] * thetas.size, thetas)
+    assert along.shape == (64, model.n, model.n + 3)
+    assert np.array_equal(along, general)
+    # a query of its own is another product shape: equal to rounding only
+    np.testing.assert_allclose(along[0], panels(key, thetas[0]), rtol=0,
+                               atol=1e-14 * np.abs(along[0]).max())
