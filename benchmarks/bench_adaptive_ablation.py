@@ -36,7 +36,8 @@ LQG's, beside the plant's own (about 0.01): a design that removes damping
 there feeds the modes it is meant to quiet.
 
 Usage: ``python benchmarks/bench_adaptive_ablation.py [--scenario paddle_rotation]
-[--seeds 6] [--paddle-angle DEG] [--at 200] [--workers 2] [--no-tolerance]``
+[--seeds 6] [--task slew] [--snr-db 40] [--paddle-angle DEG] [--at 200] [--workers 2]
+[--no-tolerance]``
 (about 3 minutes on 2 cores).
 
 The ``true rigid gain`` row reaches into the identifier's regression
@@ -342,6 +343,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--paddle-angle", type=float, default=None,
                         help="paddle angle at t = 0, deg (constant and rotation scenarios)")
+    parser.add_argument("--task", default="slew", choices=("slew", "regulation"))
+    parser.add_argument("--snr-db", type=float, default=40.0,
+                        help="measurement SNR per channel, dB")
     parser.add_argument("--at", type=float, default=200.0,
                         help="time of the frozen-loop damping analysis, s")
     parser.add_argument("--workers", type=int, default=2)
@@ -349,7 +353,8 @@ def main() -> None:
                         help="skip the tolerance table (the same law on perturbed true models)")
     args = parser.parse_args()
     env_id = {v: k for k, v in ENV_IDS.items()}[args.scenario]
-    kwargs = env_kwargs_for(args.scenario, paddle_angle=args.paddle_angle)
+    kwargs = env_kwargs_for(args.scenario, task=args.task, paddle_angle=args.paddle_angle,
+                            snr_db=args.snr_db)
     rows = dict(ROWS)
     if not args.no_tolerance:
         rows.update({f"same law, {name}": partial(_perturbed, **perturbation)
@@ -357,7 +362,8 @@ def main() -> None:
     table, _ = compare(rows, partial(gym.make, env_id, **kwargs), list(range(args.seeds)),
                        progress=True, workers=args.workers)
     oracle = np.array([m["cost_after_100s"] for m in table["oracle LQG"]["per_seed"]])
-    print(f"\n{args.scenario}, {args.seeds} seeds, common cost from 100 s")
+    print(f"\n{args.scenario}, {args.task} task, {args.snr_db:g} dB, {args.seeds} seeds, "
+          "common cost from 100 s")
     print(f"{'row':44s} {'/ oracle':>9s} {'worst':>7s}   split att / rate / defl / torque"
           f"   fallback t >= 60 s")
     worst = 0
