@@ -16,12 +16,15 @@
   from the true plant (the ceiling, privileged); :class:`PhysicalFeatures`:
   the identifier's physical estimates (rigid-body gain, slowest modes, their
   uncertainties, a change flag) in a fixed normalized frame, and
-  :class:`PrivilegedFeatures` the same vector from the truth;
+  :class:`PrivilegedFeatures` the same vector from the truth (or the nominal
+  plant); :class:`AdaptationModule` and :class:`EstimatedFeatures`: that vector
+  estimated from the identifier's (RMA's adaptation module);
   :class:`ResidualControl`: an
   agent's action added to a controller's (residual RL on the adaptive LQG).
 """
 
 from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
+from controllers.adaptation import AdaptationModule, EstimatedFeatures
 from controllers.adaptive import AdaptiveLQG, FallbackWarning
 from controllers.base import Controller, PolicyController
 from controllers.baselines import (
@@ -57,10 +60,12 @@ from spacecraft_conventions import __version__
 
 __all__ = [
     "PD",
+    "AdaptationModule",
     "AdaptiveLQG",
     "BinaryExcitation",
     "ComparisonInterrupted",
     "Controller",
+    "EstimatedFeatures",
     "FallbackWarning",
     "FixedLQG",
     "GainAcceptance",

@@ -39,6 +39,7 @@ what model features can give an agent (privileged; for comparisons only).
 
 from __future__ import annotations
 
+import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -308,7 +309,8 @@ def physical_feature_names(n_modes: int) -> tuple[str, ...]:
     modes = range(1, n_modes + 1)
     return ("log_gain_xx", "log_gain_yy", "log_gain_zz", "gain_xy", "gain_xz", "gain_yz",
             "gain_rel_std", *(f"log_freq_{i}" for i in modes), *(f"damping_{i}" for i in modes),
-            *(f"log_freq_std_{i}" for i in modes), "changed", "ready")
+            *(f"log_freq_std_{i}" for i in modes), "paddle_sin", "paddle_cos", "changed",
+            "ready")
 
 
 #: Channel names with the default two modes.
@@ -335,7 +337,7 @@ class _PhysicalFrame:
         if f0.size < self.k:
             raise ValueError(f"the plant has {f0.size} flexible modes, n_modes={n_modes}")
         self.f0 = f0
-        self.size = 7 + 3 * self.k + 2
+        self.size = 7 + 3 * self.k + 4
 
     def dominant_modes(self, model: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Frequencies (Hz) and damping of the true plant's ``k`` modes with the largest
@@ -348,7 +350,8 @@ class _PhysicalFrame:
 
     def fill(self, out: np.ndarray, gain: np.ndarray, gain_rel_std: float,
              freq: np.ndarray, zeta: np.ndarray, log_f_std: np.ndarray) -> None:
-        """Write one vector (``out``, length :attr:`size`; flags left to the caller)."""
+        """Write the gain and mode channels of one vector (``out``, length :attr:`size`;
+        the paddle angle and the flags are left to the caller)."""
         k = self.k
         diag = np.diag(gain)
         out[:3] = np.log(np.maximum(diag, 1e-3 * self.g0) / self.g0)
@@ -361,6 +364,10 @@ class _PhysicalFrame:
         out[7:7 + count] = np.log(np.maximum(freq[order], 1e-6) / self.f0[:count])
         out[7 + k:7 + k + count] = 10.0 * zeta[order]
         out[7 + 2 * k:7 + 2 * k + count] = log_f_std[order]
+
+    def put_paddle(self, out: np.ndarray, angle: float) -> None:
+        """Write the paddle angle (rad) as its sine and cosine into ``out``."""
+        out[7 + 3 * self.k:9 + 3 * self.k] = math.sin(angle), math.cos(angle)
 
 
 class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -390,10 +397,14 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
     frequency std       k    standard deviation of ``log f_i`` in percent
                              (the modal tracker's covariance of its last
                              refinement; 0 before the first)
+    paddle angle        2    sine and cosine of the solar paddles' angle
+                             (the drive's reading, ``info["paddle_angle"]``;
+                             present from the first step): the sign of the
+                             paddles' modal input coupling turns with it
     changed             1    1 if the identifier detected a change in the
                              last 20 s (:data:`CHANGE_WINDOW_S`)
     ready               1    1 once the identifier has warmed up (50 s by default); every
-                             other channel is 0 before
+                             channel but the paddle angle is 0 before
     ==================  ===  ================================================
 
     The identifier is fed the commanded torque the env reports
@@ -424,7 +435,7 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
     >>> env = PhysicalFeatures(gym.make("spacecraft_env:FlexibleSpacecraftFamily-v2"))
     >>> obs, info = env.reset(seed=0)
     >>> env.env.observation_space.shape, env.observation_space.shape
-    ((10,), (25,))
+    ((10,), (27,))
     >>> PHYSICAL_FEATURE_NAMES[:3], PHYSICAL_FEATURE_NAMES[-1]
     (('log_gain_xx', 'log_gain_yy', 'log_gain_zz'), 'ready')
     >>> float(obs[-1])                   # not ready before the identifier's warm-up
@@ -463,9 +474,11 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._feats = np.zeros(self.n_features)
         self._last_y: np.ndarray | None = None
         self._steps = 0
+        self._paddle_angle = 0.0
 
     def _refresh(self) -> None:
         ident, out = self.identifier, np.zeros(self.n_features)
+        self.frame.put_paddle(out, self._paddle_angle)
         estimate = ident.rigid_gain
         if estimate is not None and np.all(np.isfinite(estimate.gain)):
             freq, zeta, cov = ident.mode_estimates
@@ -496,6 +509,7 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.identifier.reset()
         self._last_y = np.asarray(obs, dtype=float)[self._meas_obs]
         self._steps = 0
+        self._paddle_angle = float(info["paddle_angle"])
         return self._observe(obs), info
 
     @single_threaded_blas
@@ -507,6 +521,7 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # (u_k, y_k): the torque applied after y_k was measured
         self.identifier.update(np.asarray(info["torque"], dtype=float), self._last_y)
         self._last_y = np.asarray(obs, dtype=float)[self._meas_obs]
+        self._paddle_angle = float(info["paddle_angle"])
         return self._observe(obs), reward, terminated, truncated, info
 
 
@@ -515,10 +530,16 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
 
     Gain ``G = a J(t)^-1`` with the actuator efficiency ``a`` of a family
     draw, the k dominant true modes (largest input-output weight, in order
-    of frequency: the ones an identifier can see), zero uncertainty, ``changed`` = 1 when
+    of frequency: the ones an identifier can see), zero uncertainty, the paddle
+    angle (as the drive reads it), ``changed`` = 1 when
     any gain or frequency channel moved by more than 1 % over the last
     20 s, and ``ready`` = 1 from the first step. For comparisons only: a
     deployed agent cannot have it.
+
+    With ``source="nominal"`` the vector is the nominal plant's instead (the
+    frame's origin: what a design assumes without identification), with the
+    drive's paddle angle, ``changed`` = 0 and ``ready`` = 1: the third input
+    of an RMA-style comparison (:mod:`controllers.adaptation`).
 
     Parameters
     ----------
@@ -531,13 +552,31 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         :class:`PhysicalFeatures`: the same instants, so an agent under
         :class:`~spacecraft_env.ActionRepeat` sees both at its decisions; the
         truth's modal analysis costs as much as an identifier update).
+    source : {"truth", "nominal"}
+        Which plant the gain and modes describe.
+
+    Attributes
+    ----------
+    nominal_vector : ndarray or None
+        With ``source="nominal"``: the nominal plant's vector (paddle angle
+        0 deg; the observation's paddle channels follow the drive).
+
+    Raises
+    ------
+    ValueError
+        For ``every < 1``, ``n_modes < 1`` or another ``source``.
     """
 
-    def __init__(self, env: gym.Env, n_modes: int = 2, every: int = 10) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes, every=every)
+    def __init__(self, env: gym.Env, n_modes: int = 2, every: int = 10,
+                 source: str = "truth") -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, n_modes=n_modes, every=every,
+                                                 source=source)
         gym.ObservationWrapper.__init__(self, env)
         if every < 1:
             raise ValueError(f"every must be >= 1, got {every}")
+        if source not in ("truth", "nominal"):
+            raise ValueError(f"source must be 'truth' or 'nominal', got {source!r}")
+        self.source = source
         self.frame = _PhysicalFrame(env, n_modes)
         self.n_modes = self.frame.k
         self.every = int(every)
@@ -546,6 +585,17 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         self._cache: dict = {}
         self._feats = np.zeros(self.n_features)
         self._steps = 0
+        self.nominal_vector: np.ndarray | None = None
+        if source == "nominal":
+            nominal = env.unwrapped.model.nominal()
+            vector = np.zeros(self.n_features)
+            freq, zeta = self.frame.dominant_modes(nominal, 0.0)
+            self.frame.fill(vector, np.linalg.inv(nominal.inertia(0.0)), 0.0,
+                            freq, zeta, np.zeros(freq.size))
+            self.frame.put_paddle(vector, 0.0)
+            vector[-1] = 1.0
+            vector.flags.writeable = False
+            self.nominal_vector = vector
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -563,13 +613,19 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
             freq, zeta = self.frame.dominant_modes(model, t)
             self.frame.fill(feats, efficiency * np.linalg.inv(model.inertia(t)), 0.0,
                             freq, zeta, np.zeros(freq.size))
+            self.frame.put_paddle(feats, model.scenario.paddle_angle(t))
             feats[-1] = 1.0
             return feats
 
         return _plant_cached(self._cache, model, t, compute)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        if self._steps % self.every == 0:
+        if self._steps % self.every == 0 and self.nominal_vector is not None:
+            base = self.env.unwrapped
+            now = self.nominal_vector.copy()
+            self.frame.put_paddle(now, base.model.scenario.paddle_angle(base.time))
+            self._feats = np.clip(now, -_CLIP, _CLIP)
+        elif self._steps % self.every == 0:
             t = self.env.unwrapped.time
             now = self._truth(t).copy()
             before = self._truth(t - CHANGE_WINDOW_S)

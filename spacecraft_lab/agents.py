@@ -183,7 +183,7 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
         score = _evaluate(policy, settings["scenario"], settings["features"],
                           settings["env_kwargs"], seeds)
     scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
-                                                   seeds, workers, progress)}
+                                                   seeds, workers, progress, when="Then")}
     mine = np.asarray(score["cost_after_100s_per_seed"], dtype=float)
     agent_over = {}
     for key, _ in COMPARATORS:

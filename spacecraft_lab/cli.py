@@ -16,6 +16,11 @@ Commands
 ``evaluate``
     A saved agent (or one the repository ships) beside the LQGs on any
     episodes (:func:`spacecraft_lab.agents.evaluate_agent`).
+``adapt``
+    What the identifier is worth to an agent: a policy trained on the true
+    plant's parameters flown with them, with their estimate from the
+    identifier and with the nominal ones
+    (:func:`spacecraft_lab.adaptation.run_adaptation`).
 ``sweep``
     A grid of identify/control tasks from a TOML/YAML file, on this
     machine's cores or a Ray cluster, resumable
@@ -44,6 +49,7 @@ from typing import Any
 from controllers import LQRWeights
 from spacecraft_conventions import __version__, exit_now, sigterm_as_interrupt
 from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
+from spacecraft_lab.adaptation import adaptation_table, run_adaptation
 from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
@@ -457,6 +463,24 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--out", type=_output_directory, default="results/evaluate",
                           help="output directory (evaluation.json, table.md)")
 
+    adapt = command("adapt", help="a policy trained on the true parameters, flown with "
+                                  "them, their estimate from the identifier and the nominal "
+                                  "ones (RMA-style)")
+    adapt.add_argument("agents", nargs="+", metavar="AGENT",
+                       help="models saved by 'train --features privileged' or "
+                            "'residual-scheduled-privileged' (.zip, with their "
+                            "_vecnormalize.pkl and the run's metrics.json)")
+    adapt.add_argument("--episodes", type=_integer(1), default=20, metavar="N",
+                       help="rollouts of each policy that train its adaptation module")
+    adapt.add_argument("--scored-episodes", type=_integer(1), default=len(HELD_OUT_SEEDS),
+                       metavar="N", help="held-out episodes scored (seeds from "
+                                         f"{HELD_OUT_SEEDS[0]})")
+    adapt.add_argument("--workers", type=_integer(1), default=None,
+                       help="processes scoring the LQG comparators side by side; the "
+                            "scores do not depend on it (default: all cores)")
+    adapt.add_argument("--out", type=_output_directory, default="results/adapt",
+                       help="output directory (adaptation.json, table.md)")
+
     table = command("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
                        help="output directories of 'spacecraft train'")
@@ -575,6 +599,19 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _adapt(args: argparse.Namespace) -> int:
+    seeds = tuple(range(HELD_OUT_SEEDS[0], HELD_OUT_SEEDS[0] + args.scored_episodes))
+    result = run_adaptation(args.agents, args.episodes, seeds, workers=args.workers)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = adaptation_table(result)
+    (out / "adaptation.json").write_text(json.dumps(result, indent=2))
+    (out / "table.md").write_text(table + "\n")
+    print(table)
+    print(f"wrote {out}/adaptation.json and table.md")
+    return 0
+
+
 def _rl_table(args: argparse.Namespace) -> int:
     print(rl_table(args.dirs))
     if args.plot is not None:
@@ -615,7 +652,8 @@ def _sweep_summary(args: argparse.Namespace) -> int:
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "demo": _demo, "identify": _identify, "control": _control, "train": _train,
-    "evaluate": _evaluate, "rl-table": _rl_table, "sweep": _sweep, "sweep-summary": _sweep_summary,
+    "evaluate": _evaluate, "adapt": _adapt, "rl-table": _rl_table, "sweep": _sweep,
+    "sweep-summary": _sweep_summary,
 }
 
 

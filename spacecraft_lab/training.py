@@ -29,7 +29,10 @@ error, the last torque and the base's state estimate observed
 (``residual-scheduled-observed``, :class:`controllers.ResidualObservations`), or
 of that one with the identifier's physical estimates observed
 (``residual-scheduled-physical``: the draw's rigid gain and modes, which the
-schedule on the paddle angle does not know).
+schedule on the paddle angle does not know), or the same vector from the truth
+(``residual-scheduled-privileged``: the policy that
+:mod:`spacecraft_lab.adaptation` evaluates with true, estimated and nominal
+parameters).
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -93,7 +96,7 @@ ALGORITHMS = ("ppo", "sac")
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "physical", "privileged", "residual-adaptive", "residual-fixed",
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
-            "residual-scheduled-physical")
+            "residual-scheduled-physical", "residual-scheduled-privileged")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -104,7 +107,8 @@ _IDENTIFIED = {
 _RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
              "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG,
              "residual-scheduled-observed": ScheduledLQG,
-             "residual-scheduled-physical": ScheduledLQG}
+             "residual-scheduled-physical": ScheduledLQG,
+             "residual-scheduled-privileged": ScheduledLQG}
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
@@ -205,6 +209,8 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
     if features.endswith("-physical"):
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
+    if features.endswith("-privileged"):
+        env = PrivilegedFeatures(env)
     if features.endswith("-observed"):
         # the attitude error, the last torque and the base's state estimate
         env = ResidualObservations(env)
@@ -262,12 +268,13 @@ def _score_comparator(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tup
 
 
 def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
-                       workers: int | None, progress: bool) -> dict[str, dict[str, Any]]:
+                       workers: int | None, progress: bool,
+                       when: str = "Before training") -> dict[str, dict[str, Any]]:
     """The comparators on the evaluation episodes, on a process pool when
-    ``workers`` (default: the cores) is above 1."""
+    ``workers`` (default: the cores) is above 1; ``when`` opens the line that says so."""
     if progress:
         names = ", ".join(key.replace("_", " ") for key, _ in COMPARATORS)
-        tqdm.write(f"Before training: scoring the {len(COMPARATORS)} comparison controllers "
+        tqdm.write(f"{when}: scoring the {len(COMPARATORS)} comparison controllers "
                    f"({names}) on the {len(eval_seeds)} evaluation episodes the agents are "
                    "judged on; each tick is one controller's episodes.")
     with tqdm(total=len(COMPARATORS), desc="comparison controllers",

@@ -39,8 +39,33 @@ def test_both_wrappers_pass_both_env_checkers(wrapper):
 
 
 def test_names_describe_every_channel():
-    assert len(physical_feature_names(3)) == 7 + 3 * 3 + 2
-    assert PHYSICAL_FEATURE_NAMES[-2:] == ("changed", "ready")
+    assert len(physical_feature_names(3)) == 7 + 3 * 3 + 4
+    assert PHYSICAL_FEATURE_NAMES[-4:] == ("paddle_sin", "paddle_cos", "changed", "ready")
+
+
+PADDLE = slice(N_FEAT - 4, N_FEAT - 2)
+
+
+def test_the_paddle_angle_tells_apart_plants_the_rest_of_the_vector_cannot():
+    """At 90 and 270 deg the gain and the modes are the same, the modal input coupling's
+    sign is not (a fixed LQG is stable at one, unstable at the other): both wrappers
+    report the drive's angle, from the first step."""
+    vectors = {}
+    for angle in (90.0, 270.0):
+        plant = {"paddle_angle_deg": angle, "paddle_rate_deg_s": 0.0,
+                 "module_masses_kg": [0.0, 0.0]}
+        for wrapper in (PrivilegedFeatures, PhysicalFeatures):
+            env = wrapper(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
+            obs, _ = env.reset(seed=0, options={"plant": plant})
+            vectors[wrapper, angle] = obs[N_OBS:]
+            np.testing.assert_allclose(obs[N_OBS:][PADDLE],
+                                       [np.sin(np.radians(angle)), np.cos(np.radians(angle))],
+                                       atol=1e-6)
+    same = slice(0, N_FEAT - 4)
+    np.testing.assert_allclose(vectors[PrivilegedFeatures, 90.0][same],
+                               vectors[PrivilegedFeatures, 270.0][same], atol=1e-5)
+    assert abs(vectors[PrivilegedFeatures, 90.0][PADDLE][0]
+               - vectors[PrivilegedFeatures, 270.0][PADDLE][0]) > 1.9
 
 
 def test_privileged_is_zero_at_the_nominal_plant_and_follows_a_draw():
@@ -124,15 +149,19 @@ def test_identified_gain_and_modes_agree_with_the_privileged_ones():
 
 
 def test_identified_features_are_zero_before_warm_up_and_restart_every_episode():
+    """Every channel but the drive's paddle angle is 0 until the identifier has warmed up."""
+    estimated = np.ones(N_FEAT, dtype=bool)
+    estimated[PADDLE] = False
     env = PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew"))
-    obs, _ = env.reset(seed=0)
-    assert np.all(obs[N_OBS:] == 0.0)
+    obs, info = env.reset(seed=0)
+    assert np.all(obs[N_OBS:][estimated] == 0.0)
+    np.testing.assert_allclose(obs[N_OBS:][PADDLE][1], np.cos(info["paddle_angle"]), atol=1e-6)
     obs = _multisine_episode(env, 450)
-    assert obs[-1] == 0.0 and np.all(obs[N_OBS:] == 0.0)      # the 50 s warm-up
+    assert obs[-1] == 0.0 and np.all(obs[N_OBS:][estimated] == 0.0)      # the 50 s warm-up
     obs = _multisine_episode(env, 600)
     assert obs[-1] == 1.0
     obs, _ = env.reset(seed=1)
-    assert np.all(obs[N_OBS:] == 0.0) and env.identifier.n_samples == 0
+    assert np.all(obs[N_OBS:][estimated] == 0.0) and env.identifier.n_samples == 0
 
 
 def test_identifier_sees_the_whole_torque_outside_a_residual_controller():

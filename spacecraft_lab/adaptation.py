@@ -1,0 +1,259 @@
+"""What the identifier is worth to an agent, measured RMA-style.
+
+``spacecraft adapt AGENT.zip [AGENT.zip ...] [--episodes 20] [--out DIR]``
+calls :func:`run_adaptation` on policies that ``spacecraft train`` trained
+with the true plant's parameters observed (``--features privileged`` or
+``residual-scheduled-privileged``: :class:`controllers.PrivilegedFeatures`,
+the rigid-body gain with the actuator efficiency, the dominant modes and the
+paddle angle). For each policy it
+
+1. flies the policy (the truth observed) on ``episodes`` episodes of the
+   family (seeds from :data:`COLLECTION_SEED`, disjoint from training, from
+   checkpoint selection and from the scored episodes), recording the
+   identifier's :class:`controllers.PhysicalFeatures` beside the privileged
+   vector at every refresh;
+2. fits an :class:`controllers.AdaptationModule` on those pairs (the
+   policy's own rollouts, as rapid motor adaptation learns its module);
+3. scores the same policy on the held-out episodes
+   (:data:`~spacecraft_lab.agents.HELD_OUT_SEEDS`) three times, the vector
+   from the truth, from the adaptation module
+   (:class:`controllers.EstimatedFeatures`) and from the nominal plant
+   (``PrivilegedFeatures(source="nominal")``), beside the oracle, scheduled
+   and fixed LQG on the same episodes: the common quadratic cost from
+   100 s, with paired ratios;
+4. measures the estimate against the truth on those episodes (RMS error per
+   channel group from 60 s), beside the identifier's raw vector and the
+   nominal one.
+
+It writes ``adaptation.json`` and ``table.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+from controllers import (
+    AdaptationModule,
+    EstimatedFeatures,
+    PhysicalFeatures,
+    PrivilegedFeatures,
+    episode_metrics,
+    run_episode,
+)
+from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent
+from spacecraft_lab.training import _make_env, _one_torch_thread, _score_comparators
+
+__all__ = ["COLLECTION_SEED", "SOURCES", "adaptation_table", "run_adaptation"]
+
+#: First episode seed of the adaptation module's training rollouts (training uses
+#: 0, 1, ...; checkpoint selection 1000-1009; the scored episodes 2000-2009).
+COLLECTION_SEED = 3000
+#: The three parameter vectors the same policy flies with.
+SOURCES = ("true", "estimated", "nominal")
+#: Channel groups of the error report (two modes): name -> channels.
+_GROUPS = {"gain": slice(0, 6), "frequency": slice(7, 9), "damping": slice(9, 11)}
+#: Errors are measured from this time on (the identifier's 50 s warm-up is over).
+_ERROR_FROM_S = 60.0
+
+
+def _unprivileged(features: str) -> str:
+    """The training setting without its privileged vector (``privileged`` -> ``none``)."""
+    if features == "privileged":
+        return "none"
+    if features.endswith("-privileged"):
+        return features[:-len("-privileged")]
+    raise ValueError(f"the agent was trained with features {features!r}; an RMA comparison "
+                     "needs a policy trained on the truth's parameters (features 'privileged' "
+                     "or 'residual-scheduled-privileged')")
+
+
+def _paired_rollouts(policy: Any, make: Any, seeds: Sequence[int],
+                     every: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fly ``policy`` with the truth observed; return the physical and privileged vectors
+    at every refresh and the refresh times (s). ``make()``: the env without features."""
+    physical, privileged, times = [], [], []
+    for seed in seeds:
+        env = PrivilegedFeatures(PhysicalFeatures(make(), every=every), every=every)
+        d = env.n_features
+        obs, info = env.reset(seed=int(seed))
+        policy.reset(seed=int(seed))
+        steps, done = 0, False
+        while not done:
+            if steps % every == 0:
+                physical.append(obs[-2 * d:-d])
+                privileged.append(obs[-d:])
+                times.append(info["time"])
+            action = policy.act(np.concatenate([obs[:-2 * d], obs[-d:]]), info)
+            obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            done = terminated or truncated
+        env.close()
+    return (np.asarray(physical, dtype=float), np.asarray(privileged, dtype=float),
+            np.asarray(times, dtype=float))
+
+
+def _group_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+    """RMS error of each channel group (:data:`_GROUPS`)."""
+    return {group: float(np.sqrt(np.mean((estimate[:, cols] - truth[:, cols]) ** 2)))
+            for group, cols in _GROUPS.items()}
+
+
+def _score(policy: Any, make_env: Any, seeds: Sequence[int]) -> dict[str, Any]:
+    costs = []
+    for seed in seeds:
+        env = make_env()
+        traj = run_episode(env, policy, seed=int(seed))
+        costs.append(episode_metrics(traj, env.unwrapped.model)["cost_after_100s"])
+        env.close()
+    costs = np.asarray(costs, dtype=float)
+    costs[np.isnan(costs)] = np.inf               # left the bound before 100 s: a failure
+    return {"cost_after_100s": float(np.median(costs)),
+            "cost_after_100s_mean": float(np.mean(costs)),
+            "cost_after_100s_worst": float(np.max(costs)),
+            "worst_episode_seed": int(seeds[int(np.argmax(costs))]),
+            "cost_after_100s_per_seed": costs.tolist()}
+
+
+def _paired(a: Sequence[float], b: Sequence[float]) -> dict[str, float]:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.asarray(a, dtype=float) / np.asarray(b, dtype=float)
+    ratio = np.where(np.isnan(ratio), np.inf, ratio)
+    return {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
+
+
+def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
+                   seeds: Sequence[int] = HELD_OUT_SEEDS, workers: int | None = None,
+                   progress: bool = True) -> dict[str, Any]:
+    """The RMA comparison of one or more policies trained on the truth's parameters.
+
+    Parameters
+    ----------
+    agents : sequence of str or Path
+        Saved models of ``spacecraft train`` with ``--features privileged`` or
+        ``residual-scheduled-privileged``, all of the same setting.
+    episodes : int
+        Rollouts per policy that train its adaptation module (seeds
+        :data:`COLLECTION_SEED` on).
+    seeds : sequence of int
+        The scored episodes (default :data:`~spacecraft_lab.agents.HELD_OUT_SEEDS`).
+    workers : int, optional
+        Processes scoring the LQG comparators (default: the cores).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    dict
+        ``agents`` (each policy's path, its scores per source, the paired
+        ratios estimated/true and nominal/estimated and to the comparators,
+        and the parameter errors per channel group of the estimate, the
+        identifier's raw vector and the nominal one), ``comparators`` (the
+        LQGs' scores), ``eval_seeds``, ``collection_seeds``.
+
+    Raises
+    ------
+    ValueError
+        For no agent, ``episodes < 1``, agents of different settings or a
+        setting without the privileged vector.
+    """
+    if not agents:
+        raise ValueError("give at least one agent")
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    seeds = tuple(int(s) for s in seeds)
+    loaded = [load_agent(agent) for agent in agents]
+    settings = loaded[0][1]
+    for _, other in loaded[1:]:
+        if any(other[key] != settings[key] for key in ("features", "scenario", "reward")):
+            raise ValueError("the agents must share their training setting; "
+                             f"{other['path']} differs from {settings['path']}")
+    base = _unprivileged(settings["features"])
+    scenario, env_kwargs = settings["scenario"], settings["env_kwargs"]
+
+    def make() -> gym.Env:
+        return _make_env(scenario, base, env_kwargs)
+
+    collection = tuple(range(COLLECTION_SEED, COLLECTION_SEED + int(episodes)))
+    comparators = _score_comparators(scenario, env_kwargs, seeds, workers, progress,
+                                     when="First")
+    import torch
+
+    results = []
+    bar = tqdm(total=len(loaded) * 4, desc="policies x (rollouts, 3 sources)",
+               disable=not progress, leave=False)
+    with _one_torch_thread(torch):
+        for policy, agent in loaded:
+            physical, privileged, _ = _paired_rollouts(policy, make, collection)
+            module = AdaptationModule().fit(physical, privileged)
+            bar.update()
+            makers = {"true": lambda: PrivilegedFeatures(make()),
+                      "estimated": lambda m=module: EstimatedFeatures(make(), m),
+                      "nominal": lambda: PrivilegedFeatures(make(), source="nominal")}
+            scores = {}
+            for source in SOURCES:
+                scores[source] = _score(policy, makers[source], seeds)
+                bar.update()
+            # the parameters themselves on the scored episodes, the truth flown
+            phys, priv, times = _paired_rollouts(policy, make, seeds)
+            late = times >= _ERROR_FROM_S
+            nominal_env = PrivilegedFeatures(make(), source="nominal")
+            nominal = np.broadcast_to(nominal_env.nominal_vector, priv[late].shape)
+            nominal_env.close()
+            errors = {"estimated": _group_errors(module.predict(phys[late]), priv[late]),
+                      "identifier": _group_errors(phys[late], priv[late]),
+                      "nominal": _group_errors(nominal, priv[late])}
+            per = {source: scores[source]["cost_after_100s_per_seed"] for source in SOURCES}
+            results.append({
+                "path": agent["path"], "scores": scores, "errors": errors,
+                "estimated_over_true": _paired(per["estimated"], per["true"]),
+                "nominal_over_estimated": _paired(per["nominal"], per["estimated"]),
+                "over": {f"{source}/{key}": _paired(per[source],
+                                                    comp["cost_after_100s_per_seed"])
+                         for source in SOURCES
+                         for key, comp in comparators.items() if key != "zero_torque"}})
+    bar.close()
+    return {"features": settings["features"], "scenario": scenario,
+            "eval_seeds": list(seeds), "collection_seeds": list(collection),
+            "comparators": comparators, "agents": results}
+
+
+def adaptation_table(result: dict[str, Any]) -> str:
+    """Markdown tables of :func:`run_adaptation`'s result."""
+    seeds = result["eval_seeds"]
+    lines = [f"RMA comparison: {result['features']} on {result['scenario']}, "
+             f"{len(result['agents'])} policies, episodes {seeds[0]}-{seeds[-1]}, adaptation "
+             f"module fitted on {len(result['collection_seeds'])} rollouts each; common cost "
+             "from 100 s, median / mean [worst episode]",
+             "",
+             "| policy | true parameters | estimated | nominal | estimated / true, paired "
+             "median [worst] | nominal / estimated | estimated / scheduled LQG |",
+             "|---|---|---|---|---|---|---|"]
+    for agent in result["agents"]:
+        cells = [f"{s['cost_after_100s']:.4g} / {s['cost_after_100s_mean']:.4g} "
+                 f"[{s['cost_after_100s_worst']:.3g}]"
+                 for s in (agent["scores"][source] for source in SOURCES)]
+        est, nom = agent["estimated_over_true"], agent["nominal_over_estimated"]
+        sched = agent["over"]["estimated/scheduled_lqg"]
+        lines.append(f"| {Path(agent['path']).stem} | {' | '.join(cells)} | "
+                     f"{est['median']:.3g} [{est['worst']:.3g}] | "
+                     f"{nom['median']:.3g} [{nom['worst']:.3g}] | "
+                     f"{sched['median']:.3g} [{sched['worst']:.3g}] |")
+    lines += ["", "| comparator | median | mean [worst] |", "|---|---|---|"]
+    for key, score in result["comparators"].items():
+        lines.append(f"| {key.replace('_', ' ')} | {score['cost_after_100s']:.4g} | "
+                     f"{score['cost_after_100s_mean']:.4g} "
+                     f"[{score['cost_after_100s_worst']:.3g}] |")
+    lines += ["", f"Parameter error from {_ERROR_FROM_S:g} s on the same episodes (RMS, frame "
+              "units: log gain, log frequency, 10 x damping):", "",
+              "| policy | vector | gain | frequency | damping |", "|---|---|---|---|---|"]
+    for agent in result["agents"]:
+        for vector, errors in agent["errors"].items():
+            lines.append(f"| {Path(agent['path']).stem} | {vector} | {errors['gain']:.3g} | "
+                         f"{errors['frequency']:.3g} | {errors['damping']:.3g} |")
+    return "\n".join(lines)

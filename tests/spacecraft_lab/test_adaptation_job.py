@@ -1,0 +1,70 @@
+"""``spacecraft adapt``: one policy flown with the true, estimated and nominal parameters."""
+
+import json
+
+import numpy as np
+import pytest
+
+from spacecraft_lab.adaptation import COLLECTION_SEED, SOURCES, adaptation_table, run_adaptation
+from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, load_agent
+from spacecraft_lab.cli import main
+from spacecraft_lab.training import EVAL_SEEDS, _evaluate, run_training
+
+
+@pytest.fixture(scope="module")
+def privileged_agent(tmp_path_factory):
+    """A residual on the scheduled LQG with the truth's parameters observed, one rollout."""
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path_factory.mktemp("privileged")
+    run_training("ppo", "residual-scheduled-privileged", 2048, 1, out, scenario="family",
+                 eval_every=10**9, progress=False, reward="cost", eval_seeds=(1000,), workers=1)
+    return out / "ppo-residual-scheduled-privileged-seed0.zip"
+
+
+def test_collection_and_scored_episodes_are_disjoint_from_training_and_selection():
+    collection = set(range(COLLECTION_SEED, COLLECTION_SEED + 100))
+    assert not collection & set(HELD_OUT_SEEDS) and not collection & set(EVAL_SEEDS)
+
+
+def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privileged_agent):
+    result = run_adaptation([privileged_agent], episodes=1, seeds=(2000,), workers=1,
+                            progress=False)
+    assert result["collection_seeds"] == [COLLECTION_SEED] and result["eval_seeds"] == [2000]
+    (agent,) = result["agents"]
+    assert set(agent["scores"]) == set(SOURCES)
+    per = {s: agent["scores"][s]["cost_after_100s_per_seed"][0] for s in SOURCES}
+    assert agent["estimated_over_true"]["median"] == pytest.approx(per["estimated"] / per["true"])
+    assert agent["nominal_over_estimated"]["median"] == pytest.approx(
+        per["nominal"] / per["estimated"])
+    # "true" is the env the policy trained and was evaluated on
+    policy, settings = load_agent(privileged_agent)
+    again = _evaluate(policy, "family", settings["features"], settings["env_kwargs"], (2000,))
+    assert per["true"] == pytest.approx(again["cost_after_100s_per_seed"][0], rel=1e-9)
+    # the estimate and the identifier's raw vector are scored against the truth
+    assert set(agent["errors"]) == {"estimated", "identifier", "nominal"}
+    for errors in agent["errors"].values():
+        assert all(np.isfinite(v) and v >= 0 for v in errors.values())
+    sched = result["comparators"]["scheduled_lqg"]["cost_after_100s_per_seed"][0]
+    assert agent["over"]["estimated/scheduled_lqg"]["median"] == pytest.approx(
+        per["estimated"] / sched)
+    table = adaptation_table(result)
+    assert "| true parameters | estimated | nominal |" in table and "| identifier |" in table
+
+
+def test_a_policy_without_the_privileged_vector_is_refused():
+    pytest.importorskip("stable_baselines3")
+    with pytest.raises(ValueError, match="trained on the truth's parameters"):
+        run_adaptation([SHIPPED_AGENTS["residual-scheduled-family"]], episodes=1,
+                       seeds=(2000,), workers=1, progress=False)
+    with pytest.raises(ValueError, match="at least one agent"):
+        run_adaptation([], progress=False)
+
+
+def test_cli_adapt_writes_json_and_table(privileged_agent, tmp_path, capsys):
+    code = main(["adapt", str(privileged_agent), "--episodes", "1", "--scored-episodes", "1",
+                 "--workers", "1", "--out", str(tmp_path / "rma")])
+    assert code == 0
+    result = json.loads((tmp_path / "rma" / "adaptation.json").read_text())
+    assert result["features"] == "residual-scheduled-privileged"
+    assert (tmp_path / "rma" / "table.md").read_text().startswith("RMA comparison")
+    assert "wrote" in capsys.readouterr().out
