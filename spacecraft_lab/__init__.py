@@ -10,7 +10,9 @@ Built on the three library packages (:mod:`spacecraft_env`,
 * :mod:`spacecraft_lab.control`: the closed-loop comparison (the main job)
   and the control sweep task.
 * :mod:`spacecraft_lab.training`: stable-baselines3 agents with and without
-  identified-model features.
+  identified-model features; :mod:`spacecraft_lab.agents`: saved agents
+  scored beside the LQGs; :mod:`spacecraft_lab.adaptation`: what the
+  identifier is worth to an agent (RMA-style).
 * :mod:`spacecraft_lab.paper`: the source paper's published figures.
 * :mod:`spacecraft_lab.reporting`, :mod:`spacecraft_lab.plots`: tables and
   figures.
