@@ -2,10 +2,10 @@
 
 ``spacecraft adapt AGENT.zip [AGENT.zip ...] [--episodes 20] [--out DIR]``
 calls :func:`run_adaptation` on policies that ``spacecraft train`` trained
-with the true plant's parameters observed (``--features privileged`` or
-``residual-scheduled-privileged``: :class:`controllers.PrivilegedFeatures`,
-the rigid-body gain with the actuator efficiency, the dominant modes and the
-paddle angle). For each policy it
+with the true plant's parameters observed (``--features privileged``,
+``residual-scheduled-privileged`` or ``residual-fixed-privileged``:
+:class:`controllers.PrivilegedFeatures`, the rigid-body gain with the actuator
+efficiency, the dominant modes and the paddle angle). For each policy it
 
 1. flies the policy (the truth observed) on ``episodes`` episodes of the
    family (seeds from :data:`COLLECTION_SEED`, disjoint from training, from
@@ -70,7 +70,7 @@ def _unprivileged(features: str) -> str:
         return features[:-len("-privileged")]
     raise ValueError(f"the agent was trained with features {features!r}; an RMA comparison "
                      "needs a policy trained on the truth's parameters (features 'privileged' "
-                     "or 'residual-scheduled-privileged')")
+                     "or 'residual-*-privileged')")
 
 
 def _paired_rollouts(policy: Any, make: Any, seeds: Sequence[int],
@@ -136,7 +136,7 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
     ----------
     agents : sequence of str or Path
         Saved models of ``spacecraft train`` with ``--features privileged`` or
-        ``residual-scheduled-privileged``, all of the same setting.
+        ``residual-*-privileged``, all of the same setting.
     episodes : int
         Rollouts per policy that train its adaptation module (seeds
         :data:`COLLECTION_SEED` on).

@@ -468,7 +468,7 @@ def build_parser() -> argparse.ArgumentParser:
                                   "ones (RMA-style)")
     adapt.add_argument("agents", nargs="+", metavar="AGENT",
                        help="models saved by 'train --features privileged' or "
-                            "'residual-scheduled-privileged' (.zip, with their "
+                            "'residual-*-privileged' (.zip, with their "
                             "_vecnormalize.pkl and the run's metrics.json)")
     adapt.add_argument("--episodes", type=_integer(1), default=20, metavar="N",
                        help="rollouts of each policy that train its adaptation module")

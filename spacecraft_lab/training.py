@@ -30,9 +30,9 @@ error, the last torque and the base's state estimate observed
 of that one with the identifier's physical estimates observed
 (``residual-scheduled-physical``: the draw's rigid gain and modes, which the
 schedule on the paddle angle does not know), or the same vector from the truth
-(``residual-scheduled-privileged``: the policy that
-:mod:`spacecraft_lab.adaptation` evaluates with true, estimated and nominal
-parameters).
+(``residual-scheduled-privileged``, or on the fixed LQG,
+``residual-fixed-privileged``: the policies that :mod:`spacecraft_lab.adaptation`
+evaluates with true, estimated and nominal parameters).
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -96,7 +96,8 @@ ALGORITHMS = ("ppo", "sac")
 FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
             "physical", "privileged", "residual-adaptive", "residual-fixed",
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
-            "residual-scheduled-physical", "residual-scheduled-privileged")
+            "residual-scheduled-physical", "residual-scheduled-privileged",
+            "residual-fixed-privileged")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -108,7 +109,8 @@ _RESIDUAL = {"residual-adaptive": AdaptiveLQG, "residual-fixed": FixedLQG,
              "residual-fixed-physical": FixedLQG, "residual-scheduled": ScheduledLQG,
              "residual-scheduled-observed": ScheduledLQG,
              "residual-scheduled-physical": ScheduledLQG,
-             "residual-scheduled-privileged": ScheduledLQG}
+             "residual-scheduled-privileged": ScheduledLQG,
+             "residual-fixed-privileged": FixedLQG}
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
