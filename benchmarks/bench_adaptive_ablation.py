@@ -67,7 +67,7 @@ from controllers import (
 from controllers.baselines import process_noise
 from identifiers import CLOSED_LOOP_SETTINGS, Resonator
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
-from spacecraft_env import ENV_IDS
+from spacecraft_env import DEFAULT_SNR_DB, ENV_IDS
 from spacecraft_lab.control import env_kwargs_for
 
 #: The band of the paddle and antenna modes whose closed-loop damping is printed, Hz.
@@ -344,7 +344,7 @@ def main() -> None:
     parser.add_argument("--paddle-angle", type=float, default=None,
                         help="paddle angle at t = 0, deg (constant and rotation scenarios)")
     parser.add_argument("--task", default="slew", choices=("slew", "regulation"))
-    parser.add_argument("--snr-db", type=float, default=40.0,
+    parser.add_argument("--snr-db", type=float, default=DEFAULT_SNR_DB,
                         help="measurement SNR per channel, dB")
     parser.add_argument("--at", type=float, default=200.0,
                         help="time of the frozen-loop damping analysis, s")

@@ -64,7 +64,7 @@ from identifiers import (
     rigid_body_gain,
 )
 from identifiers.structured.modal_basis import Resonator
-from spacecraft_env import env_id
+from spacecraft_env import DEFAULT_SNR_DB, env_id
 from spacecraft_lab.control import env_kwargs_for
 from spacecraft_lab.identification import truth_sequence
 
@@ -127,7 +127,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paddle_rotation")
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--snr-db", type=float, default=40.0,
+    parser.add_argument("--snr-db", type=float, default=DEFAULT_SNR_DB,
                         help="sensor SNR, dB (a negative value: noise-free sensors)")
     parser.add_argument("--excitation", type=float, default=None,
                         help="steady excitation budget after warm-up, N m per axis "

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from spacecraft_conventions import __version__
 from spacecraft_env.dynamics import DRIVE_AXIS, FlexibleSpacecraftModel, StateSpaceMatrices
-from spacecraft_env.env import REWARDS, FlexibleSpacecraftEnv, RewardWeights
+from spacecraft_env.env import DEFAULT_SNR_DB, REWARDS, FlexibleSpacecraftEnv, RewardWeights
 from spacecraft_env.family import PlantDraw, TaskFamily
 from spacecraft_env.limits import PARAMETER_LIMITS, Limit, check_parameter
 from spacecraft_env.parameters import (
@@ -47,6 +47,7 @@ from spacecraft_env.wrappers import ActionRepeat
 
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
+    "DEFAULT_SNR_DB",
     "DRIVE_AXIS",
     "ENV_IDS",
     "MAX_EPISODE_STEPS",

@@ -36,13 +36,16 @@ from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
 from spacecraft_env.scenarios import Scenario, make_scenario
 
-__all__ = ["REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
+__all__ = ["DEFAULT_SNR_DB", "REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
 
 #: Reward forms (the ``reward`` argument): the negative stage cost, or its
 #: bounded survival form for learning agents, and its log-scaled form that resolves
 #: precision near the target (``"log"``).
 REWARDS = ("cost", "bounded", "log")
 
+#: Default measurement SNR per channel, dB, relative to the channel's nominal level
+#: (the paper's 40 dB: 0.01 deg of attitude, 0.001 deg/s of rate, 0.1 mm of deflection).
+DEFAULT_SNR_DB = 40.0
 #: Accepted range of ``snr_db``: from noise 100x the nominal level to 1e-15 of it.
 SNR_RANGE_DB = (PARAMETER_LIMITS["snr_db"].low, PARAMETER_LIMITS["snr_db"].high)
 #: Largest ``max_torque``, N m (large thrusters; reaction wheels give < 1 N m).
@@ -332,7 +335,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     def __init__(self, scenario: str | Scenario = "constant", *, randomize: bool = False,
                  family: TaskFamily | None = None,
                  n_modes: int = 2, params: SpacecraftParameters | None = None,
-                 outputs: Sequence[str] | None = None, snr_db: float | None = 40.0,
+                 outputs: Sequence[str] | None = None, snr_db: float | None = DEFAULT_SNR_DB,
                  max_torque: float = 10.0, dt: float = 0.1, task: str = "regulation",
                  initial_attitude_deg: float = 2.0, slew_range_deg: float = 10.0,
                  disturbance_torque: float | Sequence[float] = 0.0,

@@ -48,12 +48,13 @@ from typing import Any
 
 from controllers import LQRWeights
 from spacecraft_conventions import __version__, exit_now, sigterm_as_interrupt
-from spacecraft_env import PARAMETER_LIMITS, REWARDS, SCENARIOS
+from spacecraft_env import DEFAULT_SNR_DB, PARAMETER_LIMITS, REWARDS, SCENARIOS
 from spacecraft_lab.adaptation import adaptation_table, run_adaptation
 from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
+from spacecraft_lab.paper import PAPER_SNR_DB
 from spacecraft_lab.plots import plot_rl_comparison
 from spacecraft_lab.reporting import (
     control_brief,
@@ -337,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--preset", choices=PRESETS, default="default",
                        help="the methods' settings: the package's defaults, or the source "
                             "paper's constants (p = 15, forgetting 0.98, ...)")
-    ident.add_argument("--snr-db", type=_snr, default=40.0,
+    ident.add_argument("--snr-db", type=_snr, default=PAPER_SNR_DB,
                        help="measurement SNR per channel in dB, or 'none' (paper: 40)")
     ident.add_argument("--modes", type=_integer(1), default=2,
                        help="modes per appendage, 1..8 (order n = 6 + 8 k)")
@@ -381,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "paddle_rotation: 0.36)")
     ctl.add_argument("--paddle-angle", type=_limited("paddle_angle"), default=None,
                      help="paddle angle at t = 0, deg (constant and rotation scenarios)")
-    ctl.add_argument("--snr-db", type=_snr, default=40.0,
+    ctl.add_argument("--snr-db", type=_snr, default=DEFAULT_SNR_DB,
                      help="measurement SNR per channel in dB, or 'none'")
     ctl.add_argument("--torque-weight", type=_limited("torque_weight"), default=None,
                      help="LQR torque weight per (N m)^2; smaller = more aggressive "

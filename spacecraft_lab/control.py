@@ -43,6 +43,7 @@ from controllers import (
 from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier, StructuredRPBSID
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
+    DEFAULT_SNR_DB,
     DRIVE_AXIS,
     ENV_IDS,
     SCENARIOS,
@@ -149,7 +150,7 @@ CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
 
 def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | None = None,
                    rotation_rate: float | None = None, paddle_angle: float | None = None,
-                   snr_db: float | None = 40.0, max_torque: float | None = None,
+                   snr_db: float | None = DEFAULT_SNR_DB, max_torque: float | None = None,
                    actuator_delay_steps: int = 0, torque_rate_limit: float | None = None,
                    disturbance_torque: float = 0.0, mass_centre_shift: bool = False,
                    capture_momentum: Sequence[float] | None = None) -> dict[str, Any]:
@@ -246,7 +247,7 @@ def _check_control(*, controller: str, seed: int | None = None,
                    scenario: str = "paddle_rotation", task: str = "slew",
                    module_mass: float | None = None, rotation_rate: float | None = None,
                    paddle_angle: float | None = None, max_torque: float | None = None,
-                   snr_db: float | None = 40.0, torque_weight: float | None = None,
+                   snr_db: float | None = DEFAULT_SNR_DB, torque_weight: float | None = None,
                    max_steps: int | None = None) -> dict[str, Any]:
     """:func:`control_task`'s values checked without running it; its ``gym.make``
     keywords (a sweep file is checked with it before any task runs).
@@ -275,7 +276,7 @@ def _check_control(*, controller: str, seed: int | None = None,
 def control_task(*, controller: str, seed: int, scenario: str = "paddle_rotation",
                  task: str = "slew", module_mass: float | None = None,
                  rotation_rate: float | None = None, paddle_angle: float | None = None,
-                 max_torque: float | None = None, snr_db: float | None = 40.0,
+                 max_torque: float | None = None, snr_db: float | None = DEFAULT_SNR_DB,
                  torque_weight: float | None = None, max_steps: int | None = None) -> dict:
     """One closed-loop episode: one controller on one seed (a sweep task).
 

@@ -72,7 +72,7 @@ from identifiers import (
 )
 from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
 from spacecraft_env import SCENARIOS, FlexibleSpacecraftModel, check_parameter, ets8_parameters
-from spacecraft_lab.paper import PAPER_TABLES
+from spacecraft_lab.paper import PAPER_SNR_DB, PAPER_TABLES
 from spacecraft_lab.plots import (
     plot_identification_modal,
     plot_identification_responses,
@@ -197,7 +197,7 @@ class IdentificationRecord(NamedTuple):
 
 
 def identification_records(truth: FlexibleSpacecraftModel, seed: int, n_samples: int = 2500,
-                           snr_db: float | None = 40.0) -> IdentificationRecord:
+                           snr_db: float | None = PAPER_SNR_DB) -> IdentificationRecord:
     """The identification and held-out records of one seed.
 
     Both are the truth model driven by random-phase multisine torques with
@@ -432,7 +432,7 @@ def _truth(scenario: str, n_modes: int) -> FlexibleSpacecraftModel:
 def run_identification(scenario: str = "docking", seeds: int = 10,
                        out: str | Path = "results/identify", *,
                        methods: Sequence[str] | None = None, preset: str = "default",
-                       snr_db: float | None = 40.0, n_modes: int = 2, n_samples: int = 2500,
+                       snr_db: float | None = PAPER_SNR_DB, n_modes: int = 2, n_samples: int = 2500,
                        convergence_s: float = 150.0, progress: bool = True,
                        workers: int | None = None) -> dict[str, Any]:
     """Run the identification experiment and write its artefacts.
@@ -600,7 +600,7 @@ def _task_setup(method: str, scenario: str, order: int | None, n_modes: int, pre
 
 def _check_identify(*, method: str, seed: int | None = None, scenario: str = "docking",
                     order: int | None = None, n_modes: int = 2, preset: str = "default",
-                    snr_db: float | None = 40.0, n_samples: int = 2500,
+                    snr_db: float | None = PAPER_SNR_DB, n_samples: int = 2500,
                     convergence_s: float = 150.0, baselines: bool = False) -> None:
     """:func:`identify_task`'s values checked without running it (a sweep file is checked
     with it before any task runs)."""
@@ -613,7 +613,7 @@ def _check_identify(*, method: str, seed: int | None = None, scenario: str = "do
 @single_threaded_blas
 def identify_task(*, method: str, seed: int, scenario: str = "docking",
                   order: int | None = None, n_modes: int = 2, preset: str = "default",
-                  snr_db: float | None = 40.0, n_samples: int = 2500,
+                  snr_db: float | None = PAPER_SNR_DB, n_samples: int = 2500,
                   convergence_s: float = 150.0, baselines: bool = False) -> dict[str, Any]:
     """One identification run: one method on one seed (a sweep task).
 

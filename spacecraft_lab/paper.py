@@ -9,7 +9,11 @@ predictor-based recursive subspace algorithm", Acta Astronautica 163 (2019)
 
 from __future__ import annotations
 
-__all__ = ["PAPER_METHOD_NAMES", "PAPER_TABLE5", "PAPER_TABLES"]
+__all__ = ["PAPER_METHOD_NAMES", "PAPER_SNR_DB", "PAPER_TABLE5", "PAPER_TABLES"]
+
+#: The paper's measurement SNR, dB per channel, relative to each channel's RMS over
+#: the record (its identification experiments; :func:`identifiers.add_measurement_noise`).
+PAPER_SNR_DB = 40.0
 
 #: Our method name -> the paper's name for it.
 PAPER_METHOD_NAMES: dict[str, str] = {"improved": "improved RPBSID",
