@@ -25,7 +25,8 @@ efficiency, the dominant modes and the paddle angle). For each policy it
    channel group from 60 s), beside the identifier's raw vector and the
    nominal one.
 
-It writes ``adaptation.json`` and ``table.md``.
+``spacecraft adapt`` writes ``adaptation.json``, ``table.md`` and
+``adaptation.png`` (:func:`spacecraft_lab.plots.plot_adaptation`).
 """
 
 from __future__ import annotations

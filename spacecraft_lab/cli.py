@@ -55,7 +55,7 @@ from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_f
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.paper import PAPER_SNR_DB
-from spacecraft_lab.plots import plot_rl_comparison
+from spacecraft_lab.plots import plot_adaptation, plot_rl_comparison
 from spacecraft_lab.reporting import (
     control_brief,
     control_summary,
@@ -480,7 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="processes scoring the LQG comparators side by side; the "
                             "scores do not depend on it (default: all cores)")
     adapt.add_argument("--out", type=_output_directory, default="results/adapt",
-                       help="output directory (adaptation.json, table.md)")
+                       help="output directory (adaptation.json, table.md, adaptation.png)")
 
     table = command("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
@@ -608,8 +608,9 @@ def _adapt(args: argparse.Namespace) -> int:
     table = adaptation_table(result)
     (out / "adaptation.json").write_text(json.dumps(result, indent=2))
     (out / "table.md").write_text(table + "\n")
+    plot_adaptation(out / "adaptation.png", result)
     print(table)
-    print(f"wrote {out}/adaptation.json and table.md")
+    print(f"wrote {out}/adaptation.json, table.md and adaptation.png")
     return 0
 
 

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_AGENT_SERIES",
     "PREDICTION_SERIES",
     "mark_events",
+    "plot_adaptation",
     "plot_control_comparison",
     "plot_demo_response",
     "plot_identification_modal",
@@ -435,6 +436,72 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
         else ""
     fig.suptitle(f"{' and '.join(algos)} on {task}{more}: median (line) and range (band) "
                  "over training seeds")
+    save(fig, path)
+    return fig
+
+
+def plot_adaptation(path: str | Path, result: Mapping[str, Any]) -> Figure:
+    """The RMA comparison of :func:`spacecraft_lab.adaptation.run_adaptation`.
+
+    Left: each policy's cost from 100 s on every scored episode (points) and
+    the median (bar), flown with the true, the estimated and the nominal
+    parameters, beside the oracle and scheduled LQG's medians on the same
+    episodes (grey lines). Right: the parameter error from 60 s (RMS, frame
+    units) of the adaptation module's estimate, the identifier's raw vector
+    and the nominal one, per channel group and policy.
+    """
+    sources = ("true", "estimated", "nominal")
+    agents = result["agents"]
+    fig = Figure(figsize=(13, 4.8), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    width = 0.8 / len(sources)
+    for i, agent in enumerate(agents):
+        for j, source in enumerate(sources):
+            costs = np.asarray(agent["scores"][source]["cost_after_100s_per_seed"], float)
+            x = i + (j - (len(sources) - 1) / 2) * width
+            left.scatter(np.full(costs.size, x), costs, s=12, color=f"C{j}", alpha=0.6,
+                         zorder=3, label=f"{source} parameters" if i == 0 else None)
+            left.hlines(np.median(costs), x - 0.4 * width, x + 0.4 * width, color=f"C{j}",
+                        lw=2.5, zorder=4)
+    for name, key, style in (("oracle LQG", "oracle_lqg", ":"),
+                             ("scheduled LQG", "scheduled_lqg", "--")):
+        if key in result["comparators"]:
+            left.axhline(result["comparators"][key]["cost_after_100s"], color="0.4", ls=style,
+                         lw=1.0, zorder=1, label=f"{name}, median (same episodes)")
+    left.set_xticks(range(len(agents)))
+    left.set_xticklabels([Path(a["path"]).stem.rsplit("-", 1)[-1].replace("seed", "seed ")
+                          for a in agents])
+    left.set_xlabel("policy (training seed)")
+    left.set_yscale("log")
+    left.set_ylabel("cost from 100 s per episode (bar: median)")
+    groups = ("gain", "frequency", "damping")
+    vectors = ("estimated", "identifier", "nominal")
+    names = {"estimated": "adaptation module", "identifier": "identifier, raw",
+             "nominal": "nominal plant"}
+    width = 0.8 / len(vectors)
+    for j, vector in enumerate(vectors):
+        errors = np.array([[a["errors"][vector][g] for g in groups] for a in agents])
+        x = np.arange(len(groups)) + (j - (len(vectors) - 1) / 2) * width
+        right.bar(x, np.median(errors, axis=0), width, color=f"C{j + 3}",
+                  label=f"{names[vector]} (median over policies)")
+        right.scatter(np.repeat(x[None], len(agents), axis=0).ravel(), errors.ravel(), s=10,
+                      color="k", zorder=3)
+    right.set_xticks(range(len(groups)))
+    right.set_xticklabels(["log gain", "log frequency", "10 x damping"])
+    right.set_ylabel("RMS error from 60 s (frame units)")
+    right.set_yscale("log")
+    for ax in (left, right):
+        ax.grid(alpha=0.3)
+    handles, labels = [], []
+    for ax in (left, right):
+        h, lab = ax.get_legend_handles_labels()
+        handles += h
+        labels += lab
+    fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize=8)
+    seeds = result["eval_seeds"]
+    fig.suptitle(f"Each policy ({result['features']}, {result['scenario']}) flown with the "
+                 f"true, estimated and nominal parameters, episodes {seeds[0]}-{seeds[-1]}\n"
+                 "right: how far each parameter vector is from the truth")
     save(fig, path)
     return fig
 

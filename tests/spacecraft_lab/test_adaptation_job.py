@@ -67,4 +67,5 @@ def test_cli_adapt_writes_json_and_table(privileged_agent, tmp_path, capsys):
     result = json.loads((tmp_path / "rma" / "adaptation.json").read_text())
     assert result["features"] == "residual-scheduled-privileged"
     assert (tmp_path / "rma" / "table.md").read_text().startswith("RMA comparison")
+    assert (tmp_path / "rma" / "adaptation.png").stat().st_size > 10_000
     assert "wrote" in capsys.readouterr().out
