@@ -44,11 +44,9 @@ from controllers import (
     EstimatedFeatures,
     PhysicalFeatures,
     PrivilegedFeatures,
-    episode_metrics,
-    run_episode,
 )
-from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent
-from spacecraft_lab.training import _make_env, _one_torch_thread, _score_comparators
+from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent, paired_ratio
+from spacecraft_lab.training import _evaluate, _make_env, _one_torch_thread, _score_comparators
 
 __all__ = ["COLLECTION_SEED", "SOURCES", "adaptation_table", "run_adaptation"]
 
@@ -103,29 +101,6 @@ def _group_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     """RMS error of each channel group (:data:`_GROUPS`)."""
     return {group: float(np.sqrt(np.mean((estimate[:, cols] - truth[:, cols]) ** 2)))
             for group, cols in _GROUPS.items()}
-
-
-def _score(policy: Any, make_env: Any, seeds: Sequence[int]) -> dict[str, Any]:
-    costs = []
-    for seed in seeds:
-        env = make_env()
-        traj = run_episode(env, policy, seed=int(seed))
-        costs.append(episode_metrics(traj, env.unwrapped.model)["cost_after_100s"])
-        env.close()
-    costs = np.asarray(costs, dtype=float)
-    costs[np.isnan(costs)] = np.inf               # left the bound before 100 s: a failure
-    return {"cost_after_100s": float(np.median(costs)),
-            "cost_after_100s_mean": float(np.mean(costs)),
-            "cost_after_100s_worst": float(np.max(costs)),
-            "worst_episode_seed": int(seeds[int(np.argmax(costs))]),
-            "cost_after_100s_per_seed": costs.tolist()}
-
-
-def _paired(a: Sequence[float], b: Sequence[float]) -> dict[str, float]:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.asarray(a, dtype=float) / np.asarray(b, dtype=float)
-    ratio = np.where(np.isnan(ratio), np.inf, ratio)
-    return {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
 
 
 def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
@@ -198,7 +173,8 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
                       "nominal": lambda: PrivilegedFeatures(make(), source="nominal")}
             scores = {}
             for source in SOURCES:
-                scores[source] = _score(policy, makers[source], seeds)
+                scores[source] = _evaluate(policy, scenario, base, env_kwargs, seeds,
+                                           make_env=makers[source])
                 bar.update()
             # the parameters themselves on the scored episodes, the truth flown
             phys, priv, times = _paired_rollouts(policy, make, seeds)
@@ -212,9 +188,9 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
             per = {source: scores[source]["cost_after_100s_per_seed"] for source in SOURCES}
             results.append({
                 "path": agent["path"], "scores": scores, "errors": errors,
-                "estimated_over_true": _paired(per["estimated"], per["true"]),
-                "nominal_over_estimated": _paired(per["nominal"], per["estimated"]),
-                "over": {f"{source}/{key}": _paired(per[source],
+                "estimated_over_true": paired_ratio(per["estimated"], per["true"]),
+                "nominal_over_estimated": paired_ratio(per["nominal"], per["estimated"]),
+                "over": {f"{source}/{key}": paired_ratio(per[source],
                                                     comp["cost_after_100s_per_seed"])
                          for source in SOURCES
                          for key, comp in comparators.items() if key != "zero_torque"}})

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,7 @@ from spacecraft_lab.training import (
 )
 
 __all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
-           "evaluation_table", "load_agent"]
+           "evaluation_table", "load_agent", "paired_ratio"]
 
 #: Episodes :func:`evaluate_agent` scores by default: disjoint from the training seeds
 #: and from the evaluation episodes training picks its best checkpoint on.
@@ -147,6 +148,26 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
     return policy, {**settings, "env_kwargs": env_kwargs, "path": str(path)}
 
 
+def paired_ratio(mine: Sequence[float], theirs: Sequence[float]) -> dict[str, float]:
+    """Median and worst of the per-episode cost ratios ``mine / theirs``.
+
+    Parameters
+    ----------
+    mine, theirs : sequence of float
+        Costs of the same episodes, in the same order (``inf`` for a failure).
+
+    Returns
+    -------
+    dict
+        ``median`` and ``worst`` (largest) ratio; an undefined ratio (0 / 0, or a
+        failure on both sides) counts as infinite.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.asarray(mine, dtype=float) / np.asarray(theirs, dtype=float)
+    ratio = np.where(np.isnan(ratio), np.inf, ratio)
+    return {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
+
+
 def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
                    workers: int | None = None, progress: bool = True) -> dict[str, Any]:
     """Score a saved agent and the LQG comparators on the same episodes.
@@ -184,14 +205,9 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
                           settings["env_kwargs"], seeds)
     scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
                                                    seeds, workers, progress, when="Then")}
-    mine = np.asarray(score["cost_after_100s_per_seed"], dtype=float)
-    agent_over = {}
-    for key, _ in COMPARATORS:
-        theirs = np.asarray(scores[key]["cost_after_100s_per_seed"], dtype=float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = mine / theirs
-        ratio = np.where(np.isnan(ratio), np.inf, ratio)
-        agent_over[key] = {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
+    mine = score["cost_after_100s_per_seed"]
+    agent_over = {key: paired_ratio(mine, scores[key]["cost_after_100s_per_seed"])
+                  for key, _ in COMPARATORS}
     return {"agent": settings, "eval_seeds": list(seeds), "scores": scores,
             "agent_over": agent_over}
 

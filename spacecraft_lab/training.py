@@ -220,20 +220,23 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
 
 
 def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario: str,
-              features: str, env_kwargs: dict[str, Any], seeds=EVAL_SEEDS) -> dict[str, Any]:
+              features: str, env_kwargs: dict[str, Any], seeds=EVAL_SEEDS,
+              make_env: Callable[[], gym.Env] | None = None) -> dict[str, Any]:
     """Harness scores over the evaluation episodes. ``controller``: one controller for
     every episode, or a factory called with each episode's env (a controller that
-    reads its env's true model, e.g. the oracle, must fly the env it is scored on)."""
+    reads its env's true model, e.g. the oracle, must fly the env it is scored on).
+    ``make_env``: builds each episode's env instead of the setting's."""
     make = controller if not isinstance(controller, Controller) else (lambda env: controller)
+    build = make_env or partial(_make_env, scenario, features, env_kwargs)
     per_seed = []
     kept = _IDENTIFIED.get(features, {}).get("keep_identifier", False)
-    shared = _make_env(scenario, features, env_kwargs) if kept else None
+    shared = build() if kept else None
     if shared is not None:
         # one env: its identifier learns through a first, discarded episode and
         # is carried into every evaluated one
         run_episode(shared, make(shared.unwrapped), seed=EVAL_WARMUP_SEED)
     for seed in seeds:
-        env = shared or _make_env(scenario, features, env_kwargs)
+        env = shared or build()
         traj = run_episode(env, make(env.unwrapped), seed=seed)
         per_seed.append(episode_metrics(traj, env.unwrapped.model))
         if shared is None:
