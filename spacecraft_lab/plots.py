@@ -372,7 +372,9 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     the scheduled LQG, for runs that scored it); the right panel is the return
     for a bounded reward and, for a cost reward (whose return the slew
     dominates), the cost from 100 s over the mean episode;
-    the legend outside the data.
+    the legend outside the data. An evaluation with an infinite cost (an episode
+    that left the attitude bound) sits on a marked "crashed" level ten times
+    above the largest finite value.
     """
     shown = list(runs[:MAX_AGENT_SERIES])
     fig = Figure(figsize=(13, 4.8), layout="constrained")
@@ -390,29 +392,49 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     # policy, so the right panel is the cost from 100 s over the mean episode instead
     right = "cost_after_100s_mean" if not bounded and recorded("cost_after_100s_mean") \
         else "return"
-    for j, m in enumerate(shown):
+    references = [(name, key, style) for name, key, style in (
+        ("oracle LQG", "oracle_lqg", ":"),
+        ("scheduled LQG", "scheduled_lqg", (0, (3, 1, 1, 1, 1, 1))),
+        ("adaptive LQG", "adaptive_lqg", "--"),
+        ("fixed LQG", "fixed_lqg", "-."))
+        if key in last and left in last[key] and right in last[key]]
+    series = []
+    for m in shown:
         curves = [r["curve"] for r in m["runs"] if r["curve"]]
-        if not curves:
-            continue
-        length = min(len(c) for c in curves)
+        if curves:
+            length = min(len(c) for c in curves)
+            series.append((m, curves, length, {
+                key: np.array([[c[key] for c in curve[:length]] for curve in curves],
+                              dtype=float) for key in (left, right)}))
+    # an evaluation whose episode left the attitude bound costs infinity; it is drawn
+    # on a marked "crashed" level above every finite value instead of vanishing
+    crash = {}
+    for key in (left, right):
+        finite = [v[np.isfinite(v)] for *_, values in series for v in (values[key],)]
+        finite += [np.array([last[ref][key]], dtype=float) for _, ref, _ in references]
+        finite = np.concatenate(finite) if finite else np.empty(0)
+        finite = finite[np.isfinite(finite)]
+        if any(np.any(~np.isfinite(values[key])) for *_, values in series):
+            crash[key] = 10.0 * finite.max() if finite.size and finite.max() > 0 else 1.0
+    for j, (m, curves, length, values) in enumerate(series):
         steps = np.array([c["timesteps"] for c in curves[0][:length]])
         label = f"{m['algo'].upper()}, {m['features']} ({len(curves)} seeds)"
         for ax, key in zip(axes, (left, right), strict=True):
-            values = np.array([[c[key] for c in curve[:length]] for curve in curves],
-                              dtype=float)
-            line, = ax.plot(steps, np.median(values, axis=0), "-", marker=markers[j], ms=5,
-                            lw=1.8, color=f"C{j}", label=label, zorder=3)
-            ax.fill_between(steps, values.min(axis=0), values.max(axis=0),
+            shown_values = np.where(np.isfinite(values[key]), values[key], crash.get(key, np.nan))
+            line, = ax.plot(steps, np.median(shown_values, axis=0), "-", marker=markers[j],
+                            ms=5, lw=1.8, color=f"C{j}", label=label, zorder=3)
+            ax.fill_between(steps, shown_values.min(axis=0), shown_values.max(axis=0),
                             color=line.get_color(), alpha=0.15, zorder=2)
-    for name, key, style in (("oracle LQG", "oracle_lqg", ":"),
-                             ("scheduled LQG", "scheduled_lqg", (0, (3, 1, 1, 1, 1, 1))),
-                             ("adaptive LQG", "adaptive_lqg", "--"),
-                             ("fixed LQG", "fixed_lqg", "-.")):
-        if key not in last or left not in last[key] or right not in last[key]:
-            continue
+    for name, key, style in references:
         for ax, value in zip(axes, (last[key][left], last[key][right]), strict=True):
             ax.axhline(value, color="0.4", ls=style, lw=1.0, zorder=1,
                        label=f"{name} (same episodes)")
+    for ax, key in zip(axes, (left, right), strict=True):
+        if key in crash:
+            ax.axhline(crash[key], color="C3", ls=(0, (1, 3)), lw=1.0, zorder=1)
+            ax.annotate("crashed (an episode left the attitude bound: cost infinite)",
+                        (0.01, crash[key]), xycoords=("axes fraction", "data"),
+                        xytext=(0, 3), textcoords="offset points", fontsize=7, color="C3")
     axes[0].set_yscale("log")
     axes[0].set_ylabel("cost from 100 s, median episode" if left == "cost_after_100s"
                        else "attitude RMS (deg), evaluation seeds")

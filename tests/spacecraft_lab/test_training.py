@@ -333,6 +333,28 @@ def test_rl_figure_under_a_cost_reward_shows_the_mean_episode_not_the_slew(tmp_p
     assert all(np.allclose(ln.get_ydata(), 0.009) for ln in references)
 
 
+def test_rl_figure_draws_crashed_evaluations_on_a_marked_level(tmp_path):
+    """An evaluation whose median episode left the attitude bound costs infinity; the
+    figure draws it on a "crashed" level above every finite value (it used to vanish
+    from the log axis and leave a panel of reference lines only)."""
+    from spacecraft_lab.plots import plot_rl_comparison
+
+    score = {"cost_after_100s": 0.004, "return": 2400.0}
+    curve = [{"timesteps": t, "cost_after_100s": cost, "return": 500.0}
+             for t, cost in ((25_000, float("inf")), (50_000, 30.0))]
+    run = {"algo": "sac", "features": "none", "scenario": "docking", "randomize": True,
+           "reward": "bounded", "runs": [{"curve": curve}],
+           **{key: dict(score) for key in ("oracle_lqg", "adaptive_lqg", "fixed_lqg")}}
+    fig = plot_rl_comparison(tmp_path / "crash.png", [run])
+    left = fig.axes[0]
+    agent = next(ln for ln in left.get_lines() if ln.get_marker() not in (None, "None", ""))
+    np.testing.assert_allclose(agent.get_ydata(), [300.0, 30.0])     # 10x the largest finite
+    assert any("crashed" in t.get_text() for t in left.texts)
+    assert not any("crashed" in t.get_text() for t in fig.axes[1].texts)
+    lo, hi = left.get_xlim()
+    assert lo > 0 and hi > 50_000                                    # the agent's steps
+
+
 def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp_path):
     """--envs 2: a SubprocVecEnv of two processes; PPO collects a rollout of n_steps
     decisions from each, so one rollout is twice the env steps; metrics.json says how
