@@ -349,6 +349,37 @@ def test_sb3_style_predict_and_policy_wrapper():
         PolicyController(object())
 
 
+def test_the_integral_runs_only_after_the_error_has_settled_in_its_band():
+    """settle_s: the integral waits until every attitude error has stayed inside the
+    band that long; leaving the band restarts the wait; a held (saturated) call counts
+    the time but does not integrate; 0 integrates at once, as before."""
+    from controllers.lqg import INTEGRAL_BAND, LQGLaw, LQRWeights
+
+    inside = np.full(3, 0.5 * INTEGRAL_BAND)
+    law = LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=1.0)
+    for _ in range(10):                              # 1.0 s in the band: not yet
+        law.integrate(inside, saturated=False)
+    assert np.all(law.z == 0)
+    law.integrate(inside, saturated=False)           # 1.1 s: integrates this step
+    np.testing.assert_allclose(law.z, 0.1 * inside)
+    law.integrate(3 * inside, saturated=False)       # out of the band: the wait restarts
+    for _ in range(10):
+        law.integrate(inside, saturated=True)        # held calls count the time
+    np.testing.assert_allclose(law.z, 0.1 * inside)
+    law.integrate(inside, saturated=False)
+    np.testing.assert_allclose(law.z, 0.2 * inside)
+    law.reset()
+    assert np.all(law.z == 0)
+    law.integrate(inside, saturated=False)           # the wait restarts with the episode
+    assert np.all(law.z == 0)
+    at_once = LQGLaw(np.eye(3), LQRWeights(), dt=0.1)
+    at_once.integrate(inside, saturated=False)
+    np.testing.assert_allclose(at_once.z, 0.1 * inside)
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="settle_s"):
+            LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=bad)
+
+
 @pytest.mark.parametrize("make", [FixedLQG, RobustLQG, OracleLQG, AdaptiveLQG])
 def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(make):
     """0.01 N m on every axis: PD keeps d / kp (about 0.01 deg); integral action removes it."""
