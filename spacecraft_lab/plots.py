@@ -410,9 +410,8 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     # on a marked "crashed" level above every finite value instead of vanishing
     crash = {}
     for key in (left, right):
-        finite = [v[np.isfinite(v)] for *_, values in series for v in (values[key],)]
-        finite += [np.array([last[ref][key]], dtype=float) for _, ref, _ in references]
-        finite = np.concatenate(finite) if finite else np.empty(0)
+        finite = np.concatenate([np.ravel(values[key]) for *_, values in series]
+                                + [[float(last[ref][key]) for _, ref, _ in references]])
         finite = finite[np.isfinite(finite)]
         if any(np.any(~np.isfinite(values[key])) for *_, values in series):
             crash[key] = 10.0 * finite.max() if finite.size and finite.max() > 0 else 1.0
