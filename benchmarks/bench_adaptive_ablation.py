@@ -71,7 +71,7 @@ from controllers.baselines import process_noise
 from controllers.harness import SCORED_FROM_S
 from identifiers import CLOSED_LOOP_SETTINGS, Resonator
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
-from spacecraft_env import DEFAULT_SNR_DB, ENV_IDS
+from spacecraft_env import DEFAULT_SNR_DB, ENV_IDS, env_id
 from spacecraft_lab.control import env_kwargs_for
 
 #: The band of the paddle and antenna modes whose closed-loop damping is printed, Hz.
@@ -316,8 +316,8 @@ def hub_passivity(a: np.ndarray, b: np.ndarray, c: np.ndarray, rate_rows: np.nda
     return smallest / scale
 
 
-def frozen_loops(env_id: str, kwargs: dict, at_s: float, seed: int) -> None:
-    env = gym.make(env_id, **kwargs)
+def frozen_loops(registered: str, kwargs: dict, at_s: float, seed: int) -> None:
+    env = gym.make(registered, **kwargs)
     truth = env.unwrapped.model
     adaptive, oracle = AdaptiveLQG(env, weights=LQRWeights()), OracleLQG(env, LQRWeights())
     obs, info = env.reset(seed=seed)
@@ -378,14 +378,14 @@ def main() -> None:
     parser.add_argument("--no-tolerance", action="store_true",
                         help="skip the tolerance table (the same law on perturbed true models)")
     args = parser.parse_args()
-    env_id = {v: k for k, v in ENV_IDS.items()}[args.scenario]
+    registered = env_id(args.scenario)
     kwargs = env_kwargs_for(args.scenario, task=args.task, paddle_angle=args.paddle_angle,
                             snr_db=args.snr_db)
     rows = dict(ROWS)
     if not args.no_tolerance:
         rows.update({f"same law, {name}": partial(_perturbed, **perturbation)
                      for name, perturbation in TOLERANCE.items()})
-    table, _ = compare(rows, partial(gym.make, env_id, **kwargs), list(range(args.seeds)),
+    table, _ = compare(rows, partial(gym.make, registered, **kwargs), list(range(args.seeds)),
                        progress=True, workers=args.workers)
     oracle = np.array([m["cost_after_100s"] for m in table["oracle LQG"]["per_seed"]])
     print(f"\n{args.scenario}, {args.task} task, {args.snr_db:g} dB, {args.seeds} seeds, "
@@ -403,7 +403,7 @@ def main() -> None:
         fallback = np.median([m.get("fallback_share_after_60s") or 0.0 for m in seeds])
         print(f"{name:44s} {np.median(ratio):9.2f} {np.max(ratio):7.2f}   {split:34s}"
               f" {100 * fallback:5.0f} %")
-    frozen_loops(env_id, kwargs, args.at, worst)
+    frozen_loops(registered, kwargs, args.at, worst)
 
 
 if __name__ == "__main__":

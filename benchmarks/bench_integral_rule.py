@@ -29,7 +29,7 @@ import numpy as np
 
 import spacecraft_env  # noqa: F401  (registers the environments)
 from controllers import LQRWeights, OracleLQG, RobustLQG, compare
-from spacecraft_env import DEFAULT_SNR_DB, ENV_IDS
+from spacecraft_env import DEFAULT_SNR_DB, env_id
 from spacecraft_lab.control import env_kwargs_for
 
 #: The designs compared, by name.
@@ -60,12 +60,11 @@ def main() -> None:
           f" {'[best, worst]':>15s} {'cost':>9s} {'att share':>9s} {'offset deg':>10s}")
     for disturbance in (0.0, args.disturbance):
         for scenario, task in CONDITIONS:
-            env_id = {v: k for k, v in ENV_IDS.items()}[scenario]
             kwargs = {**env_kwargs_for(scenario, task=task, snr_db=DEFAULT_SNR_DB),
                       "disturbance_torque": disturbance}
             rows = {f"{name}, {settle:g} s": partial(settled, design=design, settle_s=settle)
                     for name, design in DESIGNS.items() for settle in args.settle}
-            table, trajectories = compare(rows, partial(gym.make, env_id, **kwargs),
+            table, trajectories = compare(rows, partial(gym.make, env_id(scenario), **kwargs),
                                           list(range(args.seeds)), progress=False,
                                           workers=args.workers)
             condition = f"{scenario} {task}, disturbance {disturbance:g} N m"
