@@ -53,7 +53,13 @@ from controllers.harness import (
     run_episode,
     stage_costs,
 )
-from controllers.lqg import LQGLaw, LQRWeights, equilibrium_state, output_weight
+from controllers.lqg import (
+    LQGLaw,
+    LQRWeights,
+    equilibrium_state,
+    output_weight,
+    set_integral_settle,
+)
 from controllers.residual import ResidualControl, ResidualObservations
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
 from spacecraft_conventions import __version__
@@ -97,6 +103,7 @@ __all__ = [
     "nominal_model",
     "output_weight",
     "run_episode",
+    "set_integral_settle",
     "spectral_radius",
     "stage_costs",
 ]

@@ -153,7 +153,7 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
     scenario, env_kwargs = settings["scenario"], settings["env_kwargs"]
 
     def make() -> gym.Env:
-        return _make_env(scenario, base, env_kwargs)
+        return _make_env(scenario, base, env_kwargs, settings["base_integral_settle_s"])
 
     collection = tuple(range(COLLECTION_SEED, COLLECTION_SEED + int(episodes)))
     comparators = _score_comparators(scenario, env_kwargs, seeds, workers, progress,

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.lqg import INTEGRAL_SETTLE_S
 from spacecraft_lab.training import (
     ALGORITHMS,
     COMPARATORS,
@@ -83,6 +84,9 @@ def _settings(path: Path) -> dict[str, Any]:
     if missing:
         raise ValueError(f"{metrics_path} lacks the training settings {missing}")
     settings = {key: metrics[key] for key in _SETTINGS}
+    # a run saved before the key existed trained its residual base with the integral at once
+    settle = metrics.get("base_integral_settle_s", 0.0)
+    settings["base_integral_settle_s"] = INTEGRAL_SETTLE_S if settle is None else float(settle)
     if settings["algo"] not in ALGORITHMS or settings["features"] not in FEATURES:
         raise ValueError(f"{metrics_path}: algo {settings['algo']!r} / features "
                          f"{settings['features']!r} are not ones this version trains")
@@ -109,7 +113,9 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
         deciding every ``repeat`` env steps as in training.
     settings : dict
         ``algo``, ``features``, ``scenario``, ``randomize``, ``reward``,
-        ``repeat``, ``env_kwargs`` (the environment's keywords) and ``path``.
+        ``repeat``, ``env_kwargs`` (the environment's keywords), ``path`` and
+        ``base_integral_settle_s`` (the residual base's integral settle time it
+        was trained with, s: 0 for runs saved before it was recorded).
 
     Raises
     ------
@@ -135,7 +141,7 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
 
     env_kwargs = _training_env_kwargs(settings["randomize"], settings["reward"])
     venv = DummyVecEnv([lambda: _make_env(settings["scenario"], settings["features"],
-                                          env_kwargs)])
+                                          env_kwargs, settings["base_integral_settle_s"])])
     normalization = VecNormalize.load(str(statistics), venv)
     normalization.training = False
     model = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))[settings["algo"]].load(
@@ -202,7 +208,8 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
 
     with _one_torch_thread(torch):      # as in training: results independent of the cores
         score = _evaluate(policy, settings["scenario"], settings["features"],
-                          settings["env_kwargs"], seeds)
+                          settings["env_kwargs"], seeds,
+                          base_settle_s=settings["base_integral_settle_s"])
     scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
                                                    seeds, workers, progress, when="Then")}
     mine = score["cost_after_100s_per_seed"]

@@ -77,7 +77,9 @@ from controllers import (
     ScheduledLQG,
     episode_metrics,
     run_episode,
+    set_integral_settle,
 )
+from controllers.lqg import INTEGRAL_SETTLE_S
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
@@ -196,7 +198,11 @@ def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     return Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs), repeat))
 
 
-def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.Env:
+def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
+              base_settle_s: float = INTEGRAL_SETTLE_S) -> gym.Env:
+    """The setting's env. ``base_settle_s``: the residual base's integral settle time
+    (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
+    trained on."""
     env = gym.make(env_id(scenario), **env_kwargs)
     if features in _IDENTIFIED:
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
@@ -207,7 +213,8 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
     elif features == "privileged":
         env = PrivilegedFeatures(env)
     if features in _RESIDUAL:
-        env = ResidualControl(env, _RESIDUAL[features](env.unwrapped), scale=RESIDUAL_SCALE)
+        base = set_integral_settle(_RESIDUAL[features](env.unwrapped), base_settle_s)
+        env = ResidualControl(env, base, scale=RESIDUAL_SCALE)
     if features.endswith("-physical"):
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
@@ -221,13 +228,16 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any]) -> gym.E
 
 def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario: str,
               features: str, env_kwargs: dict[str, Any], seeds=EVAL_SEEDS,
-              make_env: Callable[[], gym.Env] | None = None) -> dict[str, Any]:
+              make_env: Callable[[], gym.Env] | None = None,
+              base_settle_s: float = INTEGRAL_SETTLE_S) -> dict[str, Any]:
     """Harness scores over the evaluation episodes. ``controller``: one controller for
     every episode, or a factory called with each episode's env (a controller that
     reads its env's true model, e.g. the oracle, must fly the env it is scored on).
-    ``make_env``: builds each episode's env instead of the setting's."""
+    ``make_env``: builds each episode's env instead of the setting's;
+    ``base_settle_s``: as in :func:`_make_env`."""
     make = controller if not isinstance(controller, Controller) else (lambda env: controller)
-    build = make_env or partial(_make_env, scenario, features, env_kwargs)
+    build = make_env or partial(_make_env, scenario, features, env_kwargs,
+                                base_settle_s=base_settle_s)
     per_seed = []
     kept = _IDENTIFIED.get(features, {}).get("keep_identifier", False)
     shared = build() if kept else None
@@ -467,6 +477,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "hyperparameters": hyper, "envs": envs,
         "residual_scale": RESIDUAL_SCALE if residual else None,
+        # the residual base's integral settle time, so a loaded agent flies that base
+        "base_integral_settle_s": INTEGRAL_SETTLE_S if residual else None,
         # the env steps every seed trained (whole rollouts), and what was asked
         "timesteps": int(max(r["env_steps"] for r in runs)), "timesteps_requested": timesteps,
         "seeds": seeds, "eval_seeds": list(eval_seeds),

@@ -352,18 +352,18 @@ def test_sb3_style_predict_and_policy_wrapper():
 def test_the_integral_runs_only_after_the_error_has_settled_in_its_band():
     """settle_s: the integral waits until every attitude error has stayed inside the
     band that long; leaving the band restarts the wait; a held (saturated) call counts
-    the time but does not integrate; 0 integrates at once, as before."""
-    from controllers.lqg import INTEGRAL_BAND, LQGLaw, LQRWeights
+    the time but does not integrate; 0 integrates at once (the published LQI)."""
+    from controllers.lqg import INTEGRAL_BAND, INTEGRAL_SETTLE_S, LQGLaw, LQRWeights
 
     inside = np.full(3, 0.5 * INTEGRAL_BAND)
     law = LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=1.0)
-    for _ in range(10):                              # 1.0 s in the band: not yet
+    for _ in range(9):                               # 0.9 s in the band: not yet
         law.integrate(inside, saturated=False)
     assert np.all(law.z == 0)
-    law.integrate(inside, saturated=False)           # 1.1 s: integrates this step
+    law.integrate(inside, saturated=False)           # 1.0 s: integrates this step
     np.testing.assert_allclose(law.z, 0.1 * inside)
     law.integrate(3 * inside, saturated=False)       # out of the band: the wait restarts
-    for _ in range(10):
+    for _ in range(9):
         law.integrate(inside, saturated=True)        # held calls count the time
     np.testing.assert_allclose(law.z, 0.1 * inside)
     law.integrate(inside, saturated=False)
@@ -372,12 +372,38 @@ def test_the_integral_runs_only_after_the_error_has_settled_in_its_band():
     assert np.all(law.z == 0)
     law.integrate(inside, saturated=False)           # the wait restarts with the episode
     assert np.all(law.z == 0)
-    at_once = LQGLaw(np.eye(3), LQRWeights(), dt=0.1)
+    at_once = LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=0.0)
     at_once.integrate(inside, saturated=False)
     np.testing.assert_allclose(at_once.z, 0.1 * inside)
+    default = LQGLaw(np.eye(3), LQRWeights(), dt=0.1)
+    assert default.settle_s == INTEGRAL_SETTLE_S == 50.0
+    for _ in range(499):                             # 49.9 s in the band: not yet
+        default.integrate(inside, saturated=False)
+    assert np.all(default.z == 0)
+    default.integrate(inside, saturated=False)       # 50 s, counted in steps, not a float sum
+    np.testing.assert_allclose(default.z, 0.1 * inside)
     for bad in (-1.0, float("nan")):
         with pytest.raises(ValueError, match="settle_s"):
             LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=bad)
+
+
+def test_set_integral_settle_reaches_the_adaptive_loop_and_its_fallback():
+    """A saved residual agent flies its base as trained: ``set_integral_settle`` sets
+    every LQG law of a controller (the adaptive LQG's own and its robust fallback's)
+    and leaves a controller without one alone."""
+    from controllers import PD, set_integral_settle
+    from controllers.lqg import INTEGRAL_SETTLE_S
+
+    env = gym.make("FlexibleSpacecraftDocking-v2")
+    adaptive = AdaptiveLQG(env)
+    assert adaptive.law.settle_s == adaptive.fallback.law.settle_s == INTEGRAL_SETTLE_S
+    assert set_integral_settle(adaptive, 0.0) is adaptive
+    assert adaptive.law.settle_s == adaptive.fallback.law.settle_s == 0.0
+    pd = PD(env)
+    assert set_integral_settle(pd, 10.0) is pd and not hasattr(pd, "law")
+    for bad in (-1.0, float("inf")):
+        with pytest.raises(ValueError, match="settle_s"):
+            set_integral_settle(adaptive, bad)
 
 
 @pytest.mark.parametrize("make", [FixedLQG, RobustLQG, OracleLQG, AdaptiveLQG])

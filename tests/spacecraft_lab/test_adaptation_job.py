@@ -38,7 +38,8 @@ def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privil
         per["nominal"] / per["estimated"])
     # "true" is the env the policy trained and was evaluated on
     policy, settings = load_agent(privileged_agent)
-    again = _evaluate(policy, "family", settings["features"], settings["env_kwargs"], (2000,))
+    again = _evaluate(policy, "family", settings["features"], settings["env_kwargs"], (2000,),
+                      base_settle_s=settings["base_integral_settle_s"])
     assert per["true"] == pytest.approx(again["cost_after_100s_per_seed"][0], rel=1e-9)
     # the estimate and the identifier's raw vector are scored against the truth
     assert set(agent["errors"]) == {"estimated", "identifier", "nominal"}

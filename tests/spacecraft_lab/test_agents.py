@@ -39,8 +39,11 @@ def test_the_shipped_agent_flies_as_it_did_when_it_was_trained():
     assert settings["features"] == "residual-scheduled" and settings["repeat"] == 2
     recorded = json.loads((SHIPPED_AGENTS[SHIPPED].parent / "metrics.json").read_text())
     expected = recorded["runs"][0]["final"]["cost_after_100s_per_seed"][:2]
+    # trained before the integral's settle time was recorded: its base integrates at once
+    assert settings["base_integral_settle_s"] == 0.0
     score = _evaluate(policy, settings["scenario"], settings["features"],
-                      settings["env_kwargs"], EVAL_SEEDS[:2])
+                      settings["env_kwargs"], EVAL_SEEDS[:2],
+                      base_settle_s=settings["base_integral_settle_s"])
     np.testing.assert_allclose(score["cost_after_100s_per_seed"], expected, rtol=1e-6)
 
 
