@@ -252,7 +252,8 @@ _METAVARS = {"scenario": "S", "seeds": "N", "seed": "N", "steps": "N", "out": "D
              "torque_rate_limit": "NM_S", "disturbance_torque": "NM",
              "features": "F", "timesteps": "N", "first_seed": "N", "repeat": "N",
              "eval_every": "N", "eval_episodes": "N", "tensorboard": "DIR", "config": "FILE",
-             "workers": "N", "address": "ADDR", "timeout": "S", "max_tasks": "N"}
+             "workers": "N", "address": "ADDR", "timeout": "S", "max_tasks": "N",
+             "integral_settle": "S"}
 _SPELLED_CHOICES = 3
 
 
@@ -395,6 +396,10 @@ def build_parser() -> argparse.ArgumentParser:
                      default=None, help="actuator slew-rate limit, N m/s (default: none)")
     ctl.add_argument("--disturbance-torque", type=_limited("disturbance_torque"),
                      default=0.0, help="constant external torque on every axis, N m")
+    ctl.add_argument("--integral-settle", type=_number(0.0, 1e4, unit=" s"), default=None,
+                     help="seconds every attitude error must stay in the LQG integral's "
+                          "band before it integrates (default: INTEGRAL_SETTLE_S, 50; 0: "
+                          "at once, as before 2026-11-26)")
     ctl.add_argument("--save-trajectories", action="store_true",
                      help="also write every episode to OUT/trajectories/ (npz)")
     ctl.add_argument("--workers", type=_integer(1), default=None,
@@ -556,7 +561,8 @@ def _control(args: argparse.Namespace) -> int:
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,
-                          save_trajectories=args.save_trajectories, workers=args.workers)
+                          save_trajectories=args.save_trajectories, workers=args.workers,
+                          integral_settle_s=args.integral_settle)
     print(control_brief(metrics["controllers"]))
     print(control_summary(metrics["controllers"], args.scenario, args.out))
     print(f"wrote {args.out}/metrics.json, results.csv, table.md (the full table), "

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from controllers import (
     PD,
@@ -39,7 +40,9 @@ from controllers import (
     compare,
     episode_metrics,
     run_episode,
+    set_integral_settle,
 )
+from controllers.lqg import INTEGRAL_SETTLE_S
 from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier, StructuredRPBSID
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
@@ -71,8 +74,17 @@ ORACLE = "oracle LQG"
 SAME_LAW = "same-law oracle"
 
 
-def _build(name: str, weights: LQRWeights, env: gym.Env) -> Any:
-    """The controller ``name`` (a key of :func:`CONTROLLERS`) for ``env``."""
+def _build(name: str, weights: LQRWeights, env: gym.Env,
+           integral_settle_s: float | None = None) -> Any:
+    """The controller ``name`` (a key of :func:`CONTROLLERS`) for ``env``, its LQG
+    laws' integral waiting ``integral_settle_s`` (None: the default)."""
+    controller = _construct(name, weights, env)
+    if integral_settle_s is not None:
+        set_integral_settle(controller, integral_settle_s)
+    return controller
+
+
+def _construct(name: str, weights: LQRWeights, env: gym.Env) -> Any:
     if name == "fixed LQG":
         return FixedLQG(env, weights)
     if name == "robust LQG":
@@ -132,11 +144,13 @@ CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive 
 ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL, STRUCTURED_RPBSID)
 
 
-def CONTROLLERS(weights: LQRWeights) -> dict[str, Any]:
+def CONTROLLERS(weights: LQRWeights, integral_settle_s: float | None = None) -> dict[str, Any]:
     """Name -> factory ``env -> Controller`` for every controller of
     :data:`ALL_CONTROLLER_NAMES` (picklable, so the comparison can run its seeds on a
-    process pool)."""
-    return {name: partial(_build, name, weights) for name in ALL_CONTROLLER_NAMES}
+    process pool); ``integral_settle_s``: the LQG laws' integral settle time, s
+    (:func:`controllers.set_integral_settle`; None: the default)."""
+    return {name: partial(_build, name, weights, integral_settle_s=integral_settle_s)
+            for name in ALL_CONTROLLER_NAMES}
 
 
 #: Short names for sweep files and the command line -> keys of :func:`CONTROLLERS`.
@@ -329,7 +343,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
                 out: str | Path = "results/control", *, env_kwargs: dict[str, Any] | None = None,
                 weights: LQRWeights | None = None, controllers: Sequence[str] | None = None,
                 steps: int | None = None, progress: bool = True,
-                save_trajectories: bool = False, workers: int | None = None) -> dict:
+                save_trajectories: bool = False, workers: int | None = None,
+                integral_settle_s: float | None = None) -> dict:
     """Compare the controllers and write the artefacts.
 
     Parameters
@@ -356,6 +371,10 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     workers : int, optional
         Processes that run the seeds side by side (default: one per core,
         at most one per seed); the results do not depend on it.
+    integral_settle_s : float, optional
+        Seconds every attitude error must stay in the integral's band before
+        the LQG designs integrate (default: :data:`controllers.lqg.INTEGRAL_SETTLE_S`;
+        0 reproduces the integral at once of versions before 2026-11-26).
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
@@ -363,7 +382,11 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     if steps is not None:
         kwargs = {**kwargs, "max_episode_steps": int(steps)}
     weights = weights or LQRWeights()
-    factories = CONTROLLERS(weights)
+    if integral_settle_s is not None and not (np.isfinite(integral_settle_s)
+                                              and integral_settle_s >= 0):
+        raise ValueError(f"integral_settle_s must be a finite time >= 0 s, "
+                         f"got {integral_settle_s}")
+    factories = CONTROLLERS(weights, integral_settle_s)
     if controllers is None:
         factories = {name: factories[name] for name in CONTROLLER_NAMES}
     else:
@@ -384,7 +407,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         # Ctrl-C: write what the completed seeds say, then let the interrupt go on
         if stop.completed:
             _write_control(out, scenario, stop.completed, kwargs, weights, stop.table,
-                           stop.trajectories, steps, make_env, interrupted=stop.total)
+                           stop.trajectories, steps, make_env, interrupted=stop.total,
+                           integral_settle_s=integral_settle_s)
         raise
     if save_trajectories:
         folder = out / "trajectories"
@@ -392,7 +416,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         for name, trajs in runs.items():
             for seed, traj in enumerate(trajs):
                 traj.save(folder / f"{name.replace(' ', '-')}-seed{seed}.npz")
-    return _write_control(out, scenario, seeds, kwargs, weights, table, runs, steps, make_env)
+    return _write_control(out, scenario, seeds, kwargs, weights, table, runs, steps, make_env,
+                          integral_settle_s=integral_settle_s)
 
 
 #: The common cost from 100 s and its split, first in ``results.csv``.
@@ -403,7 +428,8 @@ COST_COLUMNS = ("cost_after_100s", "cost_attitude_after_100s", "cost_rate_after_
 
 def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
                    weights: LQRWeights, table: dict, runs: dict, steps: int | None,
-                   make_env: Any, interrupted: int | None = None) -> dict:
+                   make_env: Any, interrupted: int | None = None,
+                   integral_settle_s: float | None = None) -> dict:
     """``metrics.json``, ``table.md``, ``results.csv`` and ``comparison.png`` of a comparison
     (``interrupted``: the number of seeds asked for, when fewer finished)."""
     env = make_env()
@@ -414,7 +440,10 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
                 f"those.\n\n{text}")
     metrics = {"scenario": scenario, "seeds": seeds, "seeds_requested": interrupted or seeds,
                "env_kwargs": {k: repr(v) for k, v in kwargs.items()},
-               "weights": weights.__dict__, "controllers": table}
+               "weights": weights.__dict__,
+               "integral_settle_s": (INTEGRAL_SETTLE_S if integral_settle_s is None
+                                     else float(integral_settle_s)),
+               "controllers": table}
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
     (out / "table.md").write_text(text)
     cols = [*COST_COLUMNS, "attitude_rms_after_100s_deg", "vibration_rms_after_100s_mm",

@@ -84,3 +84,28 @@ def test_the_structured_rpbsid_option_flies_its_identified_design(tmp_path):
     table = json.loads((tmp_path / "structured" / "metrics.json").read_text())
     (seed,) = table["controllers"][STRUCTURED_RPBSID]["per_seed"]
     assert seed["fallback_share_after_60s"] < 0.5 and seed["stable"]
+
+
+def test_the_integral_settle_option_reaches_every_design_and_is_recorded(tmp_path):
+    """``--integral-settle 0`` flies the LQGs with the integral at once (the law before
+    its 50 s rule): the cost differs from the default's, and the metrics say which ran;
+    a negative time is refused before anything is written."""
+    from controllers.lqg import INTEGRAL_SETTLE_S
+    from spacecraft_lab.control import run_control
+
+    def cost(settle, name):
+        metrics = run_control("docking", 1, tmp_path / name, controllers=["oracle-lqg"],
+                              steps=1500, progress=False, workers=1,
+                              integral_settle_s=settle)
+        return metrics["integral_settle_s"], \
+            metrics["controllers"]["oracle LQG"]["per_seed"][0]["cost_after_100s"]
+
+    default_settle, default_cost = cost(None, "default")
+    at_once_settle, at_once_cost = cost(0.0, "at-once")
+    assert default_settle == INTEGRAL_SETTLE_S and at_once_settle == 0.0
+    assert at_once_cost != pytest.approx(default_cost, rel=1e-3)
+    with pytest.raises(ValueError, match="integral_settle_s"):
+        run_control("docking", 1, tmp_path / "bad", integral_settle_s=-1.0)
+    assert not (tmp_path / "bad").exists()
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["control", "--integral-settle", "-1"])
