@@ -33,7 +33,7 @@ from controllers.riccati import RiccatiTracker, check_weights
 from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
 
 __all__ = ["INTEGRAL_BAND", "INTEGRAL_SETTLE_S", "LQGLaw", "LQRWeights", "augment_integral",
-           "equilibrium_state", "output_weight", "set_integral_settle"]
+           "check_settle_time", "equilibrium_state", "output_weight", "set_integral_settle"]
 
 #: Attitude error (rad) within which the integral runs: 0.2 deg.
 INTEGRAL_BAND = np.deg2rad(0.2)
@@ -181,9 +181,7 @@ class LQGLaw:
         if not (np.isfinite(band) and band > 0):
             raise ValueError(f"band must be a positive angle in rad, got {band}")
         self.band = float(band)
-        if not (np.isfinite(settle_s) and settle_s >= 0):
-            raise ValueError(f"settle_s must be a finite time >= 0 s, got {settle_s}")
-        self.settle_s = float(settle_s)
+        self.settle_s = check_settle_time(settle_s)
         # (1 deg s)^-2 in rad: the integral state is in rad s
         self._qz = weights.integral / (NOMINAL_SCALE["attitude"] ** 2)
         self.tracker: RiccatiTracker | None = None
@@ -271,10 +269,22 @@ def set_integral_settle(controller: Any, settle_s: float) -> Any:
     ValueError
         If ``settle_s`` is negative or not finite.
     """
-    if not (np.isfinite(settle_s) and settle_s >= 0):
-        raise ValueError(f"settle_s must be a finite time >= 0 s, got {settle_s}")
+    settle_s = check_settle_time(settle_s)
     for part in (controller, getattr(controller, "fallback", None)):
         law = getattr(part, "law", None)
         if isinstance(law, LQGLaw):
-            law.settle_s = float(settle_s)
+            law.settle_s = settle_s
     return controller
+
+
+def check_settle_time(settle_s: float) -> float:
+    """``settle_s`` as a float, s.
+
+    Raises
+    ------
+    ValueError
+        If it is negative or not finite (the message names ``settle_s``).
+    """
+    if not (np.isfinite(settle_s) and settle_s >= 0):
+        raise ValueError(f"settle_s must be a finite time >= 0 s, got {settle_s}")
+    return float(settle_s)

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from controllers import (
     PD,
@@ -42,7 +41,7 @@ from controllers import (
     run_episode,
     set_integral_settle,
 )
-from controllers.lqg import INTEGRAL_SETTLE_S
+from controllers.lqg import INTEGRAL_SETTLE_S, check_settle_time
 from identifiers import PhysicalFitIdentifier, ScheduledPhysicalIdentifier, StructuredRPBSID
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
@@ -382,10 +381,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     if steps is not None:
         kwargs = {**kwargs, "max_episode_steps": int(steps)}
     weights = weights or LQRWeights()
-    if integral_settle_s is not None and not (np.isfinite(integral_settle_s)
-                                              and integral_settle_s >= 0):
-        raise ValueError(f"integral_settle_s must be a finite time >= 0 s, "
-                         f"got {integral_settle_s}")
+    if integral_settle_s is not None:
+        check_settle_time(integral_settle_s)
     factories = CONTROLLERS(weights, integral_settle_s)
     if controllers is None:
         factories = {name: factories[name] for name in CONTROLLER_NAMES}

@@ -104,7 +104,7 @@ def test_the_integral_settle_option_reaches_every_design_and_is_recorded(tmp_pat
     at_once_settle, at_once_cost = cost(0.0, "at-once")
     assert default_settle == INTEGRAL_SETTLE_S and at_once_settle == 0.0
     assert at_once_cost != pytest.approx(default_cost, rel=1e-3)
-    with pytest.raises(ValueError, match="integral_settle_s"):
+    with pytest.raises(ValueError, match="settle_s"):
         run_control("docking", 1, tmp_path / "bad", integral_settle_s=-1.0)
     assert not (tmp_path / "bad").exists()
     with pytest.raises(SystemExit):
