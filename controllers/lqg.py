@@ -24,6 +24,7 @@ and the state estimate they feed it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -181,12 +182,24 @@ class LQGLaw:
         if not (np.isfinite(band) and band > 0):
             raise ValueError(f"band must be a positive angle in rad, got {band}")
         self.band = float(band)
-        self.settle_s = check_settle_time(settle_s)
+        self.settle_s = settle_s
         # (1 deg s)^-2 in rad: the integral state is in rad s
         self._qz = weights.integral / (NOMINAL_SCALE["attitude"] ** 2)
         self.tracker: RiccatiTracker | None = None
         self.gain: np.ndarray | None = None
         self.reset()
+
+    @property
+    def settle_s(self) -> float:
+        """Seconds in the band before the integral runs (checked when set; >= 0)."""
+        return self._settle_s
+
+    @settle_s.setter
+    def settle_s(self, value: float) -> None:
+        self._settle_s = check_settle_time(value)
+        # counted in steps (the current one included), so 500 steps of 0.1 s are 50 s
+        # exactly, which a float sum is not
+        self._settle_steps = math.ceil(self._settle_s / self.dt - 1e-9)
 
     def reset(self) -> None:
         """Zero the integral (start of an episode); keep the Riccati warm start."""
@@ -237,10 +250,8 @@ class LQGLaw:
         near = bool(np.all(np.isfinite(attitude_error))
                     and np.abs(attitude_error).max() < self.band)
         self._in_band_steps = self._in_band_steps + 1 if near else 0
-        # counted in steps (this one included), so 500 steps of 0.1 s are 50 s exactly
-        settle_steps = int(np.ceil(self.settle_s / self.dt - 1e-9))
         if (self.integral and not saturated and near
-                and self._in_band_steps >= settle_steps):
+                and self._in_band_steps >= self._settle_steps):
             self.z = self.z + self.dt * attitude_error
 
 

@@ -385,6 +385,9 @@ def test_the_integral_runs_only_after_the_error_has_settled_in_its_band():
     for bad in (-1.0, float("nan")):
         with pytest.raises(ValueError, match="settle_s"):
             LQGLaw(np.eye(3), LQRWeights(), dt=0.1, settle_s=bad)
+        with pytest.raises(ValueError, match="settle_s"):
+            default.settle_s = bad                   # checked when set, too
+    assert default.settle_s == INTEGRAL_SETTLE_S
 
 
 def test_set_integral_settle_reaches_the_adaptive_loop_and_its_fallback():
