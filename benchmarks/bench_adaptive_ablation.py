@@ -71,8 +71,8 @@ from controllers.baselines import process_noise
 from controllers.harness import SCORED_FROM_S
 from identifiers import CLOSED_LOOP_SETTINGS, Resonator
 from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
-from spacecraft_env import DEFAULT_SNR_DB, ENV_IDS, env_id
-from spacecraft_lab.control import env_kwargs_for
+from spacecraft_env import DEFAULT_SNR_DB, env_id
+from spacecraft_lab.control import SCENARIO_NAMES, env_kwargs_for
 
 #: The band of the paddle and antenna modes whose closed-loop damping is printed, Hz.
 CLUSTER_HZ = (0.07, 0.10)
@@ -365,7 +365,7 @@ def frozen_loops(registered: str, kwargs: dict, at_s: float, seed: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paddle_rotation",
-                        choices=sorted(set(ENV_IDS.values()) - {"family"}))
+                        choices=sorted(set(SCENARIO_NAMES) - {"family"}))
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--paddle-angle", type=float, default=None,
                         help="paddle angle at t = 0, deg (constant and rotation scenarios)")

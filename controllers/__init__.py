@@ -50,6 +50,7 @@ from controllers.harness import (
     compare,
     controller_shares,
     episode_metrics,
+    fallback_causes,
     run_episode,
     stage_costs,
 )
@@ -99,6 +100,7 @@ __all__ = [
     "effective_gains",
     "episode_metrics",
     "equilibrium_state",
+    "fallback_causes",
     "input_disk_margin",
     "nominal_model",
     "output_weight",

@@ -43,8 +43,13 @@ import numpy as np
 from controllers.lqg import augment_integral
 from controllers.riccati import spectral_radius
 
-__all__ = ["GainAcceptance", "effective_gains", "input_disk_margin", "margin_frequencies",
-           "unit_states"]
+__all__ = ["REJECTION_REASONS", "GainAcceptance", "effective_gains", "input_disk_margin",
+           "margin_frequencies", "unit_states"]
+
+#: Every reason :meth:`GainAcceptance.check` and :meth:`GainAcceptance.check_margin`
+#: return for a gain that may not fly, in the order the tests run.
+REJECTION_REASONS = ("non-finite gain", "prediction", "stiffness", "damping", "unstable",
+                     "margin", "uncertain")
 
 #: Frequencies (rad/s) the margin is evaluated at, before the model's own.
 MARGIN_GRID_POINTS = 48

@@ -48,8 +48,9 @@ Every control step k (docs/design/control.md):
 :attr:`AdaptiveLQG.stats` counts steps, steps flown by the fallback,
 re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
 failed designs and non-finite observations, the steps (and fallback steps)
-from :data:`~controllers.harness.JUDGED_FROM_S`, and reports the excitation's
-RMS torque.
+from :data:`~controllers.harness.JUDGED_FROM_S` with the cause of each of those
+fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), and
+reports the excitation's RMS torque.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike
 
-from controllers.acceptance import GainAcceptance, input_disk_margin
+from controllers.acceptance import REJECTION_REASONS, GainAcceptance, input_disk_margin
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
@@ -72,7 +73,7 @@ from controllers.lqg import LQRWeights, equilibrium_state
 from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
 from spacecraft_conventions import single_threaded_blas
 
-__all__ = ["FALLBACK_WARNING_S", "AdaptiveLQG", "FallbackWarning"]
+__all__ = ["FALLBACK_CAUSES", "FALLBACK_WARNING_S", "AdaptiveLQG", "FallbackWarning"]
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +100,16 @@ SUPERVISOR_HOLD_S = 60.0
 #: Seconds after :data:`~controllers.harness.JUDGED_FROM_S` without a single step of the
 #: identified design after which the loop warns (:class:`FallbackWarning`), once.
 FALLBACK_WARNING_S = 60.0
+
+
+#: Why the fallback flies a step (``stats["fallback_by_after_60s"]``): the acceptance
+#: test's reason for the step's rejected gain (:data:`~controllers.acceptance.REJECTION_REASONS`),
+#: a re-design that failed ("failed design"), the supervisor's hold after a growing
+#: envelope ("growing"), the bridge after a detected change ("bridge"), an accepted
+#: gain waiting out the dwell time ("dwell"), no identified model yet ("no model") or no
+#: usable state estimate on it ("no state").
+FALLBACK_CAUSES = (*REJECTION_REASONS, "failed design", "growing", "bridge", "dwell",
+                   "no model", "no state")
 
 
 class FallbackWarning(UserWarning):
@@ -272,7 +283,9 @@ class AdaptiveLQG(_LQGController):
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
                                       "nonfinite_observations": 0, "excitation_rms_Nm": 0.0,
                                       "excited_steps": 0, "switches": 0,
-                                      "steps_after_60s": 0, "fallback_steps_after_60s": 0}
+                                      "steps_after_60s": 0, "fallback_steps_after_60s": 0,
+                                      "fallback_by_after_60s": {}}
+        self._reason: str | None = None
 
     # ------------------------------------------------------------ pieces
     def _agreement(self, y: np.ndarray, model: Any, x: np.ndarray | None) -> float:
@@ -374,6 +387,7 @@ class AdaptiveLQG(_LQGController):
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.stats["failed_designs"] += 1
             self.law.tracker = None
+            self._reason = "failed design"
             log.debug("redesign failed: %s", exc)
             return None
         reason = self.acceptance.check(a, b, c, gain, self._att_rows, self._rate_rows,
@@ -384,6 +398,7 @@ class AdaptiveLQG(_LQGController):
                                                  self.dt)
                 self._margin_due = self._k + MARGIN_EVERY
             reason = self.acceptance.check_margin(self._margin, self._uncertainty)
+        self._reason = reason
         if reason is not None:
             self.stats["rejected"] += 1
             self.stats["rejected_by"][reason] = self.stats["rejected_by"].get(reason, 0) + 1
@@ -426,6 +441,19 @@ class AdaptiveLQG(_LQGController):
         shape = getattr(self.identifier, "input_uncertainty", None)
         if callable(shape) and self._k % 50 == 0:
             self.excitation.shape(shape())
+
+    def _fallback_cause(self, held: bool, bridging: bool, usable: bool, wanted: bool) -> str:
+        """Why the fallback flies this step: a key of :data:`FALLBACK_CAUSES`."""
+        if held:
+            return "growing"
+        if bridging:
+            return "bridge"
+        if self._reason is not None:            # no model, a failed or a rejected design
+            return self._reason
+        if not usable:
+            return "no state"
+        # the design passed: it waits for the dwell time (or, once, for a first gain)
+        return "dwell"
 
     def _warn_if_never_flown(self) -> None:
         """One :class:`FallbackWarning` when the identified design has not flown a single
@@ -499,6 +527,7 @@ class AdaptiveLQG(_LQGController):
             fallback_action = self.warmup_controller.act(obs, info)
         self._watch_events()
         x = None
+        self._reason = "no model" if model is None else None
         if model is not None and np.all(np.isfinite(model.A)):
             if self.rigid_state == "kalman":
                 x = self._own_filter(model, y, info)
@@ -530,6 +559,10 @@ class AdaptiveLQG(_LQGController):
         if not fly:
             self.stats["fallback_steps"] += 1
             self.stats["fallback_steps_after_60s"] += judged
+            if judged:
+                cause = self._fallback_cause(held, bridging, usable, wanted)
+                by = self.stats["fallback_by_after_60s"]
+                by[cause] = by.get(cause, 0) + 1
             self._warn_if_never_flown()
             torque = fallback_action.astype(float) * self.max_torque
             if np.all(np.isfinite(obs[self._att])):

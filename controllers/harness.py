@@ -37,8 +37,8 @@ from spacecraft_conventions import (
 
 __all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "ENVELOPE_FLOOR", "GROWTH_LIMIT",
            "JUDGED_FROM_S", "SCORED_FROM_S", "ComparisonInterrupted",
-           "Trajectory", "compare", "controller_shares", "episode_metrics", "run_episode",
-           "stage_costs"]
+           "Trajectory", "compare", "controller_shares", "episode_metrics", "fallback_causes",
+           "run_episode", "stage_costs"]
 
 # COST_WEIGHTS (re-exported): the weights of the common quadratic cost by which every
 # controller is scored, which every LQG here minimizes and whose negative is the env's
@@ -430,14 +430,54 @@ def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
     dict
         ``excitation_rms_Nm`` (N m), and ``rejected_share``,
         ``fallback_share`` and ``fallback_share_after_60s``: shares of the
-        steps (of those from :data:`JUDGED_FROM_S` on for the last).
+        steps (of those from :data:`JUDGED_FROM_S` on for the last);
+        ``fallback_causes_after_60s``: cause -> share of the steps from
+        :data:`JUDGED_FROM_S` on that the fallback flew for that cause (from
+        ``stats["fallback_by_after_60s"]``, the causes of
+        :data:`controllers.adaptive.FALLBACK_CAUSES`; they sum to
+        ``fallback_share_after_60s``; empty for controllers without them).
     """
     steps = max(1, int(stats.get("steps", 0)))
     late = max(1, int(stats.get("steps_after_60s", 0)))
     return {"excitation_rms_Nm": float(stats.get("excitation_rms_Nm", 0.0)),
             "rejected_share": stats.get("rejected", 0) / steps,
             "fallback_share": stats.get("fallback_steps", 0) / steps,
-            "fallback_share_after_60s": stats.get("fallback_steps_after_60s", 0) / late}
+            "fallback_share_after_60s": stats.get("fallback_steps_after_60s", 0) / late,
+            "fallback_causes_after_60s": {
+                cause: count / late
+                for cause, count in sorted(stats.get("fallback_by_after_60s", {}).items())}}
+
+
+def fallback_causes(per_seed: list[dict[str, Any]]) -> dict[str, float]:
+    """Why the fallback flew, over seeds: each cause's mean share of the steps.
+
+    Parameters
+    ----------
+    per_seed : list of dict
+        Episode metrics (:func:`episode_metrics`), one per seed, each with the
+        ``fallback_causes_after_60s`` of :func:`controller_shares` (a metric
+        without it, or a cause a seed did not meet, counts 0).
+
+    Returns
+    -------
+    dict
+        Cause (:data:`controllers.adaptive.FALLBACK_CAUSES`) -> mean over the
+        seeds of its share of the steps from :data:`JUDGED_FROM_S` on, largest
+        first: for seeds of equal length, the share of all their steps from
+        then on. Empty for controllers without a fallback.
+
+    Examples
+    --------
+    >>> fallback_causes([{"fallback_causes_after_60s": {"prediction": 0.4}},
+    ...                  {"fallback_causes_after_60s": {"dwell": 0.1, "prediction": 0.2}}])
+    {'prediction': 0.30000000000000004, 'dwell': 0.05}
+    """
+    if not per_seed:
+        return {}
+    causes = {c for m in per_seed for c in m.get("fallback_causes_after_60s", {})}
+    mean = {c: float(np.mean([m.get("fallback_causes_after_60s", {}).get(c, 0.0)
+                              for m in per_seed])) for c in causes}
+    return dict(sorted(mean.items(), key=lambda item: (-item[1], item[0])))
 
 
 def _envelope_growth(time: np.ndarray, level: np.ndarray, start_s: float) -> tuple[float, float]:
@@ -737,6 +777,7 @@ def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
         "stable_runs": int(sum(m["stable"] for m in per_seed)),
         "verdicts": {v: sum(m["verdict"] == v for m in per_seed)
                      for v in sorted({m["verdict"] for m in per_seed})},
+        "fallback_causes_after_60s": fallback_causes(per_seed),
         "runs": len(per_seed),
     }
 

@@ -451,12 +451,15 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
             "gain_coverage_after_60s", "verdict"]
     with open(out / "results.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["controller", "seed", *cols, "settling_s"])
+        writer.writerow(["controller", "seed", *cols, "settling_s",
+                         "fallback_causes_after_60s"])
         for name, row in table.items():
             for m in row["per_seed"]:
                 writer.writerow([name, m["seed"], *[m[c] for c in cols],
                                  ";".join("" if s is None else f"{s:.1f}"
-                                          for s in m["settling_s"])])
+                                          for s in m["settling_s"]),
+                                 ";".join(f"{cause}:{share:.4f}" for cause, share
+                                          in m.get("fallback_causes_after_60s", {}).items())])
     angle = ""
     scen = model.scenario
     if isinstance(scen, SolarRotationScenario):

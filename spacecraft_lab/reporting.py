@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_brief", "control_summary", "control_table", "identification_table",
+__all__ = ["control_brief", "control_summary", "control_table", "fallback_causes_text",
+           "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
            "training_metrics_problem"]
 
@@ -116,8 +117,9 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
     excitation's share of the torque term; then the secondary columns:
     verdicts, attitude RMS and vibration from 100 s, excitation RMS, the
     identified rigid-body gain's median error and 2-sigma coverage of the
-    truth from 60 s (controllers with an identifier), and the share of steps
-    the fallback flew from 60 s (after the warm-up) and over the episode.
+    truth from 60 s (controllers with an identifier), the share of steps
+    the fallback flew from 60 s (after the warm-up) and over the episode, and
+    why it flew from 60 s (:func:`fallback_causes_text`).
     """
     def cell(row: dict, key: str, digits: int) -> str:
         return (f"{row['median'][key]:.{digits}g} "
@@ -136,8 +138,9 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
     head = ("| controller | cost t >= 100 s | / oracle | / robust | split: att / rate / defl "
             "/ torque (excitation) | verdicts | attitude RMS t >= 100 s (deg) "
             "| vibration t >= 100 s (mm) | excitation RMS (N m) "
-            "| gain error, coverage t >= 60 s | fallback flew t >= 60 s (all) |")
-    lines = [head, "|" + "---|" * 11]
+            "| gain error, coverage t >= 60 s | fallback flew t >= 60 s (all) "
+            "| why it flew t >= 60 s |")
+    lines = [head, "|" + "---|" * 12]
     for name, row in table.items():
         med = row["median"]
         verdicts = ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items())
@@ -149,9 +152,29 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
                  cell(row, "vibration_rms_after_100s_mm", 3),
                  f"{med['excitation_rms_Nm']:.3g}", gain(med),
                  f"{100 * med['fallback_share_after_60s']:.0f} % "
-                 f"({100 * med['fallback_share']:.0f} %)"]
+                 f"({100 * med['fallback_share']:.0f} %)",
+                 fallback_causes_text(row.get("fallback_causes_after_60s", {})) or "-"]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def fallback_causes_text(causes: dict[str, float], floor: float = 0.005) -> str:
+    """``"prediction 38 %, dwell 1 %"``: the causes of :func:`controllers.fallback_causes`
+    whose share of the steps from 60 s is at least ``floor``, largest first ("" if none).
+
+    Parameters
+    ----------
+    causes : dict
+        Cause -> share of the steps from 60 s (mean over seeds).
+    floor : float
+        Smallest share shown.
+
+    Returns
+    -------
+    str
+    """
+    return ", ".join(f"{cause} {100 * share:.0f} %" for cause, share in causes.items()
+                     if share >= floor)
 
 
 def control_brief(table: dict[str, dict], oracle: str | None = "oracle LQG",
@@ -383,8 +406,10 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
         verdicts = table[adaptive]["verdicts"]
         stable = verdicts.get("stable", 0)
         fallback = table[adaptive]["median"].get("fallback_share_after_60s", np.nan)
+        why = fallback_causes_text(table[adaptive].get("fallback_causes_after_60s", {}))
         flew = ("" if not np.isfinite(fallback) else
-                f"; its robust fallback flew {100 * fallback:.0f} % of the steps from 60 s")
+                f"; its robust fallback flew {100 * fallback:.0f} % of the steps from 60 s"
+                + (f" (why, mean over seeds: {why})" if why else ""))
         if parts:
             lines.append(f"On {scenario} over {seeds} seeds, the adaptive LQG's quadratic cost "
                          f"from 100 s was {' and '.join(parts)} (median of paired seeds; lower "

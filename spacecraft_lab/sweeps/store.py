@@ -40,6 +40,8 @@ _CHECKS = {
     "string": lambda v: isinstance(v, str),
     "bool": lambda v: isinstance(v, bool),
     "list": lambda v: isinstance(v, list) and all(_is_json_scalar(x) for x in v),
+    "mapping": lambda v: isinstance(v, dict) and all(isinstance(k, str) and _is_number(x)
+                                                     for k, x in v.items()),
 }
 
 

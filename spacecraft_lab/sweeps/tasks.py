@@ -57,7 +57,7 @@ TASKS: dict[str, str] = {
 METRIC_TYPES: dict[str, dict[str, str]] = {
     "identify": {},
     "control": {"verdict": "string", "stable": "bool", "settling_s": "list",
-                "settled_before_event": "list"},
+                "settled_before_event": "list", "fallback_causes_after_60s": "mapping"},
 }
 
 #: Environment of worker processes: one BLAS/OpenMP thread each, so that a

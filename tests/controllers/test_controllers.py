@@ -304,6 +304,49 @@ def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
     assert traj.controller_stats["redesigns"] == 0
 
 
+@pytest.mark.parametrize(("acceptance", "cause"), [
+    ({"max_prediction_error": np.inf, "min_disk_margin": 0.999}, "margin"),
+    ({"max_prediction_error": 1e-9}, "prediction"),
+])
+def test_every_fallback_step_after_60s_has_its_cause(acceptance, cause):
+    """With one acceptance test made impossible, every step the fallback flies from 60 s
+    is put down to that test; the causes sum to the fallback's share and are reported by
+    the episode metrics and pooled over seeds."""
+    from controllers import controller_shares, fallback_causes
+    from controllers.acceptance import REJECTION_REASONS
+    from controllers.adaptive import FALLBACK_CAUSES
+
+    env = gym.make("FlexibleSpacecraftDocking-v2")
+    ctrl = AdaptiveLQG(env.unwrapped, acceptance=GainAcceptance(**acceptance))
+    traj = run_episode(env, ctrl, seed=0, max_steps=700)
+    stats = traj.controller_stats
+    assert stats["steps_after_60s"] == 100 and stats["redesigns"] == 0
+    assert stats["fallback_by_after_60s"] == {cause: 100}
+    shares = controller_shares(stats)
+    assert shares["fallback_causes_after_60s"] == {cause: 1.0}
+    assert shares["fallback_share_after_60s"] == 1.0
+    assert cause in REJECTION_REASONS and set(REJECTION_REASONS) <= set(FALLBACK_CAUSES)
+    pooled = fallback_causes([shares, {"fallback_causes_after_60s": {}}])
+    assert pooled == {cause: 0.5}
+
+
+def test_the_fallback_causes_of_a_default_loop_add_up():
+    """On a default loop that flies its design and its fallback, every fallback step
+    from 60 s has exactly one cause among :data:`FALLBACK_CAUSES`."""
+    from controllers.adaptive import FALLBACK_CAUSES
+
+    env = gym.make("FlexibleSpacecraftPaddleRotation-v2", snr_db=None)
+    ctrl = AdaptiveLQG(env.unwrapped)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # the fallback warning, on clean data
+        traj = run_episode(env, ctrl, seed=0, max_steps=800)
+    stats = traj.controller_stats
+    by = stats["fallback_by_after_60s"]
+    assert stats["fallback_steps_after_60s"] > 0
+    assert sum(by.values()) == stats["fallback_steps_after_60s"]
+    assert set(by) <= set(FALLBACK_CAUSES)
+
+
 def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
     env = FlexibleSpacecraftEnv("docking")
     ctrl = AdaptiveLQG(env)
