@@ -304,6 +304,47 @@ def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
     assert traj.controller_stats["redesigns"] == 0
 
 
+def test_the_dual_excitation_runs_only_in_its_window_after_the_warm_up_or_a_change(
+        monkeypatch):
+    """With a tolerance no estimate meets, the excitation wants to run for good: it runs
+    for ``excitation_window_s`` after the identifier's first model, then stops; a change
+    the identifier reports opens the window again; ``inf`` keeps the old behaviour."""
+    from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+
+    reported: list = []          # the changes the identifier reports (the loop counts them)
+    monkeypatch.setattr(RigidFlexibleIdentifier, "events", property(lambda self: reported))
+
+    def run(window, steps=420, event_at=None, more=0):
+        reported.clear()
+        env = FlexibleSpacecraftEnv("docking")
+        ctrl = AdaptiveLQG(env, uncertainty_tolerance=1e-9, excitation_window_s=window)
+        obs, info = env.reset(seed=0)
+        ctrl.reset(0)
+        excitation, warm_at = [], None
+        for k in range(steps + more):
+            if k == event_at:
+                reported.append("a change")
+            action = ctrl.act(obs, info)
+            if warm_at is None and ctrl._warm:
+                warm_at = k
+            excitation.append(np.abs(ctrl.last_excitation).max())
+            obs, _, _, _, info = env.step(action)
+        return np.array(excitation), warm_at
+
+    bounded, warm_at = run(5.0)
+    assert warm_at is not None and warm_at < 330
+    window = slice(warm_at + 10, warm_at + 50)           # inside the 5 s (50 steps)
+    after = slice(warm_at + 60, 420)                     # the amplitude is set every 10 steps
+    assert bounded[window].max() > 0 and bounded[after].max() == 0
+    unbounded, _ = run(np.inf)
+    assert unbounded[after].max() > 0
+    reopened, _ = run(5.0, event_at=420, more=40)
+    assert reopened[after].max() == 0 and reopened[430:460].max() > 0
+    for bad in (-1.0, np.nan):
+        with pytest.raises(ValueError, match="excitation_window_s"):
+            AdaptiveLQG(FlexibleSpacecraftEnv("docking"), excitation_window_s=bad)
+
+
 @pytest.mark.parametrize(("acceptance", "cause"), [
     ({"max_prediction_error": np.inf, "min_disk_margin": 0.999}, "margin"),
     ({"max_prediction_error": 1e-9}, "prediction"),
