@@ -33,8 +33,12 @@ def residual_env() -> gym.Env:
 
 venv = VecNormalize(DummyVecEnv([lambda: ActionRepeat(residual_env(), 10)]))
 venv.seed(0)
-model = PPO("MlpPolicy", venv, seed=0, policy_kwargs={"log_std_init": -1.0})
-model.learn(total_timesteps=max(args.timesteps // 10, 1))
+decisions = max(args.timesteps // 10, 1)
+# PPO collects n_steps decisions before its first update (SB3's default 2048): a smaller
+# budget gets a smaller rollout, a multiple of the 64-decision mini-batch
+model = PPO("MlpPolicy", venv, seed=0, n_steps=min(2048, max(64, decisions // 64 * 64)),
+            policy_kwargs={"log_std_init": -1.0})
+model.learn(total_timesteps=decisions)
 venv.training = False
 
 env = residual_env()

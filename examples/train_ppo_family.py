@@ -38,8 +38,12 @@ def make_env() -> gym.Env:
 
 venv = VecNormalize(DummyVecEnv([make_env]), norm_obs=True, norm_reward=True, clip_obs=10.0)
 venv.seed(0)
-model = PPO("MlpPolicy", venv, seed=0, policy_kwargs={"log_std_init": -1.0})
-model.learn(total_timesteps=max(args.timesteps // REPEAT, 1))
+decisions = max(args.timesteps // REPEAT, 1)
+# PPO collects n_steps decisions before its first update (SB3's default 2048): a smaller
+# budget gets a smaller rollout, a multiple of the 64-decision mini-batch
+model = PPO("MlpPolicy", venv, seed=0, n_steps=min(2048, max(64, decisions // 64 * 64)),
+            policy_kwargs={"log_std_init": -1.0})
+model.learn(total_timesteps=decisions)
 venv.training = False
 
 agent = NormalizedPolicy(model, venv, "PPO + physical", repeat=REPEAT)
