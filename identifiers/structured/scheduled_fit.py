@@ -231,7 +231,9 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
                         weights: ArrayLike | None = None,
                         filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
                         good_enough: float | None = None, start_nfev: int = 60,
-                        max_nfev: int = 150) -> ScheduledFit:
+                        max_nfev: int = 150,
+                        initial: tuple[ScheduledPhysicalModel, ArrayLike] | None = None
+                        ) -> ScheduledFit:
     """Fit a :class:`ScheduledPhysicalModel` to a record by output error.
 
     Parameters
@@ -273,6 +275,10 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     max_nfev : int
         Function evaluations in all for the kept start (it continues if its
         first refinement stopped at ``start_nfev``).
+    initial : (ScheduledPhysicalModel, (6 + 2 N,) array_like), optional
+        A model and its state at the record's first sample to refine first,
+        before the equation-error starts (a refit after a change starts from
+        the model it replaces); it must have this call's appendages.
 
     Returns
     -------
@@ -309,10 +315,22 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     w = 1.0 / layout.scales() if weights is None else np.asarray(weights, dtype=float)
     problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
     floor = noise_floor(y, w)
+    starts: list = list(filter_constants)
+    if initial is not None:
+        model0, x0 = initial
+        x0 = np.asarray(x0, dtype=float).reshape(-1)
+        if model0.n_modes != turning.size or x0.shape != (6 + 2 * turning.size,):
+            raise ValueError(f"initial must be a model of {turning.size} appendages and its "
+                             f"({6 + 2 * turning.size},) state, got {model0.n_modes} and "
+                             f"{x0.shape}")
+        starts.insert(0, problem.pack(model0.rest_inertia, model0.drive_anisotropy,
+                                      2 * np.pi * np.asarray(model0.frequencies_hz),
+                                      model0.damping, model0.couplings, x0))
     best = None
-    for tau in filter_constants:
+    for start in starts:
         try:
-            p0 = equation_error_start(problem, y, float(tau))
+            p0 = start if isinstance(start, np.ndarray) else \
+                equation_error_start(problem, y, float(start))
         except (np.linalg.LinAlgError, ValueError):
             continue
         solution = problem.solve(p0, start_nfev)

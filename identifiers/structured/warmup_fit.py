@@ -1,4 +1,4 @@
-"""What the identifiers that fit once to their warm-up and then hold the fit share.
+"""What the identifiers that fit to their warm-up and then hold the fit share.
 
 :class:`WarmupFit` records the samples until the warm-up is over, calls the
 host's ``_fit`` (retried once the record is half a warm-up longer when it
@@ -6,6 +6,14 @@ fails: each attempt is a nonlinear fit of seconds), then runs a Kalman filter
 on the held model (:class:`~identifiers.structured.state_filter.ModelFilter`),
 its measurement noise the fit's residual per output and its process noise an
 unmodelled torque.
+
+A host with ``refit_on_change`` set also watches the filter's innovations
+with a CUSUM test (:class:`~identifiers.structured.change_detection.InnovationCUSUM`):
+when it fires, the change is reported in :attr:`WarmupFit.events`, the held
+model keeps flying while a new record of ``warmup`` samples is taken, and the
+host's ``_fit`` then fits that record (it may start from the held fit); a
+failed refit keeps the held model. So the fit is renewed where the data say
+the plant moved, not on a clock.
 """
 
 from __future__ import annotations
@@ -15,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from identifiers.core.kalman import KalmanPredictor
+from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM
 from identifiers.structured.state_filter import ModelFilter
 
 __all__ = ["WarmupFit"]
@@ -23,12 +32,17 @@ __all__ = ["WarmupFit"]
 class WarmupFit(ModelFilter):
     """Mixin: the record, the fit's hold and the filter on it.
 
-    The host provides ``process_torque`` (N m per axis), ``_fit() -> bool``
-    (fit the record, set ``fit`` and ``_mats``, start the filter with
-    :meth:`_start_filter`; False when it failed) and may override
-    :meth:`_record_item` (what each sample adds to the record) and
-    :meth:`_follow` (run before the filter's update once the model is held).
+    The host provides ``process_torque`` (N m per axis), ``refit_on_change``
+    (bool), ``_fit() -> bool`` (fit the record, set ``fit`` and ``_mats``,
+    start the filter with :meth:`_start_filter`; False when it failed, with
+    ``fit`` and ``_mats`` as they were) and may override :meth:`_record_item`
+    (what each sample adds to the record) and :meth:`_follow` (run before the
+    filter's update once the model is held). During a refit's record
+    :attr:`refit_start` holds the filter's state at the record's first sample
+    (a start for the refit); it is None otherwise.
     """
+
+    refit_on_change: bool = False
 
     _SHARED_ITEMS = ("_pending", "_record")
 
@@ -41,12 +55,32 @@ class WarmupFit(ModelFilter):
         self._mats: tuple[np.ndarray, ...] | None = None
         self._q = self._r = None
         self._seen: np.ndarray | None = None
+        self._events: list[ChangeEvent] = []
+        self._detector: InnovationCUSUM | None = None
+        self._detector_offset = 0
+        self.refit_start: np.ndarray | None = None
+        self.n_refits = 0
+
+    @property
+    def events(self) -> list[ChangeEvent]:
+        """Changes the innovation test detected (samples counted from the first
+        update; empty without ``refit_on_change``)."""
+        return list(self._events)
+
+    @property
+    def refitting(self) -> bool:
+        """True while the record for a refit after a detected change is being taken."""
+        return self.refit_start is not None
 
     def restart(self) -> None:
         """A new record of the same plant: keep the fit, restart the state's filter
-        (``x = 0`` with a vague covariance); before the fit, keep recording."""
+        (``x = 0`` with a vague covariance) and the change test, drop a refit's
+        unfinished record; before the fit, keep recording."""
         if self._kf is not None:
             self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
+            # a refit's record, and the change test's calibration, belong to the old record
+            self._record, self.refit_start = [], None
+            self._watch()
 
     def _allocate(self, r: int, m: int) -> None:
         """Nothing before the fit: the record grows sample by sample."""
@@ -62,14 +96,51 @@ class WarmupFit(ModelFilter):
         y = np.where(seen, y, np.nan)
         if self.fit is None:
             self._record.append(self._record_item(u, y))
-            if len(self._record) >= max(self.warmup, self._retry_at) and not self._fit():
-                # keep recording; try again once the record is half a warm-up longer
-                self.fit = None
-                self._retry_at = len(self._record) + max(self.warmup // 2, 1)
+            if len(self._record) >= max(self.warmup, self._retry_at):
+                if self._fit():
+                    self._watch()
+                else:
+                    # keep recording; try again once the record is half a warm-up longer
+                    self.fit = None
+                    self._retry_at = len(self._record) + max(self.warmup // 2, 1)
             return
         self._follow()
         a, b, c, _, _ = self._mats
+        prior = self._kf.x.copy()
         self._kf.update(a, b, c, self._q, self._r, u, y)
+        if self.refit_start is not None:
+            self._record.append(self._record_item(u, y))
+            if len(self._record) >= self.warmup:
+                self._refit()
+            return
+        if self._detector is not None and learn and np.isfinite(y).all():
+            event = self._detector.update(self._kf.innovation, self._kf.innovation_covariance)
+            if event is not None:
+                offset = self._detector_offset
+                self._events.append(ChangeEvent(sample=offset + event.sample,
+                                                onset=offset + event.onset,
+                                                time=(offset + event.sample) * self.dt,
+                                                statistic=event.statistic))
+                # the record for the refit starts with this sample: the filter's
+                # prior of it is the refit's start
+                self.refit_start = prior
+                self._record = [self._record_item(u, y)]
+
+    def _refit(self) -> None:
+        """Fit the record taken since the detected change; keep the held model if the
+        fit fails."""
+        if self._fit():
+            self.n_refits += 1
+        else:
+            self._record = []
+        self.refit_start = None
+        self._watch()
+
+    def _watch(self) -> None:
+        """A fresh change test on the (new) held model's innovations, from the next
+        sample on."""
+        self._detector = InnovationCUSUM(dt=self.dt) if self.refit_on_change else None
+        self._detector_offset = self.n_samples
 
     def _process_noise(self, b: np.ndarray) -> np.ndarray:
         """The filter's process covariance for the normalized input matrix ``b``: an
