@@ -1,5 +1,7 @@
 """``spacecraft adapt``: one policy flown with the true, estimated and nominal parameters."""
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -26,10 +28,26 @@ def test_collection_and_scored_episodes_are_disjoint_from_training_and_selection
     assert not collection & set(HELD_OUT_SEEDS) and not collection & set(EVAL_SEEDS)
 
 
-def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privileged_agent):
-    result = run_adaptation([privileged_agent], episodes=1, seeds=(2000,), workers=1,
-                            progress=False)
-    assert result["collection_seeds"] == [COLLECTION_SEED] and result["eval_seeds"] == [2000]
+@pytest.fixture(scope="module")
+def adapted(privileged_agent, tmp_path_factory):
+    """``spacecraft adapt`` on the agent, one collection and one scored episode: the
+    CLI's output directory, the result it holds and what it printed (one run serves
+    the tests below)."""
+    out = tmp_path_factory.mktemp("rma")
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["adapt", str(privileged_agent), "--episodes", "1", "--scored-episodes",
+                     "1", "--workers", "1", "--out", str(out)])
+    assert code == 0
+    return out, json.loads((out / "adaptation.json").read_text()), printed.getvalue()
+
+
+def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privileged_agent,
+                                                                         adapted):
+    _, result, _ = adapted
+    assert result["collection_seeds"] == [COLLECTION_SEED]
+    assert result["eval_seeds"] == [HELD_OUT_SEEDS[0]]
+    (seed,) = result["eval_seeds"]
     (agent,) = result["agents"]
     assert set(agent["scores"]) == set(SOURCES)
     per = {s: agent["scores"][s]["cost_after_100s_per_seed"][0] for s in SOURCES}
@@ -38,7 +56,7 @@ def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privil
         per["nominal"] / per["estimated"])
     # "true" is the env the policy trained and was evaluated on
     policy, settings = load_agent(privileged_agent)
-    again = _evaluate(policy, "family", settings["features"], settings["env_kwargs"], (2000,),
+    again = _evaluate(policy, "family", settings["features"], settings["env_kwargs"], (seed,),
                       base_settle_s=settings["base_integral_settle_s"])
     assert per["true"] == pytest.approx(again["cost_after_100s_per_seed"][0], rel=1e-9)
     # the estimate and the identifier's raw vector are scored against the truth
@@ -61,12 +79,9 @@ def test_a_policy_without_the_privileged_vector_is_refused():
         run_adaptation([], progress=False)
 
 
-def test_cli_adapt_writes_json_and_table(privileged_agent, tmp_path, capsys):
-    code = main(["adapt", str(privileged_agent), "--episodes", "1", "--scored-episodes", "1",
-                 "--workers", "1", "--out", str(tmp_path / "rma")])
-    assert code == 0
-    result = json.loads((tmp_path / "rma" / "adaptation.json").read_text())
+def test_cli_adapt_writes_json_and_table(adapted):
+    out, result, printed = adapted
     assert result["features"] == "residual-scheduled-privileged"
-    assert (tmp_path / "rma" / "table.md").read_text().startswith("RMA comparison")
-    assert (tmp_path / "rma" / "adaptation.png").stat().st_size > 10_000
-    assert "wrote" in capsys.readouterr().out
+    assert (out / "table.md").read_text().startswith("RMA comparison")
+    assert (out / "adaptation.png").stat().st_size > 10_000
+    assert "wrote" in printed

@@ -65,7 +65,30 @@ def test_the_physical_fit_option_flies_and_stays_out_of_the_default_comparison(t
     assert PHYSICAL in json.dumps(table)
 
 
+def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendages():
+    """``--controllers adaptive-lqg-scheduled`` builds the adaptive LQG on a scheduled
+    identifier that knows the env's appendages (its fit is flown in the slow test
+    below)."""
+    import gymnasium as gym
+
+    from controllers import AdaptiveLQG, LQRWeights
+    from identifiers import ScheduledPhysicalIdentifier
+    from spacecraft_lab.control import CONTROLLERS, env_id, env_kwargs_for
+
+    assert SCHEDULED_PHYSICAL not in CONTROLLER_NAMES
+    env = gym.make(env_id("paddle_rotation"), **env_kwargs_for("paddle_rotation"))
+    ctrl = CONTROLLERS(LQRWeights())[SCHEDULED_PHYSICAL](env)
+    assert isinstance(ctrl, AdaptiveLQG)
+    assert isinstance(ctrl.identifier, ScheduledPhysicalIdentifier)
+    model = env.unwrapped.model
+    assert ctrl.identifier.turning == tuple(model.appendage_turns)
+    assert ctrl.identifier.sensor_appendage == tuple(model.sensor_appendage)
+    assert any(ctrl.identifier.turning) and not all(ctrl.identifier.turning)
+
+
+@pytest.mark.slow
 def test_the_scheduled_physical_option_flies_on_turning_paddles(tmp_path):
+    """The whole CLI run, its 10-50 s fit included (slow)."""
     assert SCHEDULED_PHYSICAL not in CONTROLLER_NAMES
     main(["control", "--scenario", "paddle_rotation", "--seeds", "1", "--steps", "400",
           "--controllers", "adaptive-lqg-scheduled", "--workers", "1",
