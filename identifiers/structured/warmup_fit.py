@@ -57,7 +57,6 @@ class WarmupFit(ModelFilter):
         self._seen: np.ndarray | None = None
         self._events: list[ChangeEvent] = []
         self._detector: InnovationCUSUM | None = None
-        self._detector_offset = 0
         self.refit_start: np.ndarray | None = None
         self.n_refits = 0
 
@@ -116,10 +115,12 @@ class WarmupFit(ModelFilter):
         if self._detector is not None and learn and np.isfinite(y).all():
             event = self._detector.update(self._kf.innovation, self._kf.innovation_covariance)
             if event is not None:
-                offset = self._detector_offset
-                self._events.append(ChangeEvent(sample=offset + event.sample,
-                                                onset=offset + event.onset,
-                                                time=(offset + event.sample) * self.dt,
+                # the test counts only the samples it was fed: stamp the event with
+                # this identifier's sample count
+                sample = self.n_samples - 1
+                self._events.append(ChangeEvent(sample=sample,
+                                                onset=sample - (event.sample - event.onset),
+                                                time=sample * self.dt,
                                                 statistic=event.statistic))
                 # the record for the refit starts with this sample: the filter's
                 # prior of it is the refit's start
@@ -140,7 +141,6 @@ class WarmupFit(ModelFilter):
         """A fresh change test on the (new) held model's innovations, from the next
         sample on."""
         self._detector = InnovationCUSUM(dt=self.dt) if self.refit_on_change else None
-        self._detector_offset = self.n_samples
 
     def _process_noise(self, b: np.ndarray) -> np.ndarray:
         """The filter's process covariance for the normalized input matrix ``b``: an
