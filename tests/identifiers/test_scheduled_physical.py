@@ -187,6 +187,10 @@ def test_the_fit_refuses_records_it_cannot_use():
                             sensor_appendage=[0, 0, 1, 2])
     with pytest.raises(ValueError, match="finite"):
         fit_scheduled_model(u, y, np.full(50, np.nan), 0.1, STANDARD_OUTPUTS, TURNING)
+    with pytest.raises(ValueError, match=r"initial must be a model of 4 appendages and its "
+                                         r"\(14,\) state"):
+        fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                            initial=(_model(), np.zeros(10)))
 
 
 def test_the_identifier_follows_the_drive_after_its_fit():
