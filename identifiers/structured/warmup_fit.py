@@ -105,7 +105,8 @@ class WarmupFit(ModelFilter):
             return
         self._follow()
         a, b, c, _, _ = self._mats
-        prior = self._kf.x.copy()
+        # the filter's prior of this sample: the refit's start if the test fires on it
+        prior = self._kf.x.copy() if self._detector is not None else None
         self._kf.update(a, b, c, self._q, self._r, u, y)
         if self.refit_start is not None:
             self._record.append(self._record_item(u, y))
