@@ -3,6 +3,7 @@ test reproduces one and checks what happens now."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -85,10 +86,16 @@ def _fallback_tail(fault: str, seed: int) -> tuple[float, AdaptiveLQG]:
     return float(np.mean(flown[-1000:])), ctrl
 
 
+@functools.cache
+def _clean_fallback_tail(seed: int) -> float:
+    """The fault-free run's share, flown once for both D1 tests."""
+    return _fallback_tail("none", seed)[0]
+
+
 def _d1_gaps(fault: str) -> list[float]:
     gaps = []
     for seed in range(3):
-        clean, _ = _fallback_tail("none", seed)
+        clean = _clean_fallback_tail(seed)
         share, ctrl = _fallback_tail(fault, seed)
         gaps.append(abs(share - clean))
         assert np.isfinite(ctrl._err2) and np.isfinite(ctrl._sig2)
