@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
@@ -139,16 +140,40 @@ def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.n
                        dt: float, x0: np.ndarray,
                        blocks: list[tuple[int, int]] | None = None) -> np.ndarray:
     """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
-    discretized once per block of :func:`segments` (default), at its middle angle."""
+    discretized once per block of :func:`segments` (default), at its middle angle
+    (all blocks' exponentials in one call, the recursion in one compiled pass)."""
+    blocks = segments(angle) if blocks is None else blocks
+    bounds = np.asarray(blocks, dtype=np.int64).reshape(-1, 2)
     states = np.empty((u.shape[0], model.order))
-    x = np.asarray(x0, dtype=float).copy()
-    for s0, s1 in (segments(angle) if blocks is None else blocks):
-        ad, bd = model.zoh(0.5 * (angle[s0] + angle[s1 - 1]), dt)
-        forced = u[s0:s1] @ bd.T
-        for t in range(s0, s1):
-            states[t] = x
-            x = ad @ x + forced[t - s0]
+    if bounds.shape[0] == 0:
+        return states
+    middle = 0.5 * (angle[bounds[:, 0]] + angle[bounds[:, 1] - 1])
+    ad, bd = model.zoh(middle, dt)
+    _run_blocks(np.ascontiguousarray(ad), np.ascontiguousarray(bd),
+                np.ascontiguousarray(u, dtype=float), bounds,
+                np.asarray(x0, dtype=float).reshape(-1), states)
     return states
+
+
+@njit(cache=True, nogil=True)
+def _run_blocks(ad, bd, u, bounds, x0, states):  # pragma: no cover - compiled
+    """``x_{t+1} = A_b x_t + B_b u_t`` over the blocks ``b``, ``states[t] = x_t``."""
+    n, m = ad.shape[1], bd.shape[2]
+    x = x0.copy()
+    nxt = np.empty(n)
+    for b in range(bounds.shape[0]):
+        for t in range(bounds[b, 0], bounds[b, 1]):
+            for i in range(n):
+                states[t, i] = x[i]
+            for i in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += ad[b, i, j] * x[j]
+                for j in range(m):
+                    acc += bd[b, i, j] * u[t, j]
+                nxt[i] = acc
+            for i in range(n):
+                x[i] = nxt[i]
 
 
 class _Problem:

@@ -43,12 +43,14 @@ from spacecraft_conventions import OutputLayout
 __all__ = ["ScheduledPhysicalModel", "drive_rotation", "plane_basis"]
 
 
-def drive_rotation(axis: ArrayLike, angle: float) -> np.ndarray:
+def drive_rotation(axis: ArrayLike, angle: ArrayLike) -> np.ndarray:
     """``R(a)``: rotation by ``angle`` (rad) about the unit vector ``axis`` (Rodrigues);
-    about the body y axis ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``."""
+    about the body y axis ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``. ``angle`` of shape
+    (K,) gives the K rotations, (K, 3, 3)."""
     x, y, z = np.asarray(axis, dtype=float)
     cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * (cross @ cross)
+    a = np.asarray(angle, dtype=float)[..., None, None]
+    return np.eye(3) + np.sin(a) * cross + (1.0 - np.cos(a)) * (cross @ cross)
 
 
 def plane_basis(axis: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -153,11 +155,13 @@ class ScheduledPhysicalModel:
         plane = np.outer(e1, e1) + np.outer(e2, e2)
         return np.hypot(p0, p1) * plane + anisotropy
 
-    def coupling(self, angle: float) -> np.ndarray:
-        """``F(a)`` (3, N), kg^1/2 m."""
-        f = self.couplings.T.copy()
+    def coupling(self, angle: ArrayLike) -> np.ndarray:
+        """``F(a)`` (3, N), kg^1/2 m; (K, 3, N) for K angles."""
+        a = np.asarray(angle, dtype=float)
+        f = np.broadcast_to(self.couplings.T, (*a.shape, 3, self.n_modes)).copy()
         if self.turning.any():
-            f[:, self.turning] = drive_rotation(self.drive_axis, angle).T @ f[:, self.turning]
+            f[..., self.turning] = np.swapaxes(drive_rotation(self.drive_axis, a), -1, -2) \
+                @ self.couplings.T[:, self.turning]
         return f
 
     def inertia(self, angle: float) -> np.ndarray:
@@ -169,46 +173,48 @@ class ScheduledPhysicalModel:
         """``J(a)^-1``, rad/s^2 per N m: the rigid-body gain at drive angle ``a``."""
         return np.linalg.inv(self.inertia(angle))
 
-    def _turned(self, angle: float) -> np.ndarray:
+    def _turned(self, angle: ArrayLike) -> np.ndarray:
         r = drive_rotation(self.drive_axis, angle)
-        return r.T @ self.turning_inertia_at_zero @ r
+        return np.swapaxes(r, -1, -2) @ self.turning_inertia_at_zero @ r
 
-    def continuous(self, angle: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, B)`` of ``x' = A x + B u`` at drive angle ``a`` (rad).
+    def continuous(self, angle: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, B)`` of ``x' = A x + B u`` at drive angle ``a`` (rad): (6 + 2 N, 6 + 2 N)
+        and (6 + 2 N, 3); for K angles, (K, ...) stacks, built in one pass.
 
         ``J(a) - F F^T = S + R^T (|P| Pi + P) R`` is positive definite at every
         angle by construction.
         """
         n, size = self.n_modes, self.order
-        f = self.coupling(angle)
-        schur = self.rest_inertia + self._turned(angle)
-        schur_inv = np.linalg.inv(schur)
+        lead = np.shape(angle)
+        f = self.coupling(angle)                                    # (..., 3, N)
+        schur_inv = np.linalg.inv(self.rest_inertia + self._turned(angle))
         g = schur_inv @ f
         w = 2 * np.pi * self.frequencies_hz
         stiff, damp = -(w**2), -2.0 * self.damping * w
-        h = np.eye(n) + f.T @ g
-        a = np.zeros((size, size))
-        b = np.zeros((size, 3))
-        a[0:3, 3:6] = np.eye(3)
-        a[6:6 + n, 6 + n:] = np.eye(n)
+        h = np.eye(n) + np.swapaxes(f, -1, -2) @ g
+        a = np.zeros((*lead, size, size))
+        b = np.zeros((*lead, size, 3))
+        a[..., 0:3, 3:6] = np.eye(3)
+        a[..., 6:6 + n, 6 + n:] = np.eye(n)
         # omega' = S^-1 (u - F r), eta'' = -G^T u + (I + F^T G) r, r = -W^2 eta - 2ZW eta'
-        a[3:6, 6:6 + n] = -g * stiff
-        a[3:6, 6 + n:] = -g * damp
-        a[6 + n:, 6:6 + n] = h * stiff
-        a[6 + n:, 6 + n:] = h * damp
-        b[3:6] = schur_inv
-        b[6 + n:] = -g.T
+        a[..., 3:6, 6:6 + n] = -g * stiff
+        a[..., 3:6, 6 + n:] = -g * damp
+        a[..., 6 + n:, 6:6 + n] = h * stiff
+        a[..., 6 + n:, 6 + n:] = h * damp
+        b[..., 3:6, :] = schur_inv
+        b[..., 6 + n:, :] = -np.swapaxes(g, -1, -2)
         return a, b
 
-    def zoh(self, angle: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Zero-order-hold ``(A_d, B_d)`` at sample time ``dt`` (s) and angle ``a``."""
+    def zoh(self, angle: ArrayLike, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Zero-order-hold ``(A_d, B_d)`` at sample time ``dt`` (s) and angle ``a``; for
+        K angles, (K, ...) stacks (one exponential call for the stack)."""
         a, b = self.continuous(angle)
-        size = a.shape[0]
-        block = np.zeros((size + 3, size + 3))
-        block[:size, :size] = a * dt
-        block[:size, size:] = b * dt
+        size = a.shape[-1]
+        block = np.zeros((*a.shape[:-2], size + 3, size + 3))
+        block[..., :size, :size] = a * dt
+        block[..., :size, size:] = b * dt
         e = scipy.linalg.expm(block)
-        return e[:size, :size], e[:size, size:]
+        return e[..., :size, :size], e[..., :size, size:]
 
     def output_matrix(self, layout: OutputLayout) -> np.ndarray:
         """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection)."""

@@ -108,6 +108,35 @@ def test_the_discrete_model_is_the_zero_order_hold_of_the_continuous_one():
     np.testing.assert_array_equal(d.C[6:, 6:10], np.diag(model.tips))
 
 
+def test_stacked_angles_give_the_per_angle_model_and_the_simulation_its_recursion():
+    """``continuous``/``zoh`` on K angles equal the K single-angle calls (to rounding), and
+    the compiled simulation equals ``x_{t+1} = A_b x_t + B_b u_t`` block by block."""
+    model = _model()
+    angles = np.array([0.1, 0.9, 2.5, -1.3])
+    a, b = model.continuous(angles)
+    ad, bd = model.zoh(angles, 0.1)
+    assert a.shape == ad.shape == (4, 14, 14) and b.shape == bd.shape == (4, 14, 3)
+    assert model.coupling(angles).shape == (4, 3, 4)
+    for k, angle in enumerate(angles):
+        for stacked, single in zip((a[k], b[k], ad[k], bd[k]),
+                                   (*model.continuous(angle), *model.zoh(angle, 0.1)),
+                                   strict=True):
+            np.testing.assert_allclose(stacked, single, rtol=1e-13,
+                                       atol=1e-13 * np.abs(single).max())
+    u, _, angle = _record(model, 120, np.random.default_rng(2), rate=0.01)
+    x0 = np.random.default_rng(3).normal(size=model.order) * 1e-3
+    blocks = segments(angle)
+    assert 5 < len(blocks) < 60             # blocks of several samples
+    states = simulate_scheduled(model, u, angle, 0.1, x0)
+    x, expected = x0.copy(), np.empty_like(states)
+    for s0, s1 in blocks:
+        a_d, b_d = model.zoh(0.5 * (angle[s0] + angle[s1 - 1]), 0.1)
+        for t in range(s0, s1):
+            expected[t] = x
+            x = a_d @ x + b_d @ u[t]
+    np.testing.assert_allclose(states, expected, rtol=1e-12, atol=1e-15)
+
+
 @pytest.mark.parametrize(("change", "message"), [
     ({"rest_inertia": -REST}, "symmetric positive definite"),
     ({"couplings": np.zeros((3, 3))}, r"couplings must have shape \(4, 3\)"),
