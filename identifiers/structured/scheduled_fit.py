@@ -142,17 +142,26 @@ def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.n
     """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
     discretized once per block of :func:`segments` (default), at its middle angle
     (all blocks' exponentials in one call, the recursion in one compiled pass)."""
-    blocks = segments(angle) if blocks is None else blocks
-    bounds = np.asarray(blocks, dtype=np.int64).reshape(-1, 2)
+    bounds = _block_bounds(angle, blocks)
     states = np.empty((u.shape[0], model.order))
     if bounds.shape[0] == 0:
         return states
-    middle = 0.5 * (angle[bounds[:, 0]] + angle[bounds[:, 1] - 1])
-    ad, bd = model.zoh(middle, dt)
+    ad, bd = model.zoh(_block_angles(angle, bounds), dt)
     _run_blocks(np.ascontiguousarray(ad), np.ascontiguousarray(bd),
                 np.ascontiguousarray(u, dtype=float), bounds,
                 np.asarray(x0, dtype=float).reshape(-1), states)
     return states
+
+
+def _block_bounds(angle: np.ndarray, blocks: list[tuple[int, int]] | None) -> np.ndarray:
+    """(B, 2) int64 ``[start, stop)`` of each block (default :func:`segments`)."""
+    return np.asarray(segments(angle) if blocks is None else blocks,
+                      dtype=np.int64).reshape(-1, 2)
+
+
+def _block_angles(angle: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Each block's middle angle, rad, at which it is discretized."""
+    return 0.5 * (angle[bounds[:, 0]] + angle[bounds[:, 1] - 1])
 
 
 @njit(cache=True, nogil=True)
@@ -191,7 +200,10 @@ class _Problem:
             else np.zeros(0, dtype=int)
         self.turning, self.sensors, self.axis = turning, sensors, axis
         self.n = turning.size
-        self.blocks = segments(angle)
+        self.block_bounds = _block_bounds(angle, None)
+        self.block_angles = _block_angles(angle, self.block_bounds)
+        self.u_c = np.ascontiguousarray(u, dtype=float)
+        self._last: tuple[bytes, np.ndarray, tuple | None] | None = None
 
     def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
                ) -> tuple[ScheduledPhysicalModel, np.ndarray]:
@@ -213,13 +225,25 @@ class _Problem:
                                np.log(w), np.log(zeta), np.ravel(couplings) / _COUPLING,
                                np.asarray(x0) / _STATE])
 
-    def evaluate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(weighted residuals, tip gains); residuals of 1e6 where the model breaks."""
+    def _matrices(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(x0, A_d, B_d)`` of every block for parameters ``p``; None where the model
+        breaks."""
         try:
             model, x0 = self.unpack(p)
-            x = simulate_scheduled(model, self.u, self.angle, self.dt, x0, self.blocks)[self.good]
+            ad, bd = model.zoh(self.block_angles, self.dt)
         except (np.linalg.LinAlgError, ValueError):
-            x = None
+            return None
+        return x0, np.ascontiguousarray(ad), np.ascontiguousarray(bd)
+
+    def _residuals(self, mats: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+        """(weighted residuals, tip gains) of the simulation on ``mats``; residuals of
+        1e6 where the model breaks."""
+        x = None
+        if mats is not None:
+            x0, ad, bd = mats
+            states = np.empty((self.u_c.shape[0], ad.shape[1]))
+            _run_blocks(ad, bd, self.u_c, self.block_bounds, x0, states)
+            x = states[self.good]
         if x is None or not np.all(np.isfinite(x)):
             return np.full(int(self.good.sum()) * self.layout.size, 1e6), np.zeros(
                 self.sensors.size)
@@ -233,6 +257,36 @@ class _Problem:
             parts.append((y[:, row] - tips[i] * eta) * w[row])
         return np.concatenate(parts), tips
 
+    def evaluate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(weighted residuals, tip gains); residuals of 1e6 where the model breaks."""
+        mats = self._matrices(p)
+        residuals, tips = self._residuals(mats)
+        self._last = (p.tobytes(), residuals, mats)
+        return residuals, tips
+
+    def jacobian(self, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Forward differences of :meth:`evaluate` (steps ``sqrt(eps) max(1, |p_i|)``,
+        taken backward where forward would leave the bounds). The initial state's
+        columns reuse the blocks' matrices at ``p``: they do not depend on it."""
+        if self._last is None or self._last[0] != p.tobytes():
+            self.evaluate(p)
+        _, f0, mats = self._last
+        sign = np.where(p >= 0, 1.0, -1.0)
+        h = np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(p))
+        h = np.where((p + h > hi) | (p + h < lo), -h, h)
+        h = (p + h) - p
+        jac = np.empty((f0.size, p.size))
+        first_state = p.size - (6 + 2 * self.n)
+        for i in range(p.size):
+            q = p.copy()
+            q[i] += h[i]
+            if i < first_state or mats is None:
+                f = self._residuals(self._matrices(q))[0]
+            else:
+                f = self._residuals((_STATE * q[first_state:], mats[1], mats[2]))[0]
+            jac[:, i] = (f - f0) / h[i]
+        return jac
+
     def bounds(self, size: int) -> tuple[np.ndarray, np.ndarray]:
         n = self.n
         lo, hi = np.full(size, -np.inf), np.full(size, np.inf)
@@ -244,8 +298,9 @@ class _Problem:
     def solve(self, p0: np.ndarray, max_nfev: int):
         lo, hi = self.bounds(p0.size)
         p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
-        return least_squares(lambda p: self.evaluate(p)[0], p0, method="trf", x_scale="jac",
-                             bounds=(lo, hi), max_nfev=max_nfev)
+        return least_squares(lambda p: self.evaluate(p)[0], p0,
+                             jac=lambda p: self.jacobian(p, lo, hi), method="trf",
+                             x_scale="jac", bounds=(lo, hi), max_nfev=max_nfev)
 
 
 @single_threaded_blas

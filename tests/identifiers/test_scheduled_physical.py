@@ -137,6 +137,31 @@ def test_stacked_angles_give_the_per_angle_model_and_the_simulation_its_recursio
     np.testing.assert_allclose(states, expected, rtol=1e-12, atol=1e-15)
 
 
+def test_the_fits_jacobian_is_the_forward_difference_of_its_residuals():
+    """The initial state's columns, which reuse the blocks' matrices, equal those of a
+    full re-simulation; every column is the forward difference of the residuals."""
+    from identifiers.structured.scheduled_fit import _Problem
+
+    truth = _model()
+    u, y, angle = _record(truth, 150, np.random.default_rng(4))
+    problem = _Problem(u, y, angle, 0.1, STANDARD_OUTPUTS, 1.0 / STANDARD_OUTPUTS.scales(),
+                       np.array(TURNING), np.arange(4), np.array([0.0, 1.0, 0.0]))
+    x0 = np.random.default_rng(5).normal(size=truth.order) * 1e-3
+    p = problem.pack(truth.rest_inertia, truth.drive_anisotropy,
+                     2 * np.pi * truth.frequencies_hz, truth.damping, truth.couplings, x0)
+    lo, hi = problem.bounds(p.size)
+    jac = problem.jacobian(p, lo, hi)
+    f0 = problem.evaluate(p)[0]
+    expected = np.empty_like(jac)
+    for i in range(p.size):
+        q = p.copy()
+        q[i] += np.sqrt(np.finfo(float).eps) * max(1.0, abs(p[i])) * (1 if p[i] >= 0 else -1)
+        expected[:, i] = (problem.evaluate(q)[0] - f0) / (q[i] - p[i])
+    scale = np.linalg.norm(expected, axis=0)
+    assert np.all(scale[-truth.order:] > 0)          # the state's columns are not empty
+    np.testing.assert_allclose(jac / scale, expected / scale, rtol=0, atol=1e-6)
+
+
 @pytest.mark.parametrize(("change", "message"), [
     ({"rest_inertia": -REST}, "symmetric positive definite"),
     ({"couplings": np.zeros((3, 3))}, r"couplings must have shape \(4, 3\)"),
