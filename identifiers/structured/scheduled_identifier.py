@@ -72,6 +72,15 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         False (the first fit is held): in the closed-loop scenarios the test
         never fired, a docking included (docs/design/control.md), so the
         option is not yet shown to pay where the loop flies.
+    accumulate : bool
+        Let the information accumulate (default True): fit again, the held
+        model refined first, to the last ``max_record`` samples each time as
+        many samples have come since the last fit as it used (60 s, 120 s,
+        then every ``max_record`` samples). False holds the warm-up's fit,
+        which the drive then carries to angles the fit never saw.
+    max_record : int
+        Samples the accumulating refits keep (default 1200: 120 s), at least
+        ``warmup``.
     fit_options : dict, optional
         Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
         (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``),
@@ -101,6 +110,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
                  drive_axis: ArrayLike = (0.0, 1.0, 0.0), dt: float = 0.1,
                  warmup: int = 300, schedule_resolution: float = np.deg2rad(0.1),
                  process_torque: float = 0.05, refit_on_change: bool = False,
+                 accumulate: bool = True, max_record: int = 1200,
                  fit_options: dict | None = None,
                  input_scale: ArrayLike | None = None,
                  output_scale: ArrayLike | None = None, max_abs: float = 1e6) -> None:
@@ -129,6 +139,13 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         if not isinstance(refit_on_change, bool | np.bool_):
             raise TypeError(f"refit_on_change must be a bool, got {refit_on_change!r}")
         self.refit_on_change = bool(refit_on_change)
+        if not isinstance(accumulate, bool | np.bool_):
+            raise TypeError(f"accumulate must be a bool, got {accumulate!r}")
+        self.accumulate = bool(accumulate)
+        self.max_record = positive_int("max_record", max_record)
+        if self.max_record < positive_int("warmup", warmup):
+            raise ValueError(f"max_record must be at least warmup ({warmup} samples), got "
+                             f"{max_record}")
         allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev"}
         self.fit_options = dict(fit_options or {})
         if not set(self.fit_options) <= allowed:

@@ -14,10 +14,19 @@ model keeps flying while a new record of ``warmup`` samples is taken, and the
 host's ``_fit`` then fits that record (it may start from the held fit); a
 failed refit keeps the held model. So the fit is renewed where the data say
 the plant moved, not on a clock.
+
+A host with ``accumulate`` set lets the information grow instead of holding
+the warm-up's fit: it keeps the last ``max_record`` samples and fits them
+again, the held model refined first, each time as many samples have come
+since the last fit as that fit used (the record doubles: 30 s, 60 s, 120 s,
+...), then every ``max_record`` samples once the record is full. A fit's cost
+grows with its record, so the refits cost about two fits of the longest
+record in all until the record is full.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -43,8 +52,10 @@ class WarmupFit(ModelFilter):
     """
 
     refit_on_change: bool = False
+    accumulate: bool = False
+    max_record: int = 1200
 
-    _SHARED_ITEMS = ("_pending", "_record")
+    _SHARED_ITEMS = ("_pending", "_record", "_history", "_priors")
 
     def reset(self) -> None:
         super().reset()
@@ -59,6 +70,15 @@ class WarmupFit(ModelFilter):
         self._detector: InnovationCUSUM | None = None
         self.refit_start: np.ndarray | None = None
         self.n_refits = 0
+        # the accumulating refits: the last max_record samples and the filter's prior
+        # state at each (NaN before the first fit), the sample count at which the
+        # held fit's record started, its length and the samples since
+        self._history: deque = deque(maxlen=self.max_record)
+        self._priors: deque = deque(maxlen=self.max_record)
+        self._count = 0
+        self._fit_origin = 0
+        self._fit_length = 0
+        self._since_fit = 0
 
     @property
     def events(self) -> list[ChangeEvent]:
@@ -79,6 +99,9 @@ class WarmupFit(ModelFilter):
             self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
             # a refit's record, and the change test's calibration, belong to the old record
             self._record, self.refit_start = [], None
+            self._history.clear()
+            self._priors.clear()
+            self._since_fit = 0
             self._watch()
 
     def _allocate(self, r: int, m: int) -> None:
@@ -93,11 +116,17 @@ class WarmupFit(ModelFilter):
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
         y = np.where(seen, y, np.nan)
+        self._count += 1
+        if self.accumulate:
+            self._history.append(self._record_item(u, y))
         if self.fit is None:
+            if self.accumulate:
+                self._priors.append(np.full(self.n, np.nan))
             self._record.append(self._record_item(u, y))
             if len(self._record) >= max(self.warmup, self._retry_at):
+                length = len(self._record)
                 if self._fit():
-                    self._watch()
+                    self._fitted(self._count - length, length)
                 else:
                     # keep recording; try again once the record is half a warm-up longer
                     self.fit = None
@@ -106,12 +135,18 @@ class WarmupFit(ModelFilter):
         self._follow()
         a, b, c, _, _ = self._mats
         # the filter's prior of this sample: the refit's start if the test fires on it
-        prior = self._kf.x.copy() if self._detector is not None else None
+        prior = self._kf.x.copy() if self._detector is not None or self.accumulate else None
         self._kf.update(a, b, c, self._q, self._r, u, y)
+        if self.accumulate:
+            self._priors.append(prior)
+        self._since_fit += 1
         if self.refit_start is not None:
             self._record.append(self._record_item(u, y))
             if len(self._record) >= self.warmup:
                 self._refit()
+            return
+        if self.accumulate and self._since_fit >= min(self._fit_length, self.max_record):
+            self._refit_accumulated()
             return
         if self._detector is not None and learn and np.isfinite(y).all():
             event = self._detector.update(self._kf.innovation, self._kf.innovation_covariance)
@@ -130,13 +165,54 @@ class WarmupFit(ModelFilter):
 
     def _refit(self) -> None:
         """Fit the record taken since the detected change; keep the held model if the
-        fit fails."""
+        fit fails. The accumulating record restarts with it (the samples before the
+        change are another plant's)."""
+        length = len(self._record)
+        if self.accumulate:
+            self._history.clear()
+            self._history.extend(self._record)
+            self._priors.clear()
+            self._priors.extend([np.full(self.n, np.nan)] * length)
         if self._fit():
             self.n_refits += 1
+            self._fitted(self._count - length, length)
         else:
             self._record = []
+            self._since_fit = 0
         self.refit_start = None
         self._watch()
+
+    def _refit_accumulated(self) -> None:
+        """Fit the last ``max_record`` samples again, the held model refined first from
+        its state at the record's first sample; keep the held model if the fit
+        fails."""
+        length = len(self._history)
+        origin = self._count - length
+        start = self._priors[0]
+        if origin == self._fit_origin:
+            start = self._fit_initial_state()     # the held fit's record starts there too
+        self.refit_start = start if start is not None and np.all(np.isfinite(start)) \
+            else None
+        self._record = list(self._history)
+        if self._fit():
+            self.n_refits += 1
+            self._fitted(origin, length)
+        else:
+            self._record = []
+            self._since_fit = 0
+        self.refit_start = None
+        self._watch()
+
+    def _fitted(self, origin: int, length: int) -> None:
+        """A fit of ``length`` samples from sample ``origin`` (own count) is held."""
+        self._fit_origin, self._fit_length, self._since_fit = origin, length, 0
+        self._watch()
+
+    def _fit_initial_state(self) -> np.ndarray | None:
+        """The held fit's state at its record's first sample (physical units), or None;
+        the host's fit object carries it as ``initial_state``."""
+        state = getattr(self.fit, "initial_state", None)
+        return None if state is None else np.asarray(state, dtype=float)
 
     def _watch(self) -> None:
         """A fresh change test on the (new) held model's innovations, from the next

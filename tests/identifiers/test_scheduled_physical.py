@@ -312,6 +312,41 @@ def test_a_failed_fit_is_retried_after_half_a_warmup_not_every_sample(monkeypatc
     assert ident.model is None and ident.fit is None
 
 
+def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatch):
+    """With ``accumulate`` (the default) the fit is redone when as many samples have come
+    as it used, on at most ``max_record`` samples, from the held model and its state at
+    the record's first sample; without it the warm-up's fit is held."""
+    import identifiers.structured.scheduled_identifier as module
+    from identifiers import ScheduledFit
+
+    truth = _model()
+    calls = []
+
+    def fake(u, y, angle, *args, initial=None, **kwargs):
+        calls.append((len(u), None if initial is None else bool(np.isfinite(initial[1]).all())))
+        return ScheduledFit(truth, np.zeros(truth.order), np.eye(20), 1.0, 1.0)
+
+    monkeypatch.setattr(module, "fit_scheduled_model", fake)
+    rng = np.random.default_rng(7)
+    data = [(rng.normal(size=3), rng.normal(size=10) * STANDARD_OUTPUTS.scales())
+            for _ in range(400)]
+    for accumulate, expected in ((True, [(40, None), (80, True)] + [(120, True)] * 3),
+                                 (False, [(40, None)])):
+        calls.clear()
+        ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120,
+                                            accumulate=accumulate)
+        for k, (u, y) in enumerate(data):
+            ident.set_schedule(0.01 * k)
+            ident.update(u, y)
+        # at 40 samples, then 80 (the record doubled), 160, 280 and 400 (every max_record)
+        assert calls == expected
+        assert ident.n_refits == len(expected) - 1
+    with pytest.raises(ValueError, match="max_record must be at least warmup"):
+        ScheduledPhysicalIdentifier(warmup=300, max_record=200)
+    with pytest.raises(TypeError, match="accumulate must be a bool"):
+        ScheduledPhysicalIdentifier(accumulate="yes")
+
+
 def test_a_change_the_innovations_show_is_reported_and_refitted():
     """Rest inertia doubled at 26 s under 1 N m excitation: the innovation test fires
     within 15 s, the record after it is fitted from the held model, and the new gain
@@ -330,7 +365,7 @@ def test_a_change_the_innovations_show_is_reported_and_refitted():
     y = y + 1e-3 * STANDARD_OUTPUTS.scales() * rng.normal(size=y.shape)
     options = {"filter_constants": (1.0,), "start_nfev": 20, "max_nfev": 30}
     ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=100, refit_on_change=True,
-                                        fit_options=options)
+                                        accumulate=False, fit_options=options)
     assert not ScheduledPhysicalIdentifier().refit_on_change       # opt-in
     first = None
     for k in range(steps):
