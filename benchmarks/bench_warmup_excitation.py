@@ -14,6 +14,8 @@ for three identifiers side by side:
   ceiling of any identifier behind this warm-up);
 * ``scheduled``: the drive-scheduled physical fit
   (``spacecraft_lab.control.scheduled_physical_identifier``);
+* ``scheduled-held``: the same fit held after the warm-up
+  (``accumulate=False``; the default refits as its record doubles);
 * ``default``: the default identifier.
 
 Usage: ``python benchmarks/bench_warmup_excitation.py [--scenario paddle_rotation]
@@ -47,6 +49,8 @@ def _controller(env: gym.Env, identifier: str, amplitude: float):
         ident.warmup = CLOSED_LOOP_SETTINGS["warmup"]
     elif identifier == "scheduled":
         ident = scheduled_physical_identifier(env)
+    elif identifier == "scheduled-held":
+        ident = scheduled_physical_identifier(env, accumulate=False)
     else:
         ident = None
     options = {} if ident is None else {"identifier": ident}
@@ -78,7 +82,7 @@ def main() -> None:
     parser.add_argument("--amplitudes", type=float, nargs="+", default=[1.0, 0.5],
                         help="warm-up amplitudes to compare, N m per axis")
     parser.add_argument("--identifiers", nargs="+", default=["truth", "scheduled", "default"],
-                        choices=("truth", "scheduled", "default"))
+                        choices=("truth", "scheduled", "scheduled-held", "default"))
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     snr = None if args.snr_db < 0 else args.snr_db
@@ -94,7 +98,7 @@ def main() -> None:
     print(f"\n{args.scenario}, {args.task}, SNR {snr} dB, {args.seeds} seeds; cost from 100 s "
           "/ oracle LQG, paired: median [worst]; split over the oracle's cost (median)")
     oracle = rows[("oracle", 0.0)]
-    print(f"{'identifier':>10} {'warm-up N m':>11} {'cost/oracle':>18} "
+    print(f"{'identifier':>14} {'warm-up N m':>11} {'cost/oracle':>18} "
           f"{'att / rate / defl / torque':>28} {'gain error from 60 s':>21}")
     for ident in args.identifiers:
         for amp in args.amplitudes:
@@ -104,7 +108,7 @@ def main() -> None:
                               axis=0)
             errors = [per[s]["gain_error"] for s in seeds if per[s]["gain_error"] is not None]
             error = f"{np.median(errors):.0%}" if errors else "-"
-            print(f"{ident:>10} {amp:>11.2f} {np.median(ratio):>9.2f} [{np.max(ratio):>5.2f}] "
+            print(f"{ident:>14} {amp:>11.2f} {np.median(ratio):>9.2f} [{np.max(ratio):>5.2f}] "
                   f"{' / '.join(f'{v:.2f}' for v in split):>28} {error:>21}")
 
 

@@ -126,14 +126,16 @@ SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
 STRUCTURED_RPBSID = "adaptive LQG, structured RPBSID"
 
 
-def scheduled_physical_identifier(env: gym.Env) -> ScheduledPhysicalIdentifier:
+def scheduled_physical_identifier(env: gym.Env, **options: Any) -> ScheduledPhysicalIdentifier:
     """:class:`~identifiers.ScheduledPhysicalIdentifier` for ``env``: its sensors, its
     appendages (which the paddle drive turns, which sensor sits on which) and
-    its drive axis, all read from the env's model."""
+    its drive axis, all read from the env's model; ``options``: the identifier's
+    other keywords (e.g. ``accumulate=False`` to hold the warm-up's fit)."""
     model = env.unwrapped.model
     return ScheduledPhysicalIdentifier(
         env.unwrapped.observation_layout.sensors(), turning=model.appendage_turns,
-        sensor_appendage=model.sensor_appendage, drive_axis=DRIVE_AXIS, dt=model.dt)
+        sensor_appendage=model.sensor_appendage, drive_axis=DRIVE_AXIS, dt=model.dt,
+        **options)
 
 
 #: The controllers of the default comparison, in their table order.

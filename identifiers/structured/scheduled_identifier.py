@@ -6,11 +6,14 @@ fits a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
 to them by output error
 (:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
 then on exports that model evaluated at the latest angle, with a Kalman filter
-on it for the state. The drive's rotation is followed through the angle. A
-change of the plant itself (a docking) is not, unless ``refit_on_change`` is
-set: then a test on the filter's innovations looks for one, and the model is
-fitted again to the ``warmup`` samples after it, starting from the model it
-replaces (docs/design/control.md).
+on it for the state. The drive's rotation is followed through the angle. By
+default (``accumulate``) the fit is redone, from the held model, each time the
+record has doubled (60 s, 120 s, then every 120 s on the last 120 s): the
+data the loop gathers, and the angles the drive reaches, enter the model. A
+change of the plant itself (a docking) is forgotten with the bounded record;
+with ``refit_on_change`` a test on the filter's innovations also looks for one,
+and the model is fitted again to the ``warmup`` samples after it, starting from
+the model it replaces (docs/design/control.md).
 """
 
 from __future__ import annotations
@@ -34,7 +37,8 @@ __all__ = ["ScheduledPhysicalIdentifier"]
 
 
 class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
-    """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up.
+    """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up and
+    again as the record grows (``accumulate``).
 
     Call :meth:`set_schedule` with the drive angle at a sample before the
     :meth:`update` that carries it (``controllers.AdaptiveLQG`` does, from the
@@ -69,7 +73,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         Watch the filter's innovations for a change of the plant (CUSUM) and,
         when one is found, report it in :attr:`events` and fit again to the
         ``warmup`` samples after it, the held model refined first. Default
-        False (the first fit is held): in the closed-loop scenarios the test
+        False: in the closed-loop scenarios the test
         never fired, a docking included (docs/design/control.md), so the
         option is not yet shown to pay where the loop flies.
     accumulate : bool

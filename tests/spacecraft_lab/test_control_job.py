@@ -84,6 +84,13 @@ def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendage
     assert ctrl.identifier.turning == tuple(model.appendage_turns)
     assert ctrl.identifier.sensor_appendage == tuple(model.sensor_appendage)
     assert any(ctrl.identifier.turning) and not all(ctrl.identifier.turning)
+    # its fit accumulates by default; the factory passes the identifier's options on
+    from spacecraft_lab.control import scheduled_physical_identifier
+
+    assert ctrl.identifier.accumulate
+    held = scheduled_physical_identifier(env, accumulate=False, max_record=600)
+    assert not held.accumulate and held.max_record == 600
+    assert held.turning == ctrl.identifier.turning
 
 
 @pytest.mark.slow
