@@ -80,8 +80,10 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         Let the information accumulate (default True): fit again, the held
         model refined first, to the last ``max_record`` samples each time as
         many samples have come since the last fit as it used (60 s, 120 s,
-        then every ``max_record`` samples). False holds the warm-up's fit,
-        which the drive then carries to angles the fit never saw.
+        then every ``max_record`` samples). A refit whose rigid-body gain is
+        less certain than the held fit's (a record without the warm-up's
+        excitation) is kept out (``n_refits_kept_out``). False holds the
+        warm-up's fit, which the drive then carries to angles it never saw.
     max_record : int
         Samples the accumulating refits keep (default 1200: 120 s), at least
         ``warmup``.

@@ -56,6 +56,9 @@ class WarmupFit(ModelFilter):
     max_record: int = 1200
 
     _SHARED_ITEMS = ("_pending", "_record", "_history", "_priors")
+    #: What a fit replaces, restored when an accumulating refit is kept out (the
+    #: host's attributes of its held model included).
+    _HELD_STATE = ("fit", "_mats", "_mats_angle", "_q", "_r", "_kf", "_gain_at")
 
     def reset(self) -> None:
         super().reset()
@@ -70,6 +73,7 @@ class WarmupFit(ModelFilter):
         self._detector: InnovationCUSUM | None = None
         self.refit_start: np.ndarray | None = None
         self.n_refits = 0
+        self.n_refits_kept_out = 0
         # the accumulating refits: the last max_record samples and the filter's prior
         # state at each (NaN before the first fit), the sample count at which the
         # held fit's record started, its length and the samples since
@@ -184,8 +188,9 @@ class WarmupFit(ModelFilter):
 
     def _refit_accumulated(self) -> None:
         """Fit the last ``max_record`` samples again, the held model refined first from
-        its state at the record's first sample; keep the held model if the fit
-        fails."""
+        its state at the record's first sample; keep the held model if the fit fails
+        or knows the rigid-body gain less well (a record that no longer holds the
+        warm-up's excitation can)."""
         length = len(self._history)
         origin = self._count - length
         start = self._priors[0]
@@ -194,14 +199,24 @@ class WarmupFit(ModelFilter):
         self.refit_start = start if start is not None and np.all(np.isfinite(start)) \
             else None
         self._record = list(self._history)
-        if self._fit():
+        held = {key: self.__dict__[key] for key in self._HELD_STATE if key in self.__dict__}
+        held_std = self._gain_relative_std()
+        if self._fit() and self._gain_relative_std() <= held_std:
             self.n_refits += 1
             self._fitted(origin, length)
         else:
+            self.__dict__.update(held)
             self._record = []
             self._since_fit = 0
+            self.n_refits_kept_out += 1
         self.refit_start = None
         self._watch()
+
+    def _gain_relative_std(self) -> float:
+        """The held fit's relative standard deviation of the rigid-body gain (inf if the
+        host reports none)."""
+        estimate = getattr(self, "rigid_gain", None)
+        return float("inf") if estimate is None else float(estimate.relative_std())
 
     def _fitted(self, origin: int, length: int) -> None:
         """A fit of ``length`` samples from sample ``origin`` (own count) is held."""

@@ -341,6 +341,25 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         # at 40 samples, then 80 (the record doubled), 160, 280 and 400 (every max_record)
         assert calls == expected
         assert ident.n_refits == len(expected) - 1
+    # a refit that knows the gain less well (here: a four times larger covariance on
+    # the third fit) is kept out, the held fit and its filter kept
+    fits = []
+
+    def widening(u, y, angle, *args, initial=None, **kwargs):
+        fits.append(ScheduledFit(truth, np.zeros(truth.order),
+                                 np.eye(20) * (4.0 if len(fits) == 2 else 1.0), 1.0, 1.0))
+        return fits[-1]
+
+    monkeypatch.setattr(module, "fit_scheduled_model", widening)
+    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120)
+    for k, (u, y) in enumerate(data[:170]):
+        ident.set_schedule(0.01 * k)
+        ident.update(u, y)
+        if k == 158:
+            held_filter = ident._kf
+    assert len(fits) == 3 and ident.fit is fits[1]
+    assert ident.n_refits == 1 and ident.n_refits_kept_out == 1
+    assert ident._kf is held_filter                # updated on, not replaced
     with pytest.raises(ValueError, match="max_record must be at least warmup"):
         ScheduledPhysicalIdentifier(warmup=300, max_record=200)
     with pytest.raises(TypeError, match="accumulate must be a bool"):
