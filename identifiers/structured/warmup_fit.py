@@ -19,9 +19,11 @@ A host with ``accumulate`` set lets the information grow instead of holding
 the warm-up's fit: it keeps the last ``max_record`` samples and fits them
 again, the held model refined first, each time as many samples have come
 since the last fit as that fit used (the record doubles: 30 s, 60 s, 120 s,
-...), then every ``max_record`` samples once the record is full. A fit's cost
-grows with its record, so the refits cost about two fits of the longest
-record in all until the record is full.
+...), then every ``max_record`` samples once the record is full. A refit that
+knows the rigid-body gain less well than the held fit (a record that no
+longer holds the warm-up's excitation) is kept out, so information is not
+lost. A fit's cost grows with its record, so the refits cost about two fits
+of the longest record in all until the record is full.
 """
 
 from __future__ import annotations
