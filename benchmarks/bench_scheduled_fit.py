@@ -26,7 +26,7 @@ import numpy as np
 
 import identifiers.structured.scheduled_identifier as scheduled_identifier
 from controllers import AdaptiveLQG, LQRWeights
-from identifiers.structured.scheduled_fit import segments, simulate_scheduled
+from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_lab.control import env_id, env_kwargs_for, scheduled_physical_identifier
 
 

@@ -8,8 +8,10 @@ the inertia and couplings from the hub's torque balance, on signals passed
 through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
 from each start, every parameter, the initial state included, by bounded
 nonlinear least squares on the weighted simulation error (the model
-re-discretized per :data:`RESOLUTION` of drive travel; the tip gains solved
-linearly inside every evaluation, variable projection), the best kept. Output
+re-discretized per
+:data:`~identifiers.structured.scheduled_simulation.RESOLUTION` of drive
+travel; the tip gains solved linearly inside every evaluation, variable
+projection), the best kept. Output
 error needs nothing but the torques that acted, so closed-loop data do not
 bias it.
 """
@@ -20,23 +22,24 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
+from identifiers.structured.scheduled_simulation import (
+    _block_angles,
+    _block_bounds,
+    _run_blocks,
+)
 from identifiers.structured.scheduled_start import equation_error_start
 from spacecraft_conventions import OutputLayout, single_threaded_blas
 
-__all__ = ["ScheduledFit", "fit_scheduled_model", "noise_floor", "segments", "simulate_scheduled"]
+__all__ = ["ScheduledFit", "fit_scheduled_model", "noise_floor"]
 
 #: Scales of the fitted parameters (they only condition the problem): inertia
 #: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state.
 _INERTIA, _COUPLING, _ANISOTROPY, _STATE = 2e4, 30.0, 1e3, 1e-3
-#: Drive travel (rad) over which the simulated model keeps one discretization
-#: (0.25 deg: 0.7 s of the paddle-rotation scenario's 0.36 deg/s).
-RESOLUTION = np.deg2rad(0.25)
 
 
 @dataclass(frozen=True)
@@ -121,68 +124,6 @@ def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
     second = np.diff(good, n=2, axis=0)
     mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
     return float(np.mean((weights * 1.4826 * mad / np.sqrt(6.0)) ** 2))
-
-
-def segments(angle: np.ndarray, resolution: float = RESOLUTION) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]``: consecutive samples whose angle stays within
-    ``resolution`` (rad) of their block's first one."""
-    bounds, start = [], 0
-    for t in range(1, angle.size):
-        if abs(angle[t] - angle[start]) > resolution:
-            bounds.append((start, t))
-            start = t
-    if angle.size:
-        bounds.append((start, angle.size))
-    return bounds
-
-
-def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.ndarray,
-                       dt: float, x0: np.ndarray,
-                       blocks: list[tuple[int, int]] | None = None) -> np.ndarray:
-    """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
-    discretized once per block of :func:`segments` (default), at its middle angle
-    (all blocks' exponentials in one call, the recursion in one compiled pass)."""
-    bounds = _block_bounds(angle, blocks)
-    states = np.empty((u.shape[0], model.order))
-    if bounds.shape[0] == 0:
-        return states
-    ad, bd = model.zoh(_block_angles(angle, bounds), dt)
-    _run_blocks(np.ascontiguousarray(ad), np.ascontiguousarray(bd),
-                np.ascontiguousarray(u, dtype=float), bounds,
-                np.asarray(x0, dtype=float).reshape(-1), states)
-    return states
-
-
-def _block_bounds(angle: np.ndarray, blocks: list[tuple[int, int]] | None) -> np.ndarray:
-    """(B, 2) int64 ``[start, stop)`` of each block (default :func:`segments`)."""
-    return np.asarray(segments(angle) if blocks is None else blocks,
-                      dtype=np.int64).reshape(-1, 2)
-
-
-def _block_angles(angle: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """Each block's middle angle, rad, at which it is discretized."""
-    return 0.5 * (angle[bounds[:, 0]] + angle[bounds[:, 1] - 1])
-
-
-@njit(cache=True, nogil=True)
-def _run_blocks(ad, bd, u, bounds, x0, states):  # pragma: no cover - compiled
-    """``x_{t+1} = A_b x_t + B_b u_t`` over the blocks ``b``, ``states[t] = x_t``."""
-    n, m = ad.shape[1], bd.shape[2]
-    x = x0.copy()
-    nxt = np.empty(n)
-    for b in range(bounds.shape[0]):
-        for t in range(bounds[b, 0], bounds[b, 1]):
-            for i in range(n):
-                states[t, i] = x[i]
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += ad[b, i, j] * x[j]
-                for j in range(m):
-                    acc += bd[b, i, j] * u[t, j]
-                nxt[i] = acc
-            for i in range(n):
-                x[i] = nxt[i]
 
 
 class _Problem:

@@ -26,10 +26,8 @@ from numpy.typing import ArrayLike
 from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.online import OnlineIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.scheduled_fit import (
-    fit_scheduled_model,
-    simulate_scheduled,
-)
+from identifiers.structured.scheduled_fit import fit_scheduled_model
+from identifiers.structured.scheduled_simulation import simulate_scheduled
 from identifiers.structured.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 

@@ -15,8 +15,9 @@ from identifiers import (
     StateSpaceModel,
     fit_scheduled_model,
 )
-from identifiers.structured.scheduled_fit import noise_floor, segments, simulate_scheduled
+from identifiers.structured.scheduled_fit import noise_floor
 from identifiers.structured.scheduled_model import drive_rotation, plane_basis
+from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 TURNING = (True, True, False, False)
