@@ -30,6 +30,7 @@ from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 from identifiers.structured.scheduled_simulation import (
     _block_angles,
     _block_bounds,
+    _block_models,
     _run_blocks,
 )
 from identifiers.structured.scheduled_start import equation_error_start
@@ -132,7 +133,9 @@ class _Problem:
     (3 N); x0 / _STATE (6 + 2 N)]``."""
 
     def __init__(self, u, y, angle, dt, layout, weights, turning, sensors, axis) -> None:
-        self.u, self.angle, self.dt, self.layout = u, angle, dt, layout
+        # contiguous: the compiled simulation reads it every evaluation
+        self.u = np.ascontiguousarray(u, dtype=float)
+        self.angle, self.dt, self.layout = angle, dt, layout
         self.good = np.all(np.isfinite(y), axis=1)
         self.y = y[self.good]
         self.w = weights
@@ -143,7 +146,6 @@ class _Problem:
         self.n = turning.size
         self.block_bounds = _block_bounds(angle, None)
         self.block_angles = _block_angles(angle, self.block_bounds)
-        self.u_c = np.ascontiguousarray(u, dtype=float)
         self._last: tuple[bytes, np.ndarray, tuple | None] | None = None
 
     def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
@@ -171,10 +173,10 @@ class _Problem:
         breaks."""
         try:
             model, x0 = self.unpack(p)
-            ad, bd = model.zoh(self.block_angles, self.dt)
+            ad, bd = _block_models(model, self.block_angles, self.dt)
         except (np.linalg.LinAlgError, ValueError):
             return None
-        return x0, np.ascontiguousarray(ad), np.ascontiguousarray(bd)
+        return x0, ad, bd
 
     def _residuals(self, mats: tuple | None) -> tuple[np.ndarray, np.ndarray]:
         """(weighted residuals, tip gains) of the simulation on ``mats``; residuals of
@@ -182,8 +184,8 @@ class _Problem:
         x = None
         if mats is not None:
             x0, ad, bd = mats
-            states = np.empty((self.u_c.shape[0], ad.shape[1]))
-            _run_blocks(ad, bd, self.u_c, self.block_bounds, x0, states)
+            states = np.empty((self.u.shape[0], ad.shape[1]))
+            _run_blocks(ad, bd, self.u, self.block_bounds, x0, states)
             x = states[self.good]
         if x is None or not np.all(np.isfinite(x)):
             return np.full(int(self.good.sum()) * self.layout.size, 1e6), np.zeros(

@@ -46,11 +46,17 @@ def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.n
     states = np.empty((u.shape[0], model.order))
     if bounds.shape[0] == 0:
         return states
-    ad, bd = model.zoh(_block_angles(angle, bounds), dt)
-    _run_blocks(np.ascontiguousarray(ad), np.ascontiguousarray(bd),
-                np.ascontiguousarray(u, dtype=float), bounds,
+    ad, bd = _block_models(model, _block_angles(angle, bounds), dt)
+    _run_blocks(ad, bd, np.ascontiguousarray(u, dtype=float), bounds,
                 np.asarray(x0, dtype=float).reshape(-1), states)
     return states
+
+
+def _block_models(model: ScheduledPhysicalModel, angles: np.ndarray, dt: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_d, B_d)`` stacks at the blocks' angles, contiguous for :func:`_run_blocks`."""
+    ad, bd = model.zoh(angles, dt)
+    return np.ascontiguousarray(ad), np.ascontiguousarray(bd)
 
 
 def _block_bounds(angle: np.ndarray, blocks: list[tuple[int, int]] | None) -> np.ndarray:

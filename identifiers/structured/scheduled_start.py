@@ -41,7 +41,7 @@ def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
     y = np.where(np.isfinite(y), y, 0.0)
     first = [int(np.flatnonzero(problem.sensors == k)[0]) for k in range(n)]
     rows = problem.defl[first]
-    r = np.stack([drive_rotation(problem.axis, a) for a in problem.angle])       # (T, 3, 3)
+    r = drive_rotation(problem.axis, problem.angle)                              # (T, 3, 3)
     om1 = _filtered(y[:, problem.rate], problem.dt, tau, 1)
     d0, d1, d2 = (_filtered(y[:, rows], problem.dt, tau, o) for o in (0, 1, 2))
     uf = _filtered(problem.u, problem.dt, tau, 0)

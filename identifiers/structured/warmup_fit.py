@@ -58,9 +58,6 @@ class WarmupFit(ModelFilter):
     max_record: int = 1200
 
     _SHARED_ITEMS = ("_pending", "_record", "_history", "_priors")
-    #: What a fit replaces, restored when an accumulating refit is kept out (the
-    #: host's attributes of its held model included).
-    _HELD_STATE = ("fit", "_mats", "_mats_angle", "_q", "_r", "_kf", "_gain_at")
 
     def reset(self) -> None:
         super().reset()
@@ -123,16 +120,19 @@ class WarmupFit(ModelFilter):
         seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
         y = np.where(seen, y, np.nan)
         self._count += 1
+        # this sample's record item, made once where it is kept beyond this step
+        item = self._record_item(u, y) if self.accumulate else None
         if self.accumulate:
-            self._history.append(self._record_item(u, y))
+            self._history.append(item)
         if self.fit is None:
             if self.accumulate:
                 self._priors.append(np.full(self.n, np.nan))
-            self._record.append(self._record_item(u, y))
+            self._record.append(item or self._record_item(u, y))
             if len(self._record) >= max(self.warmup, self._retry_at):
                 length = len(self._record)
                 if self._fit():
                     self._fitted(self._count - length, length)
+                    self._watch()
                 else:
                     # keep recording; try again once the record is half a warm-up longer
                     self.fit = None
@@ -147,7 +147,7 @@ class WarmupFit(ModelFilter):
             self._priors.append(prior)
         self._since_fit += 1
         if self.refit_start is not None:
-            self._record.append(self._record_item(u, y))
+            self._record.append(item or self._record_item(u, y))
             if len(self._record) >= self.warmup:
                 self._refit()
             return
@@ -167,7 +167,7 @@ class WarmupFit(ModelFilter):
                 # the record for the refit starts with this sample: the filter's
                 # prior of it is the refit's start
                 self.refit_start = prior
-                self._record = [self._record_item(u, y)]
+                self._record = [item or self._record_item(u, y)]
 
     def _refit(self) -> None:
         """Fit the record taken since the detected change; keep the held model if the
@@ -201,7 +201,9 @@ class WarmupFit(ModelFilter):
         self.refit_start = start if start is not None and np.all(np.isfinite(start)) \
             else None
         self._record = list(self._history)
-        held = {key: self.__dict__[key] for key in self._HELD_STATE if key in self.__dict__}
+        # what the fit replaces (the held fit, its matrices, its filter: the host's as
+        # well), restored if the refit is kept out
+        held = dict(self.__dict__)
         held_std = self._gain_relative_std()
         if self._fit() and self._gain_relative_std() <= held_std:
             self.n_refits += 1
@@ -223,7 +225,6 @@ class WarmupFit(ModelFilter):
     def _fitted(self, origin: int, length: int) -> None:
         """A fit of ``length`` samples from sample ``origin`` (own count) is held."""
         self._fit_origin, self._fit_length, self._since_fit = origin, length, 0
-        self._watch()
 
     def _fit_initial_state(self) -> np.ndarray | None:
         """The held fit's state at its record's first sample (physical units), or None;
