@@ -82,7 +82,8 @@ class Trajectory:
     gain_covered : (K,) ndarray or None
         1 where the identifier's own calibrated rigid-body gain
         (``identifier.rigid_gain``, :class:`identifiers.RigidGainEstimate`)
-        covers the true ``J(t)^-1`` within two standard deviations, else 0;
+        covers the true ``J(t)^-1`` with its 2-sigma (95.45 %) confidence
+        region (:meth:`identifiers.RigidGainEstimate.covers`), else 0;
         NaN before warm-up and for an exact gain (zero covariance: an
         oracle's); for identifiers that report one.
     controller_stats : dict

@@ -117,16 +117,19 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
     excitation's share of the torque term; then the secondary columns:
     verdicts, attitude RMS and vibration from 100 s, excitation RMS, the
     identified rigid-body gain's median error and 2-sigma coverage of the
-    truth from 60 s (controllers with an identifier), the share of steps
-    the fallback flew from 60 s (after the warm-up) and over the episode, and
-    why it flew from 60 s (:func:`fallback_causes_text`).
+    truth from 60 s (pooled over the seeds' samples; controllers with an
+    identifier), the share of steps the fallback flew from 60 s (after the
+    warm-up) and over the episode, and why it flew from 60 s (:func:`fallback_causes_text`).
     """
     def cell(row: dict, key: str, digits: int) -> str:
         return (f"{row['median'][key]:.{digits}g} "
                 f"[{row['q25'][key]:.{digits}g}, {row['q75'][key]:.{digits}g}]")
 
-    def gain(med: dict) -> str:
-        err, cover = med["gain_error_after_60s"], med["gain_coverage_after_60s"]
+    def gain(row: dict) -> str:
+        # the error's median over seeds; the coverage pooled over every seed's samples
+        # (the mean of the seeds' shares: a median of shares that are mostly 0 or 1 is
+        # not a coverage)
+        err, cover = row["median"]["gain_error_after_60s"], row["mean"]["gain_coverage_after_60s"]
         if not np.isfinite(err):
             return "-"
         return f"{100 * err:.0f} %, " + ("-" if not np.isfinite(cover) else f"{100 * cover:.0f} %")
@@ -150,7 +153,7 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
         cells = [cell(row, "cost_after_100s", 3), paired(name, oracle), paired(name, baseline),
                  split, verdicts, cell(row, "attitude_rms_after_100s_deg", 3),
                  cell(row, "vibration_rms_after_100s_mm", 3),
-                 f"{med['excitation_rms_Nm']:.3g}", gain(med),
+                 f"{med['excitation_rms_Nm']:.3g}", gain(row),
                  f"{100 * med['fallback_share_after_60s']:.0f} % "
                  f"({100 * med['fallback_share']:.0f} %)",
                  fallback_causes_text(row.get("fallback_causes_after_60s", {})) or "-"]

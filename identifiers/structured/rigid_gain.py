@@ -19,10 +19,12 @@ noise count too).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.special import gammaincinv
 
 __all__ = ["RigidGainEstimate"]
 
@@ -97,18 +99,54 @@ class RigidGainEstimate:
 
     def mahalanobis(self, gain: ArrayLike) -> float:
         """The distance of ``gain`` from the estimate in standard deviations: the
-        square root of ``d^T C^-1 d`` over the entries with a positive variance."""
-        d = (np.asarray(gain, dtype=float) - self.gain).ravel()
+        square root of ``d^T C^+ d`` over the entries with a positive variance
+        (``C^+`` the pseudo-inverse: a constrained estimate, e.g. a symmetric one,
+        has a singular covariance)."""
+        d, sub = self._difference(gain)
+        if sub is None:
+            return float("inf") if np.any(d) else 0.0
+        return float(np.sqrt(max(d @ np.linalg.lstsq(sub, d, rcond=None)[0], 0.0)))
+
+    def covers(self, gain: ArrayLike, sigmas: float = 2.0) -> bool:
+        """Whether ``gain`` lies in the estimate's confidence region of the probability
+        a scalar's ``+-sigmas`` band holds (95.45 % for 2).
+
+        The region is the ellipsoid ``d^T C^+ d <= chi2_k^-1(p)``, ``d`` the
+        difference, ``k`` the covariance's rank and ``p = erf(sigmas / sqrt(2))``:
+        an estimate whose errors are Gaussian with covariance ``C`` covers the
+        truth with probability ``p``, whatever the shape of ``C`` (so the share of
+        covered samples is a calibration check). For ``k = 1`` it is the scalar
+        band ``|d| <= sigmas * std``.
+
+        Until 2026-11-27 the test was ``||d||_F <= sigmas sqrt(trace(C))``, which a
+        calibrated estimate passes with probability 0.95-1.0 depending on the
+        shape of ``C`` (about 1.0 for nine equal variances): it overstated
+        coverage.
+        """
+        if not sigmas > 0:
+            raise ValueError(f"sigmas must be > 0, got {sigmas}")
+        d, sub = self._difference(gain)
+        # an entry the estimate claims exactly (zero variance) must agree, to rounding
+        fixed = np.diag(self.covariance) <= 0
+        exact = (np.asarray(gain, dtype=float) - self.gain).ravel()[fixed]
+        if np.any(np.abs(exact) > 1e-12 * max(float(np.linalg.norm(self.gain)), 1e-300)):
+            return False
+        if sub is None:
+            return True
+        rank = int(np.linalg.matrix_rank(sub, hermitian=True))
+        probability = math.erf(sigmas / math.sqrt(2.0))
+        threshold = 2.0 * float(gammaincinv(0.5 * rank, probability))   # chi2_k quantile
+        return bool(d @ np.linalg.lstsq(sub, d, rcond=None)[0] <= threshold)
+
+    def _difference(self, gain: ArrayLike) -> tuple[np.ndarray, np.ndarray | None]:
+        """``gain - G`` over the entries with a positive variance, and their covariance
+        (None if no entry has one: then the whole difference)."""
+        gain = np.asarray(gain, dtype=float)
+        if gain.shape != (3, 3):
+            raise ValueError(f"gain must be (3, 3), got {gain.shape}")
+        d = (gain - self.gain).ravel()
         cov = self.covariance
         keep = np.diag(cov) > 0
         if not keep.any():
-            return float("inf") if np.any(d) else 0.0
-        sub = cov[np.ix_(keep, keep)]
-        return float(np.sqrt(max(d[keep] @ np.linalg.lstsq(sub, d[keep], rcond=None)[0], 0.0)))
-
-    def covers(self, gain: ArrayLike, sigmas: float = 2.0) -> bool:
-        """Whether ``gain`` lies within ``sigmas`` standard deviations of the estimate
-        in the relative-error sense used for gains: ``||gain - G||_F <= sigmas
-        sqrt(trace(C))``."""
-        d = np.asarray(gain, dtype=float) - self.gain
-        return bool(np.linalg.norm(d) <= sigmas * np.sqrt(max(np.trace(self.covariance), 0.0)))
+            return d, None
+        return d[keep], cov[np.ix_(keep, keep)]

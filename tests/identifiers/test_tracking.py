@@ -178,6 +178,41 @@ def test_rigid_gain_estimate_in_closed_form():
         RigidGainEstimate(np.eye(3), np.eye(4))
 
 
+@pytest.mark.parametrize("shape", ["nine equal variances", "anisotropic", "rank 6", "rank 1"])
+def test_two_sigma_region_covers_a_calibrated_estimate_95_percent_of_the_time(shape):
+    # errors drawn from the reported covariance: the 2-sigma region must hold
+    # erf(2 / sqrt 2) = 95.45 % of them whatever the covariance's shape (the former
+    # test ||d|| <= 2 sqrt(trace C) held about 100 % of the nine-equal-variance draws)
+    rng = np.random.default_rng(11)
+    factor = {"nine equal variances": 1e-2 * np.eye(9),
+              "anisotropic": rng.normal(size=(9, 9)) * np.exp(1.5 * rng.normal(size=9)),
+              "rank 6": rng.normal(size=(9, 6)),
+              "rank 1": rng.normal(size=(9, 1))}[shape]
+    est = RigidGainEstimate(np.eye(3), factor @ factor.T)
+    errors = rng.standard_normal((4000, factor.shape[1])) @ factor.T
+    share = np.mean([est.covers(np.eye(3) + e.reshape(3, 3)) for e in errors])
+    assert share == pytest.approx(0.9545, abs=0.015)
+
+
+def test_two_sigma_region_of_one_uncertain_entry_is_its_scalar_band():
+    cov = np.zeros((9, 9))
+    cov[4, 4] = 0.25                                   # G[1, 1], standard deviation 0.5
+    est = RigidGainEstimate(np.eye(3), cov)
+    inside, outside = np.eye(3), np.eye(3)
+    inside[1, 1] += 0.99
+    outside[1, 1] += 1.01
+    assert est.covers(inside) and not est.covers(outside)
+    assert est.covers(outside, sigmas=2.1)
+    off = inside.copy()
+    off[0, 2] = 1e-6                                   # an entry claimed exactly is off
+    assert not est.covers(off) and est.mahalanobis(off) == pytest.approx(1.98)
+    assert est.mahalanobis(outside) == pytest.approx(2.02)
+    with pytest.raises(ValueError, match="sigmas"):
+        est.covers(inside, sigmas=0.0)
+    with pytest.raises(ValueError, match=r"\(3, 3\)"):
+        est.covers(np.eye(2))
+
+
 def test_identifier_reports_its_rigid_gain_with_an_honest_band():
     truth = FlexibleSpacecraftModel(scenario="constant")
     rng = np.random.default_rng(4)
