@@ -105,7 +105,7 @@ class RigidGainEstimate:
         d, sub = self._difference(gain)
         if sub is None:
             return float("inf") if np.any(d) else 0.0
-        return float(np.sqrt(max(d @ np.linalg.lstsq(sub, d, rcond=None)[0], 0.0)))
+        return float(np.sqrt(_whitened(d, sub)[0]))
 
     def covers(self, gain: ArrayLike, sigmas: float = 2.0) -> bool:
         """Whether ``gain`` lies in the estimate's confidence region of the probability
@@ -133,10 +133,10 @@ class RigidGainEstimate:
             return False
         if sub is None:
             return True
-        rank = int(np.linalg.matrix_rank(sub, hermitian=True))
+        distance2, rank = _whitened(d, sub)
         probability = math.erf(sigmas / math.sqrt(2.0))
         threshold = 2.0 * float(gammaincinv(0.5 * rank, probability))   # chi2_k quantile
-        return bool(d @ np.linalg.lstsq(sub, d, rcond=None)[0] <= threshold)
+        return bool(distance2 <= threshold)
 
     def _difference(self, gain: ArrayLike) -> tuple[np.ndarray, np.ndarray | None]:
         """``gain - G`` over the entries with a positive variance, and their covariance
@@ -150,3 +150,17 @@ class RigidGainEstimate:
         if not keep.any():
             return d, None
         return d[keep], cov[np.ix_(keep, keep)]
+
+
+#: Eigenvalues of a covariance below this fraction of its largest are its null space
+#: (a constrained estimate's: a symmetric gain's antisymmetric directions, which
+#: rounding fills with noise of about 1e-16 of the largest).
+_RANK_TOLERANCE = 1e-10
+
+
+def _whitened(d: np.ndarray, cov: np.ndarray) -> tuple[float, int]:
+    """``d^T C^+ d`` over ``cov``'s range and that range's dimension (its rank)."""
+    values, vectors = np.linalg.eigh(cov)
+    keep = values > _RANK_TOLERANCE * values[-1]
+    z = vectors[:, keep].T @ d
+    return float(np.sum(z * z / values[keep])), int(keep.sum())

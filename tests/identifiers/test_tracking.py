@@ -178,7 +178,16 @@ def test_rigid_gain_estimate_in_closed_form():
         RigidGainEstimate(np.eye(3), np.eye(4))
 
 
-@pytest.mark.parametrize("shape", ["nine equal variances", "anisotropic", "rank 6", "rank 1"])
+def _symmetric_factor(rng: np.random.Generator) -> np.ndarray:
+    """(9, 6): a symmetric gain's six free entries into its nine, times a random factor."""
+    dup = np.zeros((9, 6))
+    for j, (r, c) in enumerate(zip(*np.triu_indices(3), strict=True)):
+        dup[3 * r + c, j] = dup[3 * c + r, j] = 1.0
+    return dup @ rng.normal(size=(6, 6))
+
+
+@pytest.mark.parametrize("shape", ["nine equal variances", "anisotropic", "rank 6", "rank 1",
+                                   "symmetric gain, rounding noise"])
 def test_two_sigma_region_covers_a_calibrated_estimate_95_percent_of_the_time(shape):
     # errors drawn from the reported covariance: the 2-sigma region must hold
     # erf(2 / sqrt 2) = 95.45 % of them whatever the covariance's shape (the former
@@ -187,8 +196,13 @@ def test_two_sigma_region_covers_a_calibrated_estimate_95_percent_of_the_time(sh
     factor = {"nine equal variances": 1e-2 * np.eye(9),
               "anisotropic": rng.normal(size=(9, 9)) * np.exp(1.5 * rng.normal(size=9)),
               "rank 6": rng.normal(size=(9, 6)),
-              "rank 1": rng.normal(size=(9, 1))}[shape]
-    est = RigidGainEstimate(np.eye(3), factor @ factor.T)
+              "rank 1": rng.normal(size=(9, 1)),
+              "symmetric gain, rounding noise": _symmetric_factor(rng)}[shape]
+    cov = factor @ factor.T
+    if shape.endswith("rounding noise"):       # as a covariance mapped through inv() has
+        noise = 1e-15 * np.abs(cov).max() * rng.normal(size=(9, 9))
+        cov = cov + 0.5 * (noise + noise.T)
+    est = RigidGainEstimate(np.eye(3), cov)
     errors = rng.standard_normal((4000, factor.shape[1])) @ factor.T
     share = np.mean([est.covers(np.eye(3) + e.reshape(3, 3)) for e in errors])
     assert share == pytest.approx(0.9545, abs=0.015)
