@@ -11,9 +11,14 @@ times, on that record:
 * one simulation of the record (what every residual and every Jacobian column
   of the fit costs): the stacked, compiled :func:`simulate_scheduled` beside a
   plain per-block reference (one exponential per block, the recursion in
-  Python), measured in the same run, and their largest difference.
+  Python), measured in the same run, and their largest difference;
+* one whole closed-loop episode (250 s, the warm-up's fit and the accumulating
+  refits at 60, 120 and 240 s) with the refits refining every equation-error
+  start (``refit_restarts=True``) beside the default (the held model alone),
+  their wall times, ratio and common costs from 100 s (skip with ``--no-episode``).
 
-Usage: ``python benchmarks/bench_scheduled_fit.py [--seed 0] [--snr-db 40] [--repeats 3]``
+Usage: ``python benchmarks/bench_scheduled_fit.py [--seed 0] [--snr-db 40] [--repeats 3]
+[--no-episode]``
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 import identifiers.structured.scheduled_identifier as scheduled_identifier
-from controllers import AdaptiveLQG, LQRWeights
+from controllers import AdaptiveLQG, LQRWeights, episode_metrics, run_episode
 from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_lab.control import env_id, env_kwargs_for, scheduled_physical_identifier
 
@@ -66,6 +71,20 @@ def _reference(model, u, angle, dt, x0):
     return states
 
 
+def _episode(seed: int, snr_db: float | None, **options) -> tuple[float, float]:
+    """Wall time (s) and common cost from 100 s of one closed-loop episode."""
+    env = gym.make(env_id("paddle_rotation"),
+                   **env_kwargs_for("paddle_rotation", task="slew", snr_db=snr_db))
+    ctrl = AdaptiveLQG(env, weights=LQRWeights(),
+                       identifier=scheduled_physical_identifier(env, **options))
+    start = time.perf_counter()
+    traj = run_episode(env, ctrl, seed=seed)
+    seconds = time.perf_counter() - start
+    cost = episode_metrics(traj, env.unwrapped.model)["cost_after_100s"]
+    env.close()
+    return seconds, cost
+
+
 def _best_of(function, repeats: int) -> float:
     times = []
     for _ in range(repeats):
@@ -81,6 +100,8 @@ def main() -> None:
     parser.add_argument("--snr-db", type=float, default=40.0,
                         help="measurement SNR per channel, dB (negative: noise-free)")
     parser.add_argument("--repeats", type=int, default=3, help="fits timed (best kept)")
+    parser.add_argument("--no-episode", action="store_true",
+                        help="skip the closed-loop episodes (about a minute)")
     args = parser.parse_args()
     fit_args, fit_kwargs = _record(args.seed, None if args.snr_db < 0 else args.snr_db)
     u, _, angle, dt = fit_args[:4]
@@ -100,6 +121,14 @@ def main() -> None:
                   - _reference(fit.model, u, angle, dt, x0)).max()
     print(f"one simulation: {1e3 * fast:.2f} ms stacked and compiled, {1e3 * slow:.2f} ms per "
           f"block in Python; ratio {fast / slow:.2f}; largest difference {diff:.1e}")
+    if args.no_episode:
+        return
+    snr = None if args.snr_db < 0 else args.snr_db
+    every, every_cost = _episode(args.seed, snr, refit_restarts=True)
+    held, held_cost = _episode(args.seed, snr)
+    print(f"one 250 s episode: {every:.1f} s with every start refined at each refit, "
+          f"{held:.1f} s with the held model alone (the default); ratio {held / every:.2f}; "
+          f"cost from 100 s {every_cost:.3g} and {held_cost:.3g}")
 
 
 if __name__ == "__main__":

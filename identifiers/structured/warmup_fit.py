@@ -50,7 +50,9 @@ class WarmupFit(ModelFilter):
     (what each sample adds to the record) and :meth:`_follow` (run before the
     filter's update once the model is held). During a refit's record
     :attr:`refit_start` holds the filter's state at the record's first sample
-    (a start for the refit); it is None otherwise.
+    (a start for the refit); it is None otherwise. :attr:`accumulating_refit`
+    is True while ``_fit`` runs for an accumulating refit (the held model's
+    record grown, no change detected), so the host may refit more cheaply.
     """
 
     refit_on_change: bool = False
@@ -71,6 +73,7 @@ class WarmupFit(ModelFilter):
         self._events: list[ChangeEvent] = []
         self._detector: InnovationCUSUM | None = None
         self.refit_start: np.ndarray | None = None
+        self.accumulating_refit = False
         self.n_refits = 0
         self.n_refits_kept_out = 0
         # the accumulating refits: the last max_record samples and the filter's prior
@@ -205,7 +208,12 @@ class WarmupFit(ModelFilter):
         # well), restored if the refit is kept out
         held = dict(self.__dict__)
         held_std = self._gain_relative_std()
-        if self._fit() and self._gain_relative_std() <= held_std:
+        self.accumulating_refit = True
+        try:
+            fitted = self._fit()
+        finally:
+            self.accumulating_refit = False
+        if fitted and self._gain_relative_std() <= held_std:
             self.n_refits += 1
             self._fitted(origin, length)
         else:

@@ -323,8 +323,11 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
     truth = _model()
     calls = []
 
+    starts = []
+
     def fake(u, y, angle, *args, initial=None, **kwargs):
         calls.append((len(u), None if initial is None else bool(np.isfinite(initial[1]).all())))
+        starts.append(kwargs.get("filter_constants", "default"))
         return ScheduledFit(truth, np.zeros(truth.order), np.eye(20), 1.0, 1.0)
 
     monkeypatch.setattr(module, "fit_scheduled_model", fake)
@@ -342,6 +345,17 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         # at 40 samples, then 80 (the record doubled), 160, 280 and 400 (every max_record)
         assert calls == expected
         assert ident.n_refits == len(expected) - 1
+    # the first fit refines every equation-error start, an accumulating refit the held
+    # model alone unless refit_restarts asks for them too
+    assert starts[:5] == ["default"] + [()] * 4        # the accumulating run, then the held
+    starts.clear()
+    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120,
+                                        refit_restarts=True,
+                                        fit_options={"filter_constants": (1.0, 2.0)})
+    for k, (u, y) in enumerate(data[:100]):
+        ident.set_schedule(0.01 * k)
+        ident.update(u, y)
+    assert starts == [(1.0, 2.0)] * 2 and not ident.accumulating_refit
     # a refit that knows the gain less well (here: a four times larger covariance on
     # the third fit) is kept out, the held fit and its filter kept
     fits = []
@@ -365,6 +379,8 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         ScheduledPhysicalIdentifier(warmup=300, max_record=200)
     with pytest.raises(TypeError, match="accumulate must be a bool"):
         ScheduledPhysicalIdentifier(accumulate="yes")
+    with pytest.raises(TypeError, match="refit_restarts must be a bool"):
+        ScheduledPhysicalIdentifier(refit_restarts=1)
 
 
 def test_a_change_the_innovations_show_is_reported_and_refitted():
