@@ -102,10 +102,10 @@ class RigidGainEstimate:
         square root of ``d^T C^+ d`` over the entries with a positive variance
         (``C^+`` the pseudo-inverse: a constrained estimate, e.g. a symmetric one,
         has a singular covariance)."""
-        d, sub = self._difference(gain)
-        if sub is None:
+        d, keep = self._difference(gain)
+        if not keep.any():
             return float("inf") if np.any(d) else 0.0
-        return float(np.sqrt(_whitened(d, sub)[0]))
+        return float(np.sqrt(_whitened(d[keep], self.covariance[np.ix_(keep, keep)])[0]))
 
     def covers(self, gain: ArrayLike, sigmas: float = 2.0) -> bool:
         """Whether ``gain`` lies in the estimate's confidence region of the probability
@@ -116,7 +116,8 @@ class RigidGainEstimate:
         an estimate whose errors are Gaussian with covariance ``C`` covers the
         truth with probability ``p``, whatever the shape of ``C`` (so the share of
         covered samples is a calibration check). For ``k = 1`` it is the scalar
-        band ``|d| <= sigmas * std``.
+        band ``|d| <= sigmas * std``. An entry the estimate claims exactly (zero
+        variance) must agree to rounding.
 
         Until 2026-11-27 the test was ``||d||_F <= sigmas sqrt(trace(C))``, which a
         calibrated estimate passes with probability 0.95-1.0 depending on the
@@ -125,31 +126,22 @@ class RigidGainEstimate:
         """
         if not sigmas > 0:
             raise ValueError(f"sigmas must be > 0, got {sigmas}")
-        d, sub = self._difference(gain)
-        # an entry the estimate claims exactly (zero variance) must agree, to rounding
-        fixed = np.diag(self.covariance) <= 0
-        exact = (np.asarray(gain, dtype=float) - self.gain).ravel()[fixed]
-        if np.any(np.abs(exact) > 1e-12 * max(float(np.linalg.norm(self.gain)), 1e-300)):
+        d, keep = self._difference(gain)
+        if np.any(np.abs(d[~keep]) > 1e-12 * np.linalg.norm(self.gain)):
             return False
-        if sub is None:
+        if not keep.any():
             return True
-        distance2, rank = _whitened(d, sub)
+        distance2, rank = _whitened(d[keep], self.covariance[np.ix_(keep, keep)])
         probability = math.erf(sigmas / math.sqrt(2.0))
         threshold = 2.0 * float(gammaincinv(0.5 * rank, probability))   # chi2_k quantile
         return bool(distance2 <= threshold)
 
-    def _difference(self, gain: ArrayLike) -> tuple[np.ndarray, np.ndarray | None]:
-        """``gain - G`` over the entries with a positive variance, and their covariance
-        (None if no entry has one: then the whole difference)."""
+    def _difference(self, gain: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """``(gain - G).ravel()`` and the mask of the entries with a positive variance."""
         gain = np.asarray(gain, dtype=float)
         if gain.shape != (3, 3):
             raise ValueError(f"gain must be (3, 3), got {gain.shape}")
-        d = (gain - self.gain).ravel()
-        cov = self.covariance
-        keep = np.diag(cov) > 0
-        if not keep.any():
-            return d, None
-        return d[keep], cov[np.ix_(keep, keep)]
+        return (gain - self.gain).ravel(), np.diag(self.covariance) > 0
 
 
 #: Eigenvalues of a covariance below this fraction of its largest are its null space
