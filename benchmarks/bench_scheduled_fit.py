@@ -35,12 +35,18 @@ from identifiers.structured.scheduled_simulation import segments, simulate_sched
 from spacecraft_lab.control import env_id, env_kwargs_for, scheduled_physical_identifier
 
 
-def _record(seed: int, snr_db: float | None) -> tuple[tuple, dict]:
-    """The arguments of the identifier's fit call at the end of its warm-up."""
+def _loop(snr_db: float | None, **options) -> tuple[gym.Env, AdaptiveLQG]:
+    """Paddle rotation (slew) and the adaptive LQG on the scheduled identifier, built
+    with ``options``."""
     env = gym.make(env_id("paddle_rotation"),
                    **env_kwargs_for("paddle_rotation", task="slew", snr_db=snr_db))
-    ident = scheduled_physical_identifier(env)
-    ctrl = AdaptiveLQG(env, weights=LQRWeights(), identifier=ident)
+    return env, AdaptiveLQG(env, weights=LQRWeights(),
+                            identifier=scheduled_physical_identifier(env, **options))
+
+
+def _record(seed: int, snr_db: float | None) -> tuple[tuple, dict]:
+    """The arguments of the identifier's fit call at the end of its warm-up."""
+    env, ctrl = _loop(snr_db)
     captured: list = []
     real_fit = scheduled_identifier.fit_scheduled_model
 
@@ -73,10 +79,7 @@ def _reference(model, u, angle, dt, x0):
 
 def _episode(seed: int, snr_db: float | None, **options) -> tuple[float, float]:
     """Wall time (s) and common cost from 100 s of one closed-loop episode."""
-    env = gym.make(env_id("paddle_rotation"),
-                   **env_kwargs_for("paddle_rotation", task="slew", snr_db=snr_db))
-    ctrl = AdaptiveLQG(env, weights=LQRWeights(),
-                       identifier=scheduled_physical_identifier(env, **options))
+    env, ctrl = _loop(snr_db, **options)
     start = time.perf_counter()
     traj = run_episode(env, ctrl, seed=seed)
     seconds = time.perf_counter() - start
