@@ -386,6 +386,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     algos = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
@@ -436,6 +437,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             venv.seed(seed)
             model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
                                 tensorboard_log=tensorboard, **hyper)
+            if tensorboard is None:
+                # SB3's default logger makes an empty /tmp/SB3-<date> folder per model
+                model.set_logger(Logger(folder=None, output_formats=[]))
             if residual:
                 _start_at_the_base(model)
             curve: list[dict[str, float]] = []

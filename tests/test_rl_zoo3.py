@@ -59,7 +59,9 @@ def test_the_readme_command_trains_on_the_documented_task():
     assert str(HYPERPARAMETERS["ppo"]["policy_kwargs"]["log_std_init"]) in config
 
 
-@pytest.mark.parametrize(("algo", "steps"), [("ppo", 2000), ("sac", 300)])
+# SAC (19 s) runs with -m slow: PPO checks the same hyperparameter files and registration
+@pytest.mark.parametrize(("algo", "steps"),
+                         [("ppo", 2000), pytest.param("sac", 300, marks=pytest.mark.slow)])
 def test_rl_zoo3_trains_with_the_shipped_hyperparameters(tmp_path, algo, steps):
     pytest.importorskip("rl_zoo3")
     env_id = "FlexibleSpacecraftFamily-v2"

@@ -299,6 +299,7 @@ def test_local_pool_matches_serial_bit_for_bit(tmp_path):
                                   for r in ResultStore(tmp_path / "local" / "results.jsonl"))
 
 
+@pytest.mark.slow       # 31 s, most of it starting Ray; the local pool is checked above
 def test_local_and_ray_backends_give_identical_numbers(tmp_path):
     """The issue's check: one grid (identify and control tasks) on a local
     process pool and on a local Ray instance with 2 CPUs."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import tempfile
 
 import gymnasium as gym
 import numpy as np
@@ -20,11 +21,17 @@ from spacecraft_lab.training import (
 )
 
 
-def test_training_job_writes_model_curves_and_metrics(tmp_path):
+def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3")
+    # SB3's default logger would leave an empty SB3-<date> folder in the temp directory
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
     m = run_training("ppo", "none", 2048, 1, tmp_path, eval_every=2048, progress=False,
                      eval_seeds=(1000, 1001))
     assert (tmp_path / "ppo-none-seed0.zip").exists()
+    assert not list(scratch.glob("SB3-*"))
     assert (tmp_path / "learning_curves.png").exists()
     # the VecNormalize saved beside the model no longer updates its statistics
     with open(tmp_path / "ppo-none-seed0_vecnormalize.pkl", "rb") as fh:
@@ -106,6 +113,7 @@ def test_normalized_policy_holds_each_decision_for_repeat_steps():
     assert round(float(policy.act(np.zeros(13))[0]), 6) == 0.4
 
 
+@pytest.mark.slow       # 14 s; the optional TensorBoard output
 def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     pytest.importorskip("stable_baselines3")
     event_accumulator = pytest.importorskip(
