@@ -33,7 +33,8 @@ Every control step k (docs/design/control.md):
    itself;
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
    is added only when information is needed (dual control): the warm-up's
-   budget while the identifier warms up, and afterwards an amplitude that
+   budget while the identifier warms up (at the identifier's
+   ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an amplitude that
    grows from 0 with the identifier's calibrated uncertainty of the
    rigid-body gain beyond what the design tolerates
    (``uncertainty_tolerance``), up to ``excitation_budget``, steered toward
@@ -143,8 +144,9 @@ class AdaptiveLQG(_LQGController):
         :data:`identifiers.CLOSED_LOOP_SETTINGS`.
     weights : LQRWeights
     excitation : BinaryExcitation, optional
-        The signal: default 1 N m per axis during the identifier's warm-up,
-        then driven by the uncertainty (see step 4).
+        The signal: default the identifier's ``warmup_amplitude`` (N m per
+        axis; 1 N m for an identifier without one) during its warm-up, then
+        driven by the uncertainty (see step 4).
     uncertainty_tolerance : float
         Relative standard deviation of the identified rigid-body gain the
         design tolerates without excitation (default 0.1: a 2-sigma band of
@@ -237,7 +239,9 @@ class AdaptiveLQG(_LQGController):
         self.rigid_state = rigid_state
         self.identifier = identifier
         warm = int(getattr(identifier, "warmup", 500))
-        self.excitation = excitation or BinaryExcitation(warmup_steps=warm, amplitude=0.0)
+        self.excitation = excitation or BinaryExcitation(
+            warmup_amplitude=float(getattr(identifier, "warmup_amplitude", 1.0)),
+            warmup_steps=warm, amplitude=0.0)
         for name, value in (("uncertainty_tolerance", uncertainty_tolerance),
                             ("excitation_budget", excitation_budget)):
             if not (np.isfinite(value) and value >= 0):

@@ -62,6 +62,14 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         Sample time, s.
     warmup : int
         Samples recorded before the fit (default 300: the adaptive loop's 30 s).
+    warmup_amplitude : float
+        Torque per axis, N m, that the warm-up's excitation should have
+        (``controllers.AdaptiveLQG`` gives its default excitation this
+        amplitude). Default 0.5: the output-error fit and its refits on the
+        loop's later data do as well as behind 1 N m at 30 dB, and the lightly
+        damped modes ring less into the time after the warm-up (closed-loop
+        cost 0.5-0.8x that behind 1 N m on the regulation tasks;
+        docs/results/control.md).
     schedule_resolution : float
         The exported model is re-discretized when the angle has moved this
         far (rad, default 0.1 deg) since it last was.
@@ -119,7 +127,8 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
                  turning: Sequence[bool] | None = None,
                  sensor_appendage: Sequence[int] | None = None,
                  drive_axis: ArrayLike = (0.0, 1.0, 0.0), dt: float = 0.1,
-                 warmup: int = 300, schedule_resolution: float = np.deg2rad(0.1),
+                 warmup: int = 300, warmup_amplitude: float = 0.5,
+                 schedule_resolution: float = np.deg2rad(0.1),
                  process_torque: float = 0.05, refit_on_change: bool = False,
                  accumulate: bool = True, max_record: int = 1200,
                  refit_restarts: bool = False, fit_options: dict | None = None,
@@ -146,6 +155,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             raise ValueError(f"drive_axis must be a finite non-zero 3-vector, got {drive_axis}")
         self.drive_axis = tuple(float(v) for v in axis / np.linalg.norm(axis))
         self.schedule_resolution = positive_float("schedule_resolution", schedule_resolution)
+        self.warmup_amplitude = positive_float("warmup_amplitude", warmup_amplitude)
         self.process_torque = positive_float("process_torque", process_torque)
         if not isinstance(refit_on_change, bool | np.bool_):
             raise TypeError(f"refit_on_change must be a bool, got {refit_on_change!r}")

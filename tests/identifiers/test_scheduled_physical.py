@@ -288,6 +288,9 @@ def test_the_identifier_refuses_what_it_cannot_identify():
         ScheduledPhysicalIdentifier(drive_axis=(0.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="fit_options may hold"):
         ScheduledPhysicalIdentifier(fit_options={"tolerance": 1.0})
+    for amplitude in (0.0, -0.5, np.inf):
+        with pytest.raises(ValueError, match="warmup_amplitude must be positive"):
+            ScheduledPhysicalIdentifier(warmup_amplitude=amplitude)
     ident = ScheduledPhysicalIdentifier()
     with pytest.raises(ValueError, match="finite"):
         ident.set_schedule(np.nan)

@@ -84,6 +84,10 @@ def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendage
     assert ctrl.identifier.turning == tuple(model.appendage_turns)
     assert ctrl.identifier.sensor_appendage == tuple(model.sensor_appendage)
     assert any(ctrl.identifier.turning) and not all(ctrl.identifier.turning)
+    # the warm-up excites at the amplitude the identifier asks for (0.5 N m), the
+    # default identifier's loop at 1 N m
+    assert ctrl.excitation.warmup_amplitude == ctrl.identifier.warmup_amplitude == 0.5
+    assert CONTROLLERS(LQRWeights())["adaptive LQG"](env).excitation.warmup_amplitude == 1.0
     # its fit accumulates by default; the factory passes the identifier's options on
     from spacecraft_lab.control import scheduled_physical_identifier
 
