@@ -34,8 +34,8 @@ Every control step k (docs/design/control.md):
 4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
    is added only when information is needed (dual control): the warm-up's
    budget while the identifier warms up (at the identifier's
-   ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an amplitude that
-   grows from 0 with the identifier's calibrated uncertainty of the
+   ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an
+   amplitude that grows from 0 with the identifier's calibrated uncertainty of the
    rigid-body gain beyond what the design tolerates
    (``uncertainty_tolerance``), up to ``excitation_budget``, steered toward
    the torque directions the identifier knows least, for at most

@@ -68,8 +68,8 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         amplitude). Default 0.5: the output-error fit and its refits on the
         loop's later data do as well as behind 1 N m at 30 dB, and the lightly
         damped modes ring less into the time after the warm-up (closed-loop
-        cost 0.5-0.8x that behind 1 N m on the regulation tasks;
-        docs/results/control.md).
+        cost about 0.5x that behind 1 N m on the regulation tasks, 0.8-1.0x
+        on the slews; docs/results/control.md).
     schedule_resolution : float
         The exported model is re-discretized when the angle has moved this
         far (rad, default 0.1 deg) since it last was.
