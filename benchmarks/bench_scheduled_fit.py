@@ -106,7 +106,8 @@ def main() -> None:
     parser.add_argument("--no-episode", action="store_true",
                         help="skip the closed-loop episodes (about a minute)")
     args = parser.parse_args()
-    fit_args, fit_kwargs = _record(args.seed, None if args.snr_db < 0 else args.snr_db)
+    snr = None if args.snr_db < 0 else args.snr_db
+    fit_args, fit_kwargs = _record(args.seed, snr)
     u, _, angle, dt = fit_args[:4]
     fit = scheduled_identifier.fit_scheduled_model(*fit_args, **fit_kwargs)   # compiles
     seconds = _best_of(lambda: scheduled_identifier.fit_scheduled_model(*fit_args,
@@ -126,7 +127,6 @@ def main() -> None:
           f"block in Python; ratio {fast / slow:.2f}; largest difference {diff:.1e}")
     if args.no_episode:
         return
-    snr = None if args.snr_db < 0 else args.snr_db
     every, every_cost = _episode(args.seed, snr, refit_restarts=True)
     held, held_cost = _episode(args.seed, snr)
     print(f"one 250 s episode: {every:.1f} s with every start refined at each refit, "

@@ -6,10 +6,10 @@ identifier's ``warmup_amplitude``, 0.5 N m per axis for the drive-scheduled
 fit, 1 N m for an identifier without one). The fit needs that information;
 the lightly damped modes keep ringing from it long after the warm-up, into
 the scored window from 100 s. This prints, for each warm-up amplitude, the
-paired-seed ratio of the common cost from 100 s to the oracle LQG's (median [worst seed]), the split
-of that cost (attitude / rate / deflection / torque, each over the oracle's
-whole cost, median), and the identified rigid gain's median error from 60 s,
-for three identifiers side by side:
+paired-seed ratio of the common cost from 100 s to the oracle LQG's (median
+[worst seed]), the split of that cost (attitude / rate / deflection /
+torque, each over the oracle's whole cost, median), and the identified
+rigid gain's median error from 60 s, for three identifiers side by side:
 
 * ``truth``: the same law handed the true model after the warm-up (the
   ceiling of any identifier behind this warm-up);

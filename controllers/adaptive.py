@@ -35,8 +35,8 @@ Every control step k (docs/design/control.md):
    is added only when information is needed (dual control): the warm-up's
    budget while the identifier warms up (at the identifier's
    ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an
-   amplitude that grows from 0 with the identifier's calibrated uncertainty of the
-   rigid-body gain beyond what the design tolerates
+   amplitude that grows from 0 with the identifier's calibrated uncertainty
+   of the rigid-body gain beyond what the design tolerates
    (``uncertainty_tolerance``), up to ``excitation_budget``, steered toward
    the torque directions the identifier knows least, for at most
    :data:`EXCITATION_WINDOW_S` after the warm-up or after a change the
@@ -239,9 +239,11 @@ class AdaptiveLQG(_LQGController):
         self.rigid_state = rigid_state
         self.identifier = identifier
         warm = int(getattr(identifier, "warmup", 500))
-        self.excitation = excitation or BinaryExcitation(
-            warmup_amplitude=float(getattr(identifier, "warmup_amplitude", 1.0)),
-            warmup_steps=warm, amplitude=0.0)
+        # the warm-up's amplitude the identifier asks for, else BinaryExcitation's default
+        asked = ({"warmup_amplitude": float(identifier.warmup_amplitude)}
+                 if hasattr(identifier, "warmup_amplitude") else {})
+        self.excitation = excitation or BinaryExcitation(warmup_steps=warm, amplitude=0.0,
+                                                         **asked)
         for name, value in (("uncertainty_tolerance", uncertainty_tolerance),
                             ("excitation_budget", excitation_budget)):
             if not (np.isfinite(value) and value >= 0):
