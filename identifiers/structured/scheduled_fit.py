@@ -6,8 +6,8 @@ Two stages. Equation-error starts
 coupling from a linear regression of its deflection's second derivative, then
 the inertia and couplings from the hub's torque balance, on signals passed
 through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
-from each start, every parameter, the initial state included, by bounded
-nonlinear least squares on the weighted simulation error (the model
+from each start, every parameter, the initial state and a constant disturbance
+torque included, by bounded nonlinear least squares on the weighted simulation error (the model
 re-discretized per
 :data:`~identifiers.structured.scheduled_simulation.RESOLUTION` of drive
 travel; the tip gains solved linearly inside every evaluation, variable
@@ -19,7 +19,7 @@ bias it.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -34,13 +34,18 @@ from identifiers.structured.scheduled_simulation import (
     _run_blocks,
 )
 from identifiers.structured.scheduled_start import equation_error_start
+from identifiers.structured.scheduled_uncertainty import (
+    _inertia_covariance,
+    _inertia_parameters,
+    _with_inertia,
+)
 from spacecraft_conventions import OutputLayout, single_threaded_blas
 
 __all__ = ["ScheduledFit", "fit_scheduled_model", "noise_floor"]
 
 #: Scales of the fitted parameters (they only condition the problem): inertia
-#: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state.
-_INERTIA, _COUPLING, _ANISOTROPY, _STATE = 2e4, 30.0, 1e3, 1e-3
+#: kg m^2, coupling kg^1/2 m, anisotropy kg m^2, initial state, disturbance N m.
+_INERTIA, _COUPLING, _ANISOTROPY, _STATE, _TORQUE = 2e4, 30.0, 1e3, 1e-3, 1e-2
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,10 @@ class ScheduledFit:
         The record's white-noise floor in the same units (:func:`noise_floor`):
         ``cost / noise_floor`` near 1 is a fit down to the noise, well above 1
         an unmodelled part (noise-free records: the plant's further modes).
+    disturbance_torque : (3,) ndarray
+        The constant body-frame torque, N m, that acted besides ``u`` over the
+        record (gravity gradient, solar pressure, a biased wheel); zeros when
+        the fit did not estimate one.
     """
 
     model: ScheduledPhysicalModel
@@ -71,6 +80,7 @@ class ScheduledFit:
     inertia_covariance: np.ndarray
     cost: float
     noise_floor: float = float("nan")
+    disturbance_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def gain_covariance(self, angle: float) -> np.ndarray:
         """(9, 9) covariance of ``J(a)^-1``'s row-major entries at drive angle ``a``
@@ -90,29 +100,6 @@ class ScheduledFit:
         return d @ self.inertia_covariance @ d.T
 
 
-def _inertia_parameters(model: ScheduledPhysicalModel) -> np.ndarray:
-    """``[S's upper triangle; anisotropy; couplings]`` (see :class:`ScheduledFit`)."""
-    return np.concatenate([model.rest_inertia[np.triu_indices(3)], model.drive_anisotropy,
-                           model.couplings.ravel()])
-
-
-def _with_inertia(model: ScheduledPhysicalModel, theta: np.ndarray) -> ScheduledPhysicalModel:
-    """``model`` with the parameters of :func:`_inertia_parameters` replaced (the rest
-    inertia is not checked for definiteness: a finite-difference neighbour)."""
-    rest = np.zeros((3, 3))
-    rest[np.triu_indices(3)] = theta[:6]
-    rest = rest + np.triu(rest, 1).T
-    n = model.n_modes
-    clone = object.__new__(ScheduledPhysicalModel)
-    for name in ("frequencies_hz", "damping", "turning", "tips", "sensor_appendage",
-                 "drive_axis"):
-        object.__setattr__(clone, name, getattr(model, name))
-    object.__setattr__(clone, "rest_inertia", rest)
-    object.__setattr__(clone, "drive_anisotropy", theta[6:8])
-    object.__setattr__(clone, "couplings", theta[8:8 + 3 * n].reshape(n, 3))
-    return clone
-
-
 def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
     """Weighted mean square of the outputs' white noise, ``mean_i (w_i sigma_i)^2``:
     ``sigma_i`` from the median absolute deviation of the second differences
@@ -130,9 +117,11 @@ def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
 class _Problem:
     """The weighted simulation error as a function of ``[tril(log-diagonal Cholesky of
     S / _INERTIA)] (6); P / _ANISOTROPY (2); log w (N); log zeta (N); v / _COUPLING
-    (3 N); x0 / _STATE (6 + 2 N)]``."""
+    (3 N); x0 / _STATE (6 + 2 N); d / _TORQUE (3, with ``disturbance``)]``; the
+    constant torque ``d`` adds to every ``u``."""
 
-    def __init__(self, u, y, angle, dt, layout, weights, turning, sensors, axis) -> None:
+    def __init__(self, u, y, angle, dt, layout, weights, turning, sensors, axis,
+                 disturbance: bool = False) -> None:
         # contiguous: the compiled simulation reads it every evaluation
         self.u = np.ascontiguousarray(u, dtype=float)
         self.angle, self.dt, self.layout = angle, dt, layout
@@ -144,12 +133,15 @@ class _Problem:
             else np.zeros(0, dtype=int)
         self.turning, self.sensors, self.axis = turning, sensors, axis
         self.n = turning.size
+        self.n_state = 6 + 2 * self.n + (3 if disturbance else 0)   # the trailing entries
+        self.disturbance = disturbance
         self.block_bounds = _block_bounds(angle, None)
         self.block_angles = _block_angles(angle, self.block_bounds)
         self._last: tuple[bytes, np.ndarray, tuple | None] | None = None
 
     def unpack(self, p: np.ndarray, tips: np.ndarray | None = None
-               ) -> tuple[ScheduledPhysicalModel, np.ndarray]:
+               ) -> tuple[ScheduledPhysicalModel, np.ndarray, np.ndarray]:
+        """(model, x0, d) of ``p`` (``d`` zeros without ``disturbance``)."""
         n = self.n
         lower = np.zeros((3, 3))
         lower[np.tril_indices(3)] = p[:6]
@@ -159,33 +151,42 @@ class _Problem:
             np.exp(p[8 + n:8 + 2 * n]), _COUPLING * p[8 + 2 * n:8 + 5 * n].reshape(n, 3),
             self.turning, np.zeros(self.sensors.size) if tips is None else tips, self.sensors,
             self.axis)
-        return model, _STATE * p[8 + 5 * n:]
+        x0, d = self._state_part(p[8 + 5 * n:])
+        return model, x0, d
 
-    def pack(self, rest, anisotropy, w, zeta, couplings, x0) -> np.ndarray:
+    def _state_part(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x0, d) of the trailing ``n_state`` entries."""
+        k = 6 + 2 * self.n
+        return _STATE * q[:k], (_TORQUE * q[k:] if self.disturbance else np.zeros(3))
+
+    def pack(self, rest, anisotropy, w, zeta, couplings, x0, d=(0.0, 0.0, 0.0)) -> np.ndarray:
         lower = np.linalg.cholesky(rest / _INERTIA)
         lower[np.diag_indices(3)] = np.log(lower[np.diag_indices(3)])
         return np.concatenate([lower[np.tril_indices(3)], np.asarray(anisotropy) / _ANISOTROPY,
                                np.log(w), np.log(zeta), np.ravel(couplings) / _COUPLING,
-                               np.asarray(x0) / _STATE])
+                               np.asarray(x0) / _STATE]
+                              + ([np.asarray(d, dtype=float) / _TORQUE] if self.disturbance
+                                 else []))
 
     def _matrices(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """``(x0, A_d, B_d)`` of every block for parameters ``p``; None where the model
-        breaks."""
+        """``(x0, d, A_d, B_d)`` of every block for parameters ``p``; None where the
+        model breaks."""
         try:
-            model, x0 = self.unpack(p)
+            model, x0, d = self.unpack(p)
             ad, bd = _block_models(model, self.block_angles, self.dt)
         except (np.linalg.LinAlgError, ValueError):
             return None
-        return x0, ad, bd
+        return x0, d, ad, bd
 
     def _residuals(self, mats: tuple | None) -> tuple[np.ndarray, np.ndarray]:
         """(weighted residuals, tip gains) of the simulation on ``mats``; residuals of
         1e6 where the model breaks."""
         x = None
         if mats is not None:
-            x0, ad, bd = mats
+            x0, d, ad, bd = mats
             states = np.empty((self.u.shape[0], ad.shape[1]))
-            _run_blocks(ad, bd, self.u, self.block_bounds, x0, states)
+            u = self.u + d if self.disturbance else self.u
+            _run_blocks(ad, bd, u, self.block_bounds, x0, states)
             x = states[self.good]
         if x is None or not np.all(np.isfinite(x)):
             return np.full(int(self.good.sum()) * self.layout.size, 1e6), np.zeros(
@@ -209,8 +210,9 @@ class _Problem:
 
     def jacobian(self, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Forward differences of :meth:`evaluate` (steps ``sqrt(eps) max(1, |p_i|)``,
-        taken backward where forward would leave the bounds). The initial state's
-        columns reuse the blocks' matrices at ``p``: they do not depend on it."""
+        taken backward where forward would leave the bounds). The initial state's and
+        the disturbance's columns reuse the blocks' matrices at ``p``: they do not
+        depend on them."""
         if self._last is None or self._last[0] != p.tobytes():
             self.evaluate(p)
         _, f0, mats = self._last
@@ -219,14 +221,14 @@ class _Problem:
         h = np.where((p + h > hi) | (p + h < lo), -h, h)
         h = (p + h) - p
         jac = np.empty((f0.size, p.size))
-        first_state = p.size - (6 + 2 * self.n)
+        first_state = p.size - self.n_state
         for i in range(p.size):
             q = p.copy()
             q[i] += h[i]
             if i < first_state or mats is None:
                 f = self._residuals(self._matrices(q))[0]
             else:
-                f = self._residuals((_STATE * q[first_state:], mats[1], mats[2]))[0]
+                f = self._residuals((*self._state_part(q[first_state:]), *mats[2:]))[0]
             jac[:, i] = (f - f0) / h[i]
         return jac
 
@@ -254,15 +256,16 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
                         weights: ArrayLike | None = None,
                         filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
                         good_enough: float | None = None, start_nfev: int = 60,
-                        max_nfev: int = 150,
-                        initial: tuple[ScheduledPhysicalModel, ArrayLike] | None = None
+                        max_nfev: int = 150, disturbance: bool = True,
+                        initial: tuple[ScheduledPhysicalModel, ArrayLike]
+                        | tuple[ScheduledPhysicalModel, ArrayLike, ArrayLike] | None = None
                         ) -> ScheduledFit:
     """Fit a :class:`ScheduledPhysicalModel` to a record by output error.
 
     Parameters
     ----------
     u : (T, 3) array_like
-        Applied torques, N m (what acted).
+        Applied torques, N m (the actuators' output).
     y : (T, m) array_like
         Outputs in the order of ``layout`` (rad, rad/s, m); rows with a
         non-finite entry are left out of the error.
@@ -298,10 +301,16 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     max_nfev : int
         Function evaluations in all for the kept start (it continues if its
         first refinement stopped at ``start_nfev``).
-    initial : (ScheduledPhysicalModel, (6 + 2 N,) array_like), optional
-        A model and its state at the record's first sample to refine first,
-        before the equation-error starts (a refit after a change starts from
-        the model it replaces); it must have this call's appendages.
+    disturbance : bool
+        Fit a constant body-frame torque ``d`` (N m) acting besides ``u``
+        (default True). Without it a steady torque (gravity gradient, solar
+        pressure) is read as inertia: 0.05 N m per axis put the rigid-body
+        gain 25-48 % off in the closed-loop paddle rotation, 0.6-5 % with it.
+    initial : (ScheduledPhysicalModel, (6 + 2 N,) array_like[, (3,) array_like])
+        A model, its state at the record's first sample and optionally the
+        disturbance torque (default zero) to refine first, before the
+        equation-error starts (a refit after a change starts from the model it
+        replaces); it must have this call's appendages.
 
     Returns
     -------
@@ -336,19 +345,22 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         raise ValueError(f"drive_axis must be a finite non-zero 3-vector, got {axis}")
     axis = axis / np.linalg.norm(axis)
     w = 1.0 / layout.scales() if weights is None else np.asarray(weights, dtype=float)
-    problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
+    problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis,
+                       bool(disturbance))
     floor = noise_floor(y, w)
     starts: list = list(filter_constants)
     if initial is not None:
-        model0, x0 = initial
+        model0, x0, *d0 = initial
         x0 = np.asarray(x0, dtype=float).reshape(-1)
-        if model0.n_modes != turning.size or x0.shape != (6 + 2 * turning.size,):
-            raise ValueError(f"initial must be a model of {turning.size} appendages and its "
-                             f"({6 + 2 * turning.size},) state, got {model0.n_modes} and "
-                             f"{x0.shape}")
+        d0 = np.asarray(d0[0] if d0 else np.zeros(3), dtype=float).reshape(-1)
+        if model0.n_modes != turning.size or x0.shape != (6 + 2 * turning.size,) \
+                or d0.shape != (3,) or not np.all(np.isfinite(d0)):
+            raise ValueError(f"initial must be a model of {turning.size} appendages, its "
+                             f"({6 + 2 * turning.size},) state and optionally a finite (3,) "
+                             f"torque, got {model0.n_modes}, {x0.shape} and {d0.shape}")
         starts.insert(0, problem.pack(model0.rest_inertia, model0.drive_anisotropy,
                                       2 * np.pi * np.asarray(model0.frequencies_hz),
-                                      model0.damping, model0.couplings, x0))
+                                      model0.damping, model0.couplings, x0, d0))
     best = None
     for start in starts:
         try:
@@ -366,20 +378,6 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     if best.status == 0 and max_nfev > start_nfev:      # stopped by the budget
         best = problem.solve(best.x, max_nfev - start_nfev)
     residuals, tips = problem.evaluate(best.x)
-    model, x0 = problem.unpack(best.x, tips)
+    model, x0, d = problem.unpack(best.x, tips)
     return ScheduledFit(model, x0, _inertia_covariance(problem, best.x, best.jac, residuals),
-                        float(np.mean(residuals**2)), floor)
-
-
-def _inertia_covariance(problem: _Problem, p: np.ndarray, jac: np.ndarray,
-                        residuals: np.ndarray) -> np.ndarray:
-    """``sigma^2 (J^T J)^-1`` of the parameters mapped to those of
-    :func:`_inertia_parameters` (central differences)."""
-    dof = max(residuals.size - p.size, 1)
-    sigma2 = float(np.sum(residuals**2)) / dof
-    cov = sigma2 * np.linalg.pinv(jac.T @ jac)
-    step = 1e-6
-    d = np.column_stack([(_inertia_parameters(problem.unpack(p + step * e)[0])
-                          - _inertia_parameters(problem.unpack(p - step * e)[0])) / (2 * step)
-                         for e in np.eye(p.size)])
-    return d @ cov @ d.T
+                        float(np.mean(residuals**2)), floor, d)

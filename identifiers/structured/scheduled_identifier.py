@@ -102,8 +102,10 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         (docs/results/control.md).
     fit_options : dict, optional
         Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
-        (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``),
-        e.g. fewer starts for speed; default: its defaults.
+        (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``,
+        ``disturbance``), e.g. fewer starts for speed; default: its defaults
+        (a constant disturbance torque fitted with the model, and added to the
+        torques the state's filter propagates).
     input_scale, output_scale, max_abs
         See :class:`~identifiers.core.online.OnlineIdentifier`.
 
@@ -170,7 +172,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         if self.max_record < positive_int("warmup", warmup):
             raise ValueError(f"max_record must be at least warmup ({warmup} samples), got "
                              f"{max_record}")
-        allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev"}
+        allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev", "disturbance"}
         self.fit_options = dict(fit_options or {})
         if not set(self.fit_options) <= allowed:
             raise ValueError(f"fit_options may hold {sorted(allowed)}, got "
@@ -232,7 +234,8 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         u = np.array([s[0] for s in self._record]) * su
         y = np.array([s[1] for s in self._record]) * sy
         angle = np.array([s[2] for s in self._record])
-        initial = None if self.refit_start is None else (self.fit.model, self.refit_start)
+        initial = None if self.refit_start is None else \
+            (self.fit.model, self.refit_start, self.fit.disturbance_torque)
         options = self.fit_options
         if initial is not None and self.accumulating_refit and not self.refit_restarts:
             options = {**options, "filter_constants": ()}     # the held model alone
@@ -249,10 +252,15 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             self.fit = held
             return False
         self._gain_at = None
-        states = simulate_scheduled(fit.model, u, angle, self.dt, fit.initial_state)
+        states = simulate_scheduled(fit.model, u + fit.disturbance_torque, angle, self.dt,
+                                    fit.initial_state)
         fitted = states @ fit.model.output_matrix(self.layout).T / sy
         self._start_filter(fit.initial_state, u / su, y / sy, fitted)
         return True
+
+    def _filter_input(self, u: np.ndarray) -> np.ndarray:
+        """The torques plus the fit's constant disturbance (normalized)."""
+        return u + self.fit.disturbance_torque / self._su
 
     # ------------------------------------------------------------ results
     @property

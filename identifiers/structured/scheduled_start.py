@@ -4,7 +4,8 @@ Each appendage's mode from a linear regression of its deflection's second
 derivative on the deflection, its rate and the hub's angular acceleration
 turned with the drive (``y_k'' = -w^2 y_k - 2 zeta w y_k' - d_k v_k^T R(a) omega'``),
 then the inertia and couplings from the hub's torque balance
-``u = J omega' + sum_k R(a)^T c_k y_k''`` (``c_k = v_k / d_k``), all on signals passed
+``u = J omega' + sum_k R(a)^T c_k y_k'' - d`` (``c_k = v_k / d_k``; the constant
+disturbance ``d`` only where the problem fits one), all on signals passed
 through ``1 / (tau s + 1)^3``; the couplings are shrunk until the rest inertia
 ``J - F F^T`` is well inside the positive definite cone.
 """
@@ -62,8 +63,11 @@ def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
         for e in np.eye(3):
             along = np.einsum("tji,j->ti", r, e) if rot[k] else np.tile(e, (len(y), 1))
             cols.append(along * d2[:, k:k + 1])
+    if problem.disturbance:
+        cols.extend(np.tile(-e, (len(y), 1)) for e in np.eye(3))
     design = np.stack([c[keep].ravel() for c in cols], axis=1)
     th = np.linalg.lstsq(design, uf[keep].ravel(), rcond=None)[0]
+    d = th[6 + 3 * n:] if problem.disturbance else np.zeros(3)
     inertia = sum(t * s for t, s in zip(th[:6], sym, strict=True))
     couplings = np.empty((n, 3))
     for k in range(n):
@@ -82,4 +86,4 @@ def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
     x0 = np.zeros(6 + 2 * n)
     if np.all(np.isfinite(problem.y[0])) and problem.good[0]:
         x0[0:3], x0[3:6] = problem.y[0, problem.att], problem.y[0, problem.rate]
-    return problem.pack(rest, np.zeros(2), w, zeta, couplings, x0)
+    return problem.pack(rest, np.zeros(2), w, zeta, couplings, x0, d)

@@ -119,6 +119,11 @@ class WarmupFit(ModelFilter):
     def _follow(self) -> None:
         """Hook before each filter update of the held model (default: nothing)."""
 
+    def _filter_input(self, u: np.ndarray) -> np.ndarray:
+        """The input the state's filter propagates for the normalized torques ``u``
+        ((3,) or (T, 3)); default ``u`` (a host adds what else its fit says acted)."""
+        return u
+
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         seen = self._seen if self._seen is not None else np.ones(y.size, dtype=bool)
         y = np.where(seen, y, np.nan)
@@ -145,7 +150,7 @@ class WarmupFit(ModelFilter):
         a, b, c, _, _ = self._mats
         # the filter's prior of this sample: the refit's start if the test fires on it
         prior = self._kf.x.copy() if self._detector is not None or self.accumulate else None
-        self._kf.update(a, b, c, self._q, self._r, u, y)
+        self._kf.update(a, b, c, self._q, self._r, self._filter_input(u), y)
         if self.accumulate:
             self._priors.append(prior)
         self._since_fit += 1
@@ -260,7 +265,7 @@ class WarmupFit(ModelFilter):
         self._kf = KalmanPredictor(self.n, initial_covariance=1e-6)
         self._kf.x = x0.copy()
         a, b, c, _, _ = self._mats
-        for uk, yk in zip(u, y, strict=True):
+        for uk, yk in zip(self._filter_input(u), y, strict=True):
             self._kf.update(a, b, c, self._q, self._r, uk, yk)
 
     @property
