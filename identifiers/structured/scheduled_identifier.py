@@ -103,9 +103,10 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     fit_options : dict, optional
         Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
         (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``,
-        ``disturbance``), e.g. fewer starts for speed; default: its defaults
-        (a constant disturbance torque fitted with the model, and added to the
-        torques the state's filter propagates).
+        ``disturbance``, ``disturbance_level``), e.g. fewer starts for speed;
+        default: its defaults (a constant disturbance torque fitted with the
+        model where the record tells it from zero, and added to the torques the
+        state's filter propagates).
     input_scale, output_scale, max_abs
         See :class:`~identifiers.core.online.OnlineIdentifier`.
 
@@ -172,7 +173,8 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         if self.max_record < positive_int("warmup", warmup):
             raise ValueError(f"max_record must be at least warmup ({warmup} samples), got "
                              f"{max_record}")
-        allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev", "disturbance"}
+        allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev", "disturbance",
+                   "disturbance_level"}
         self.fit_options = dict(fit_options or {})
         if not set(self.fit_options) <= allowed:
             raise ValueError(f"fit_options may hold {sorted(allowed)}, got "

@@ -1,6 +1,7 @@
-"""The drive-scheduled fit's uncertainty: the covariance of the parameters the
-inertia ``J(a)`` depends on, from the output-error fit's Jacobian (used by
-:class:`~identifiers.structured.scheduled_fit.ScheduledFit`)."""
+"""The drive-scheduled fit's uncertainty: the record's white-noise floor, and the
+covariance of the fitted parameters (those the inertia ``J(a)`` depends on) from
+the output-error fit's Jacobian (used by
+:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,21 @@ import numpy as np
 
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 
-__all__: list[str] = []
+__all__ = ["noise_floor"]
+
+
+def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
+    """Weighted mean square of the outputs' white noise, ``mean_i (w_i sigma_i)^2``:
+    ``sigma_i`` from the median absolute deviation of the second differences
+    (``var(y_{t+1} - 2 y_t + y_{t-1}) = 6 sigma^2`` for white noise; the
+    slow signals of a 0.1 s sample contribute little), rows with a non-finite
+    entry left out."""
+    good = y[np.all(np.isfinite(y), axis=1)]
+    if good.shape[0] < 8:
+        return 0.0
+    second = np.diff(good, n=2, axis=0)
+    mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
+    return float(np.mean((weights * 1.4826 * mad / np.sqrt(6.0)) ** 2))
 
 
 def _inertia_parameters(model: ScheduledPhysicalModel) -> np.ndarray:
@@ -37,13 +52,33 @@ def _with_inertia(model: ScheduledPhysicalModel, theta: np.ndarray) -> Scheduled
     return clone
 
 
-def _inertia_covariance(problem: Any, p: np.ndarray, jac: np.ndarray,
-                        residuals: np.ndarray) -> np.ndarray:
-    """``sigma^2 (J^T J)^-1`` of the parameters mapped to those of
-    :func:`_inertia_parameters` (central differences)."""
+def _gain_derivative(model: ScheduledPhysicalModel, angle: float) -> np.ndarray:
+    """(9, 8 + 3 N) derivative of ``J(a)^-1``'s row-major entries at drive angle
+    ``a`` (rad) with respect to the parameters of :func:`_inertia_parameters`
+    (central differences)."""
+    theta = _inertia_parameters(model)
+    step = 1e-6 * np.maximum(np.abs(theta), 1.0)
+    columns = []
+    for i, h in enumerate(step):
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        columns.append((_with_inertia(model, up).gain(angle)
+                        - _with_inertia(model, down).gain(angle)).ravel() / (2 * h))
+    return np.column_stack(columns)
+
+
+def _parameter_covariance(p: np.ndarray, jac: np.ndarray, residuals: np.ndarray
+                          ) -> np.ndarray:
+    """``sigma^2 (J^T J)^-1`` of the packed parameters (white residuals assumed)."""
     dof = max(residuals.size - p.size, 1)
     sigma2 = float(np.sum(residuals**2)) / dof
-    cov = sigma2 * np.linalg.pinv(jac.T @ jac)
+    return sigma2 * np.linalg.pinv(jac.T @ jac)
+
+
+def _inertia_covariance(problem: Any, p: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """The packed parameters' covariance ``cov`` mapped to the parameters of
+    :func:`_inertia_parameters` (central differences)."""
     step = 1e-6
     d = np.column_stack([(_inertia_parameters(problem.unpack(p + step * e)[0])
                           - _inertia_parameters(problem.unpack(p - step * e)[0])) / (2 * step)

@@ -8,6 +8,7 @@ import pickle
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from identifiers import (
     ScheduledPhysicalIdentifier,
@@ -207,6 +208,9 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
     else:
         # the right model class fits down to the noise
         assert 0.8 < fit.cost / fit.noise_floor < 1.25
+        # no torque acted besides u: the fitted one is not told from zero and dropped
+        assert fit.disturbance_statistic < chi2.ppf(0.999, 3)
+        np.testing.assert_array_equal(fit.disturbance_torque, np.zeros(3))
         covariance = fit.gain_covariance(angle[-1])
         std = np.sqrt(np.diag(covariance))
         assert np.all(np.abs(gain - true_gain).ravel() <= 3 * std + 1e-12)
@@ -239,9 +243,12 @@ def test_the_fit_separates_a_constant_disturbance_torque_from_the_inertia():
                               filter_constants=(1.0, 0.5))
     np.testing.assert_allclose(fit.disturbance_torque, torque, rtol=1e-6)
     assert gain_error(fit) < 1e-6
+    assert fit.disturbance_statistic > 1e6                 # kept by the test
+    assert np.all(np.diag(fit.disturbance_covariance) < 1e-12)
     blind = fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
                                 filter_constants=(1.0, 0.5), disturbance=False)
     np.testing.assert_array_equal(blind.disturbance_torque, np.zeros(3))
+    assert np.isnan(blind.disturbance_statistic)
     assert gain_error(blind) > 5e-2
     assert blind.cost > 1e6 * fit.cost
 
@@ -273,6 +280,8 @@ def test_the_fit_refuses_records_it_cannot_use():
                             sensor_appendage=[0, 0, 1, 2])
     with pytest.raises(ValueError, match="finite"):
         fit_scheduled_model(u, y, np.full(50, np.nan), 0.1, STANDARD_OUTPUTS, TURNING)
+    with pytest.raises(ValueError, match=r"disturbance_level must be in \(0, 1\) or None"):
+        fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING, disturbance_level=1.0)
     with pytest.raises(ValueError, match=r"initial must be a model of 4 appendages, its "
                                          r"\(14,\) state and optionally a finite \(3,\)"):
         fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
