@@ -11,8 +11,9 @@ torque included, by bounded nonlinear least squares on the weighted simulation
 error (the model re-discretized per
 :data:`~identifiers.structured.scheduled_simulation.RESOLUTION` of drive
 travel; the tip gains solved linearly inside every evaluation, variable
-projection), the best kept; a torque that a Wald test cannot tell from zero
-is dropped and the model refined without it. Output
+projection), the best kept; a torque whose Wald statistic is below the
+Bayesian information criterion's penalty is dropped and the model refined
+without it. Output
 error needs nothing but the torques that acted, so closed-loop data do not
 bias it.
 """
@@ -25,7 +26,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
-from scipy.stats import chi2
 
 from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
@@ -82,8 +82,8 @@ class ScheduledFit:
     disturbance_statistic : float
         The fitted torque's Wald statistic ``d^T Cov(d)^-1 d`` (chi-square with
         3 degrees of freedom where none acts; NaN when none was fitted). Below
-        the ``disturbance_level`` test's threshold the torque is set to zero
-        and the model refitted without it.
+        the fit's ``disturbance_threshold`` the torque is set to zero and the
+        model refitted without it.
     """
 
     model: ScheduledPhysicalModel
@@ -247,7 +247,7 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
                         filter_constants: Sequence[float] = (1.0, 0.5, 2.0, 3.0),
                         good_enough: float | None = None, start_nfev: int = 60,
                         max_nfev: int = 150, disturbance: bool = True,
-                        disturbance_level: float | None = 1e-3,
+                        disturbance_threshold: float | None = None,
                         initial: tuple[ScheduledPhysicalModel, ArrayLike]
                         | tuple[ScheduledPhysicalModel, ArrayLike, ArrayLike] | None = None
                         ) -> ScheduledFit:
@@ -298,11 +298,14 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         pressure) is read as inertia: under 0.05 N m per axis the closed-loop
         paddle rotation's rigid-body gain was 40 % off (median of 10 seeds),
         1 % with it.
-    disturbance_level : float or None
-        Level of the Wald test that keeps the fitted torque (default 0.001:
-        the white-residual covariance is optimistic). A torque not told from
-        zero (30 s at 40 dB: 0.005-0.007 N m standard deviation) is dropped
-        and the model refined without it; None keeps it always.
+    disturbance_threshold : float, optional
+        The fitted torque is kept only if its Wald statistic
+        (:attr:`ScheduledFit.disturbance_statistic`) reaches this value; below
+        it the model is refined without it. Default ``3 ln N`` (``N`` the
+        number of residuals), the Bayesian information criterion's penalty
+        for three parameters (24 for 30 s, 28 for 120 s of ten outputs): a
+        fixed chi-square quantile kept torques that a misfit made look
+        significant. 0 keeps it always.
     initial : (ScheduledPhysicalModel, (6 + 2 N,) array_like[, (3,) array_like])
         A model, its state at the record's first sample and optionally the
         disturbance torque (default zero) to refine first, before the
@@ -319,9 +322,9 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         Shapes that do not match, a layout without the three groups, an
         appendage without a sensor, non-finite torques or angles.
     """
-    if disturbance_level is not None and not 0.0 < disturbance_level < 1.0:
-        raise ValueError(f"disturbance_level must be in (0, 1) or None, got "
-                         f"{disturbance_level}")
+    if disturbance_threshold is not None and not disturbance_threshold >= 0.0:
+        raise ValueError(f"disturbance_threshold must be >= 0 or None, got "
+                         f"{disturbance_threshold}")
     u, y, angle = (np.asarray(v, dtype=float) for v in (u, y, angle))
     if u.ndim != 2 or u.shape[1] != 3 or y.shape != (u.shape[0], layout.size) \
             or angle.shape != (u.shape[0],):
@@ -382,8 +385,9 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
     model, x0, d = problem.unpack(best.x, tips)
     d_cov = _TORQUE**2 * cov[-3:, -3:] if disturbance else np.zeros((3, 3))
     statistic = float(d @ np.linalg.pinv(d_cov) @ d) if disturbance else float("nan")
-    if disturbance and disturbance_level is not None \
-            and statistic < chi2.ppf(1.0 - disturbance_level, 3):
+    threshold = 3.0 * np.log(residuals.size) if disturbance_threshold is None \
+        else disturbance_threshold
+    if disturbance and statistic < threshold:
         # not told from zero: the model without it, refined from this fit
         problem = _Problem(u, y, angle, float(dt), layout, w, turning, sensors, axis)
         best = problem.solve(best.x[:-3], start_nfev)

@@ -103,7 +103,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     fit_options : dict, optional
         Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
         (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``,
-        ``disturbance``, ``disturbance_level``), e.g. fewer starts for speed;
+        ``disturbance``, ``disturbance_threshold``), e.g. fewer starts for speed;
         default: its defaults (a constant disturbance torque fitted with the
         model where the record tells it from zero, and added to the torques the
         state's filter propagates).
@@ -174,7 +174,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             raise ValueError(f"max_record must be at least warmup ({warmup} samples), got "
                              f"{max_record}")
         allowed = {"filter_constants", "good_enough", "start_nfev", "max_nfev", "disturbance",
-                   "disturbance_level"}
+                   "disturbance_threshold"}
         self.fit_options = dict(fit_options or {})
         if not set(self.fit_options) <= allowed:
             raise ValueError(f"fit_options may hold {sorted(allowed)}, got "

@@ -208,9 +208,15 @@ def test_the_fit_recovers_a_model_on_a_turning_drive(snr_db):
     else:
         # the right model class fits down to the noise
         assert 0.8 < fit.cost / fit.noise_floor < 1.25
-        # no torque acted besides u: the fitted one is not told from zero and dropped
-        assert fit.disturbance_statistic < chi2.ppf(0.999, 3)
+        # no torque acted besides u: the fitted one is below the BIC penalty (3 ln N,
+        # 24 here) and dropped; a threshold of 0 keeps it
+        assert fit.disturbance_statistic < chi2.ppf(0.99, 3) < 3 * np.log(y.size)
         np.testing.assert_array_equal(fit.disturbance_torque, np.zeros(3))
+        kept = fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                                   filter_constants=(1.0,), disturbance_threshold=0.0)
+        assert np.all(kept.disturbance_torque != 0)
+        assert kept.disturbance_statistic == pytest.approx(fit.disturbance_statistic,
+                                                          rel=0.2)
         covariance = fit.gain_covariance(angle[-1])
         std = np.sqrt(np.diag(covariance))
         assert np.all(np.abs(gain - true_gain).ravel() <= 3 * std + 1e-12)
@@ -280,8 +286,9 @@ def test_the_fit_refuses_records_it_cannot_use():
                             sensor_appendage=[0, 0, 1, 2])
     with pytest.raises(ValueError, match="finite"):
         fit_scheduled_model(u, y, np.full(50, np.nan), 0.1, STANDARD_OUTPUTS, TURNING)
-    with pytest.raises(ValueError, match=r"disturbance_level must be in \(0, 1\) or None"):
-        fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING, disturbance_level=1.0)
+    with pytest.raises(ValueError, match=r"disturbance_threshold must be >= 0 or None"):
+        fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                            disturbance_threshold=np.nan)
     with pytest.raises(ValueError, match=r"initial must be a model of 4 appendages, its "
                                          r"\(14,\) state and optionally a finite \(3,\)"):
         fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
