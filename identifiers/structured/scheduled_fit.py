@@ -357,10 +357,11 @@ def fit_scheduled_model(u: ArrayLike, y: ArrayLike, angle: ArrayLike, dt: float,
         x0 = np.asarray(x0, dtype=float).reshape(-1)
         d0 = np.asarray(d0[0] if d0 else np.zeros(3), dtype=float).reshape(-1)
         if model0.n_modes != turning.size or x0.shape != (6 + 2 * turning.size,) \
-                or d0.shape != (3,) or not np.all(np.isfinite(d0)):
+                or d0.shape != (3,) or not np.all(np.isfinite(d0)) or len(initial) > 3:
             raise ValueError(f"initial must be a model of {turning.size} appendages, its "
                              f"({6 + 2 * turning.size},) state and optionally a finite (3,) "
-                             f"torque, got {model0.n_modes}, {x0.shape} and {d0.shape}")
+                             f"torque, got {model0.n_modes}, {x0.shape} and {d0.shape} "
+                             f"({len(initial)} items)")
         starts.insert(0, problem.pack(model0.rest_inertia, model0.drive_anisotropy,
                                       2 * np.pi * np.asarray(model0.frequencies_hz),
                                       model0.damping, model0.couplings, x0, d0))

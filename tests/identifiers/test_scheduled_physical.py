@@ -296,6 +296,9 @@ def test_the_fit_refuses_records_it_cannot_use():
     with pytest.raises(ValueError, match=r"finite \(3,\) torque, got 4, \(14,\) and \(2,\)"):
         fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
                             initial=(_model(), np.zeros(14), np.zeros(2)))
+    with pytest.raises(ValueError, match=r"got 4, \(14,\) and \(3,\) \(4 items\)"):
+        fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                            initial=(_model(), np.zeros(14), np.zeros(3), np.zeros(3)))
 
 
 def test_the_identifiers_filter_propagates_the_fitted_disturbance():
