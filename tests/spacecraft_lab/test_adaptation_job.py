@@ -42,6 +42,9 @@ def adapted(privileged_agent, tmp_path_factory):
     return out, json.loads((out / "adaptation.json").read_text()), printed.getvalue()
 
 
+# the two tests below share a module fixture that trains an agent and runs ``spacecraft
+# adapt`` (about 25 s): kept out of the default run (``-m slow``) for its 10-minute budget
+@pytest.mark.slow
 def test_one_policy_flies_with_each_parameter_source_on_the_same_episodes(privileged_agent,
                                                                          adapted):
     _, result, _ = adapted
@@ -79,6 +82,7 @@ def test_a_policy_without_the_privileged_vector_is_refused():
         run_adaptation([], progress=False)
 
 
+@pytest.mark.slow
 def test_cli_adapt_writes_json_and_table(adapted):
     out, result, printed = adapted
     assert result["features"] == "residual-scheduled-privileged"

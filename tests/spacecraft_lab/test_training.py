@@ -356,6 +356,7 @@ def test_rl_figure_draws_crashed_evaluations_on_a_marked_level(tmp_path):
     assert lo > 0 and hi > 50_000                                    # the agent's steps
 
 
+@pytest.mark.slow        # 12 s of training (two env processes): kept out of the default run
 def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp_path):
     """--envs 2: a SubprocVecEnv of two processes; PPO collects a rollout of n_steps
     decisions from each, so one rollout is twice the env steps; metrics.json says how
@@ -370,6 +371,10 @@ def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp
     assert run["env_steps"] == 2 * 2048 * ACTION_REPEAT == m["timesteps"]
     assert run["env_steps_per_s"] > 0
     assert (tmp_path / "ppo-none-seed0.zip").exists()
+
+
+def test_training_refuses_bad_envs_and_exploration_settings(tmp_path):
+    pytest.importorskip("stable_baselines3")
     with pytest.raises(ValueError, match="envs"):
         run_training("ppo", "none", 2048, 1, tmp_path, envs=0, progress=False)
     with pytest.raises(ValueError, match="log_std_init applies to PPO"):
