@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import solve_discrete_are
+from scipy.linalg import cho_factor, cho_solve, eigh, solve_discrete_are
 
 from identifiers.core.model import StateSpaceModel
-from identifiers.subspace.varx import predictor_product, regressor_matrix
+from identifiers.subspace.varx import predictor_product, regressor_gram, regressor_matrix
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["DEFAULT_PAST", "DEFAULT_RIDGE", "PBSIDResult", "pbsid"]
@@ -80,6 +80,16 @@ def _riccati_gain(a: np.ndarray, c: np.ndarray, x: np.ndarray, u: np.ndarray,
         return (a @ pr @ c.T + s) @ np.linalg.inv(c @ pr @ c.T + rr)
     except (np.linalg.LinAlgError, ValueError):
         return np.zeros_like(s)
+
+
+def _ridge_solve(gram: np.ndarray, regularization: float, rhs: np.ndarray) -> np.ndarray:
+    """``(gram + regularization I)^-1 rhs`` by Cholesky (the matrix is symmetric positive
+    definite for a positive ``regularization``); LU if rounding makes it fail."""
+    matrix = gram + regularization * np.eye(gram.shape[0])
+    try:
+        return cho_solve(cho_factor(matrix, check_finite=False), rhs, check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.linalg.solve(matrix, rhs)
 
 
 @single_threaded_blas
@@ -168,12 +178,11 @@ def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | Non
     z = np.hstack([u, y])
     phi = regressor_matrix(z, p)
     target = y[p:]
-    gram = phi.T @ phi
+    gram = regressor_gram(z, p, phi)           # block Toeplitz: O(N p) instead of O(N p^2)
     if regularization > 0:
         wphi = phi if weights is None else phi * (sw**2)[:, None]
         wgram = gram if weights is None else phi.T @ wphi
-        xi = np.linalg.solve(wgram + regularization * np.eye(phi.shape[1]),
-                             wphi.T @ target).T
+        xi = _ridge_solve(wgram, regularization, wphi.T @ target).T
     else:
         xi = np.linalg.lstsq(phi * sw[:, None], target * sw[:, None], rcond=None)[0].T
     lk = predictor_product(xi, r, f, weighted)
@@ -181,7 +190,15 @@ def pbsid(U: ArrayLike, Y: ArrayLike, n: int, p: int | None = None, f: int | Non
     # reuses the VARX's Gram: the left vectors U and s^2 from one small symmetric
     # eigenproblem, and the states x = diag(s)^(-1/2) U^T LK Phi^T (the right vectors
     # scaled by sqrt(s)), at a third of the cost of the thin SVD of the long matrix
-    eigval, eigvec = np.linalg.eigh(lk @ gram @ lk.T)
+    # only the n leading eigenpairs are needed for the states (all of the values when
+    # the caller asks for them: PBSIDResult.singular_values)
+    product = lk @ gram @ lk.T
+    size = product.shape[0]
+    if full_output:
+        eigval, eigvec = np.linalg.eigh(product)
+    else:
+        eigval, eigvec = eigh(product, subset_by_index=[size - n, size - 1], driver="evr",
+                              check_finite=False)
     order = np.argsort(eigval)[::-1]
     s = np.sqrt(np.maximum(eigval[order], 0.0))
     # directions the data do not excite (s = 0) give zero states, as the SVD would

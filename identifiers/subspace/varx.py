@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["free_response", "predictor_product", "regressor_matrix", "toeplitz_windows"]
+__all__ = ["free_response", "predictor_product", "regressor_gram", "regressor_matrix",
+           "toeplitz_windows"]
 
 
 def free_response(xi: np.ndarray, phi: np.ndarray, n_inputs: int, steps: int) -> np.ndarray:
@@ -78,13 +79,18 @@ def predictor_product(xi: np.ndarray, n_inputs: int, f: int, weighted: bool = Tr
     lk = np.zeros((f, m, d))
     lk[0] = xi
     xi_y = xi.reshape(m, p, zr)[:, :, n_inputs:].transpose(1, 0, 2)  # (p, m, m): Xi_i^y
+    newest_last = xi_y[::-1]                          # Xi_p^y, ..., Xi_1^y
+    flat = lk.reshape(f * m, d)
     for j in range(1, f):
         if j < p:
             lk[j, :, :d - j * zr] = xi[:, j * zr:]
         if weighted:
+            # sum_{i=1..jj} Xi_i^y LK_{j-i} as one product: [Xi_jj^y ... Xi_1^y] times
+            # the row blocks LK_{j-jj} .. LK_{j-1}, contiguous in ``flat``
             jj = min(j, p)
-            lk[j] += np.einsum("iab,ibd->ad", xi_y[:jj], lk[j - 1::-1][:jj])
-    return lk.reshape(f * m, d)
+            coefficients = newest_last[p - jj:].transpose(1, 0, 2).reshape(m, jj * m)
+            lk[j] += coefficients @ flat[(j - jj) * m:j * m]
+    return flat
 
 
 def regressor_matrix(z: np.ndarray, p: int) -> np.ndarray:
@@ -102,6 +108,54 @@ def regressor_matrix(z: np.ndarray, p: int) -> np.ndarray:
     n_samples, zr = z.shape
     windows = np.lib.stride_tricks.sliding_window_view(z, (p, zr))[:, 0]  # (N-p+1, p, zr)
     return windows[:-1, ::-1, :].reshape(n_samples - p, p * zr)
+
+
+def regressor_gram(z: np.ndarray, p: int, phi: np.ndarray | None = None) -> np.ndarray:
+    """``Phi^T Phi`` for ``Phi = regressor_matrix(z, p)``, from its block-Toeplitz structure.
+
+    Block ``(i, j)`` of the Gram is ``sum_k z_{k-1-i} z_{k-1-j}^T`` over the rows
+    ``k = p .. N-1``; block ``(i + 1, j + 1)`` sums the same products one sample
+    earlier, so it is block ``(i, j)`` plus the product that enters at the start
+    and minus the one that leaves at the end:
+    ``G_{i+1, j+1} = G_{i, j} + z_{p-2-i} z_{p-2-j}^T - z_{N-2-i} z_{N-2-j}^T``.
+    Only the first block row is a sum over the record, so the cost is
+    ``O(N p (r + m)^2 + p^2 (r + m)^2)`` instead of the direct product's
+    ``O(N p^2 (r + m)^2)``; the result equals the direct product to rounding
+    (the recursion adds at most ``p`` rounding steps per entry).
+
+    Parameters
+    ----------
+    z : (N, r + m) ndarray
+        ``[u_k, y_k]`` rows, oldest first.
+    p : int
+        VARX lags.
+    phi : (N - p, p (r + m)) ndarray, optional
+        The regressor matrix, if the caller has it (its first block column gives
+        the first block row in one product).
+
+    Returns
+    -------
+    (p (r + m), p (r + m)) ndarray
+        Symmetric.
+    """
+    n_samples, zr = z.shape
+    d = p * zr
+    g = np.empty((p, zr, d))
+    if phi is None:
+        z0 = z[p - 1:n_samples - 1]
+        for j in range(p):
+            g[0, :, j * zr:(j + 1) * zr] = z0.T @ z[p - 1 - j:n_samples - 1 - j]
+    else:
+        g[0] = phi[:, :zr].T @ phi
+    if p > 1:
+        enters = z[p - 2::-1][:p - 1].ravel()              # z_{p-2-i}, i = 0 .. p-2
+        leaves = z[n_samples - p:n_samples - 1][::-1].ravel()    # z_{N-2-i}
+        step = (np.outer(enters, enters) - np.outer(leaves, leaves)).reshape(p - 1, zr, -1)
+        for i in range(p - 1):
+            np.add(g[i, :, :-zr], step[i], out=g[i + 1, :, zr:])
+            g[i + 1, :, :zr] = g[0, :, (i + 1) * zr:(i + 2) * zr].T
+    g = g.reshape(d, d)
+    return 0.5 * (g + g.T)
 
 
 def toeplitz_windows(zbar: np.ndarray, p: int) -> np.ndarray:

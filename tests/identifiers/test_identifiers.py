@@ -21,7 +21,12 @@ from identifiers import (
     pbsid,
     vaf,
 )
-from identifiers.subspace.varx import free_response, predictor_product, regressor_matrix
+from identifiers.subspace.varx import (
+    free_response,
+    predictor_product,
+    regressor_gram,
+    regressor_matrix,
+)
 
 
 def _innovation_system(seed: int = 0, n_samples: int = 3000, noise: float = 0.1):
@@ -64,7 +69,35 @@ def test_regressor_matrix_is_newest_first():
     assert phi.shape == (17, 6)
 
 
+@pytest.mark.parametrize(("n_samples", "p"), [(12, 1), (20, 2), (60, 7), (400, 25)])
+def test_regressor_gram_equals_the_direct_product(n_samples, p):
+    # the block-Toeplitz recursion against Phi^T Phi, channels 1e-3 to 1e2 in scale
+    rng = np.random.default_rng(p)
+    z = rng.normal(size=(n_samples, 5)) * np.array([1e-3, 1e-1, 1.0, 10.0, 100.0])
+    phi = regressor_matrix(z, p)
+    direct = phi.T @ phi
+    for gram in (regressor_gram(z, p), regressor_gram(z, p, phi)):
+        assert gram.shape == direct.shape
+        np.testing.assert_array_equal(gram, gram.T)
+        np.testing.assert_allclose(gram, direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())
+
+
 # ------------------------------------------------------------------ batch PBSID
+def test_pbsid_leading_eigenpairs_give_the_full_decomposition_s_model():
+    # the plain call solves for the n leading eigenpairs only, full_output for all of
+    # them: the same model up to the states' signs (poles and Markov parameters agree)
+    _, u, y = _innovation_system()
+    plain = pbsid(u, y, 4, 10)
+    full = pbsid(u, y, 4, 10, full_output=True)
+    assert full.singular_values.shape == (10 * y.shape[1],)
+    np.testing.assert_allclose(np.sort_complex(plain.poles()), np.sort_complex(full.model.poles()),
+                               atol=1e-9)
+    for k in range(5):
+        markov = plain.C @ np.linalg.matrix_power(plain.A, k) @ plain.B
+        np.testing.assert_allclose(markov, full.model.C @ np.linalg.matrix_power(full.model.A, k)
+                                   @ full.model.B, atol=1e-9)
+
+
 def test_pbsid_recovers_poles():
     true, u, y = _innovation_system()
     model = pbsid(u, y, 4, 10)
