@@ -62,7 +62,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identifiers.core.rls_kernel import rls_step
+from identifiers.core.rls_kernel import rls_step, rls_steps
 
 __all__ = ["RecursiveLeastSquares"]
 
@@ -216,6 +216,53 @@ class RecursiveLeastSquares:
             self.n_rejected += 1
             return None
         return err
+
+    def update_many(self, phis: np.ndarray, ys: np.ndarray,
+                    use: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`update` on each row in order, in one compiled loop (a replay).
+
+        The result is the same, bit for bit, as calling :meth:`update` on the rows
+        one after another (skipping those where ``use`` is False).
+
+        Parameters
+        ----------
+        phis : (J, d) ndarray
+            Regressors, one row per sample.
+        ys : (J, q) ndarray
+            Targets.
+        use : (J,) ndarray of bool, optional
+            Rows to apply (default: all).
+
+        Returns
+        -------
+        errors : (J, q) ndarray
+            Each applied row's a-priori error; NaN where the row was not applied or
+            was refused.
+        accepted : (J,) ndarray of bool
+            Rows applied and accepted.
+
+        Raises
+        ------
+        ValueError
+            If the shapes do not match ``(J, d)``, ``(J, q)`` and ``(J,)``.
+        """
+        phis = np.ascontiguousarray(phis, dtype=float)
+        ys = np.ascontiguousarray(ys, dtype=float)
+        q, d = self.theta.shape
+        n_rows = phis.shape[0] if phis.ndim == 2 else -1
+        use = (np.ones(max(n_rows, 0), dtype=bool) if use is None
+               else np.ascontiguousarray(use, dtype=bool))
+        if phis.shape != (n_rows, d) or ys.shape != (n_rows, q) or use.shape != (n_rows,):
+            raise ValueError(f"phis must be (J, {d}), ys (J, {q}) and use (J,), got "
+                             f"{phis.shape}, {ys.shape}, {use.shape}")
+        errors = np.full((n_rows, q), np.nan)
+        accepted, self._scale, self._cycle = rls_steps(
+            self.theta, self._q, phis, ys, self._lam, self.forgetting is None,
+            -1.0 if self._gate_level is None else self._gate_level, self._pseudo_weights,
+            self.hold, self._scale, self._cycle, _OVERFLOW_GUARD, errors, self.drift, use)
+        self.n_rejected += int(np.count_nonzero(use & ~accepted))
+        errors[~accepted] = np.nan
+        return errors, accepted
 
     def reset(self) -> None:
         """Back to ``Theta = 0``, ``P = P_0``."""

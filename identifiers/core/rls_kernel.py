@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["rls_step"]
+__all__ = ["rls_step", "rls_steps"]
 
 
 @njit(cache=True, nogil=True)
@@ -178,3 +178,25 @@ def rls_step(theta: np.ndarray, q: np.ndarray, phi: np.ndarray, y: np.ndarray,
         if drift[j] > 0.0:
             q[j, j] += drift[j] / scale
     return True, scale, cycle
+
+
+@njit(cache=True, nogil=True)
+def rls_steps(theta: np.ndarray, q: np.ndarray, phis: np.ndarray, ys: np.ndarray,
+              lam: np.ndarray, vector: bool, gate_level: float, pseudo_weights: np.ndarray,
+              hold: np.ndarray, scale: float, cycle: int, guard: float,
+              errs: np.ndarray, drift: np.ndarray, use: np.ndarray
+              ) -> tuple[np.ndarray, float, int]:
+    """:func:`rls_step` on the rows of ``phis`` and ``ys`` in order, in one compiled loop.
+
+    Rows where ``use`` is False are not applied. ``errs`` (J, q) receives each
+    applied row's a-priori error. Returns which rows were accepted (False also for
+    rows not used), the new ``scale`` and ``cycle``. Each row's arithmetic is exactly
+    that of one :func:`rls_step` call."""
+    accepted = np.zeros(phis.shape[0], dtype=np.bool_)
+    for k in range(phis.shape[0]):
+        if use[k]:
+            ok, scale, cycle = rls_step(theta, q, phis[k], ys[k], lam, vector, gate_level,
+                                        pseudo_weights, hold, scale, cycle, guard, errs[k],
+                                        drift)
+            accepted[k] = ok
+    return accepted, scale, cycle

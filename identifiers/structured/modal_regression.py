@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
@@ -24,7 +25,7 @@ from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
 from spacecraft_conventions import MEASURES
 
 __all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE", "REPLAY",
-           "ModalRegression"]
+           "ModalRegression", "mean_square_step"]
 
 #: Initial covariance of every gain (unit-RMS regressors, units of the output
 #: noise variance): a vague prior.
@@ -41,6 +42,14 @@ REPLAY = 1500
 #: Samples at the end of a replay over which the Kalman filter runs (the gains
 #: learn from the whole replay): its state settles within a few hundred.
 FILTER_TAIL = 300
+
+
+@njit(cache=True, nogil=True)
+def mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
+    """``level <- keep * level + weight * x**2`` in place: one step of an exponentially
+    weighted mean square (the arithmetic of the NumPy expression)."""
+    for i in range(x.shape[0]):
+        level[i] = keep * level[i] + weight * (x[i] * x[i])
 
 
 def _spend_rank(resonators: list[Resonator], budget: int) -> list[Resonator]:
@@ -180,10 +189,39 @@ class ModalRegression:
             flex, free = self._modal_scales
             dphis = self._hp_dq.run(raw_dq).reshape(-1, n_res, 2, 3, 2) / flex
             dfrees = self._hp_dfree.run(raw_dfree).reshape(-1, n_res, 2, 2) / free
-        for j, (uk, yk, learn, real) in enumerate(samples):
+        flags = np.array([learn and real for _, _, learn, real in samples], dtype=bool)
+        self._replay_learning(phis[:tail], y_fs[:tail], flags[:tail],
+                              None if dphis is None else (dphis[:tail], dfrees[:tail]))
+        for j in range(tail, len(samples)):
+            uk, yk, learn, real = samples[j]
             sensitivity = None if dphis is None else (dphis[j], dfrees[j])
-            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=j >= tail,
+            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=True,
                          signals=(phis[j], y_fs[j], sensitivity))
+
+    def _replay_learning(self, phis: np.ndarray, y_fs: np.ndarray, use: np.ndarray,
+                         sensitivities: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """What :meth:`_sample` does with replayed samples before the filter's tail (the
+        gains' regressions, the error and signal levels, the modal tracker's moments),
+        in batch: each group's RLS runs its rows in one compiled loop, a row reaching a
+        group only if every group before it accepted it, as in :meth:`_learn`; the
+        results are those of the sample-by-sample replay, bit for bit (test)."""
+        ok = use.copy()
+        errs = np.empty((len(use), self.n_outputs))
+        for rows, cols, rls in self._fits:
+            errs[:, rows], accepted = rls.update_many(phis[:, cols], y_fs[:, rows], use=ok)
+            ok &= accepted
+        for j in np.flatnonzero(ok):
+            if self._resvar is None:
+                self._resvar, self._sigvar = errs[j] ** 2, y_fs[j] ** 2
+            else:
+                mean_square_step(self._resvar, errs[j], 0.995, 0.005)
+                mean_square_step(self._sigvar, y_fs[j], 0.995, 0.005)
+        if ok.any() and self._last_innovation is None:          # before the filter runs
+            self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
+        if self._tracker is not None and sensitivities is not None:
+            for j in np.flatnonzero(use):
+                self._tracker.update(phis[j], sensitivities[0][j], sensitivities[1][j],
+                                     y_fs[j])
 
     def _signals(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The current sample's high-passed regressor and, with tracking, its flexible

@@ -62,7 +62,6 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
@@ -76,7 +75,7 @@ from identifiers.structured.modal_basis import (
     Resonator,
     highpass_noise_gain,
 )
-from identifiers.structured.modal_regression import ModalRegression
+from identifiers.structured.modal_regression import ModalRegression, mean_square_step
 from identifiers.structured.modal_tracker import ModalTracker
 from identifiers.structured.state_filter import StateFilter
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
@@ -87,14 +86,6 @@ __all__ = ["RESOLUTION", "RigidFlexibleIdentifier"]
 #: Smallest relative error (of the high-passed signal's RMS) the change test
 #: treats as evidence: 1e-3, a 60 dB signal-to-error ratio.
 RESOLUTION = 1e-3
-
-
-@njit(cache=True, nogil=True)
-def _mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
-    """``level <- keep * level + weight * x**2`` in place: one step of an exponentially
-    weighted mean square (the arithmetic of the NumPy expression)."""
-    for i in range(x.shape[0]):
-        level[i] = keep * level[i] + weight * (x[i] * x[i])
 
 
 class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
@@ -367,8 +358,8 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
                 if self._resvar is None:
                     self._resvar, self._sigvar = err**2, y_f**2
                 else:           # running mean squares of the errors and the signals
-                    _mean_square_step(self._resvar, err, 0.995, 0.005)
-                    _mean_square_step(self._sigvar, y_f, 0.995, 0.005)
+                    mean_square_step(self._resvar, err, 0.995, 0.005)
+                    mean_square_step(self._sigvar, y_f, 0.995, 0.005)
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
             if self._tracker is not None and sensitivity is not None:

@@ -71,6 +71,34 @@ def test_fit_equals_the_update_loop_and_pickles_mid_run(constant_record):
         np.testing.assert_array_equal(other.state, seq.states[-1])
 
 
+def test_the_batch_replay_equals_the_sample_by_sample_replay(constant_record, monkeypatch):
+    # a rebuild replays its record's head in batch (each group's RLS in one compiled
+    # loop); through _sample, one sample at a time, every number is the same
+    _, u, _, y = constant_record
+    u, y = u[:700], y[:700]                 # the warm-up's rebuild and 200 live samples
+    batch = default_identifier()
+    batch_seq = batch.fit(u, y)
+
+    def one_by_one(self, phis, y_fs, use, sensitivities):
+        for j in range(len(use)):
+            sens = None if sensitivities is None else (sensitivities[0][j], sensitivities[1][j])
+            self._sample(None, None, bool(use[j]), True, replay_k=0, filtering=False,
+                         signals=(phis[j], y_fs[j], sens))
+
+    monkeypatch.setattr(RigidFlexibleIdentifier, "_replay_learning", one_by_one)
+    loop = default_identifier()
+    loop_seq = loop.fit(u, y)
+    np.testing.assert_array_equal(batch_seq.A[-1], loop_seq.A[-1])
+    np.testing.assert_array_equal(batch_seq.states, loop_seq.states)
+    for name in ("_resvar", "_sigvar", "_r"):
+        np.testing.assert_array_equal(getattr(batch, name), getattr(loop, name))
+    for (_, _, a), (_, _, b) in zip(batch._fits, loop._fits, strict=True):
+        np.testing.assert_array_equal(a.theta, b.theta)
+        np.testing.assert_array_equal(a.P, b.P)
+    for a, b in zip(batch._tracker._s, loop._tracker._s, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_no_model_until_warm_up_then_a_full_state_space_model(constant_record):
     _, u, _, y = constant_record
     ident = default_identifier()

@@ -220,3 +220,35 @@ def test_compiled_update_equals_the_dense_recursion_with_gate_floor_and_hold():
     theta, p = _dense_reference(phi, y, lam, 10.0, delta, hold, 0.25)
     np.testing.assert_allclose(rls.theta, theta, rtol=1e-9, atol=1e-12 * np.abs(theta).max())
     np.testing.assert_allclose(rls.P, p, rtol=1e-9, atol=1e-12 * np.abs(p).max())
+
+
+def test_update_many_is_the_update_loop_bit_for_bit_with_skipped_and_refused_rows():
+    phi, _, y = _data(n=300, d=7, q=2)
+    phi[120] = np.inf                       # refused by both (nothing changes)
+    use = np.ones(300, dtype=bool)
+    use[50:60] = False                      # not applied
+    kwargs = dict(regularization=np.linspace(1e-3, 1e-1, 7), hold=np.arange(7) < 2,
+                  gate=0.25, drift=1e-6)
+    loop = RecursiveLeastSquares(2, 7, np.linspace(0.97, 0.995, 7), 10.0, **kwargs)
+    batch = RecursiveLeastSquares(2, 7, np.linspace(0.97, 0.995, 7), 10.0, **kwargs)
+    expected = np.full((300, 2), np.nan)
+    for k in range(300):
+        if use[k]:
+            err = loop.update(phi[k], y[k])
+            if err is not None:
+                expected[k] = err
+    errors, accepted = batch.update_many(phi, y, use=use)
+    np.testing.assert_array_equal(errors, expected)
+    np.testing.assert_array_equal(accepted, ~np.isnan(expected[:, 0]))
+    assert not accepted[120] and not accepted[50:60].any() and accepted.sum() == 289
+    np.testing.assert_array_equal(batch.theta, loop.theta)
+    np.testing.assert_array_equal(batch.P, loop.P)
+    assert batch.n_rejected == loop.n_rejected == 1
+
+
+def test_update_many_refuses_mismatched_shapes():
+    rls = RecursiveLeastSquares(2, 3, 0.99, 1.0)
+    with pytest.raises(ValueError, match=r"phis must be \(J, 3\), ys \(J, 2\)"):
+        rls.update_many(np.zeros((5, 4)), np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="use"):
+        rls.update_many(np.zeros((5, 3)), np.zeros((5, 2)), use=np.ones(4, dtype=bool))
