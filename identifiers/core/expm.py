@@ -47,6 +47,30 @@ _COEFFICIENTS[4, :] = [64764752532480000.0, 32382376266240000.0, 777177030389760
 
 
 @njit(cache=True, nogil=True)
+def _pade_ratio(a: np.ndarray, powers: np.ndarray, b: np.ndarray, m: int) -> np.ndarray:
+    """``(V - U)^-1 (V + U)`` of the degree-``m`` Pade approximant, ``powers[k - 1]`` =
+    ``a^(2k)``: ``U = a sum_k b_(2k+1) a^(2k)``, ``V = sum_k b_(2k) a^(2k)`` (fused sums;
+    the products by BLAS)."""
+    n = a.shape[0]
+    odd = np.empty((n, n))
+    even = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            diagonal = 1.0 if i == j else 0.0
+            o = b[1] * diagonal
+            e = b[0] * diagonal
+            for k in range(1, m // 2 + 1):
+                o += b[2 * k + 1] * powers[k - 1, i, j]
+                e += b[2 * k] * powers[k - 1, i, j]
+            odd[i, j] = o
+            even[i, j] = e
+    u = a @ odd
+    minus = even - u
+    plus = even + u
+    return np.ascontiguousarray(np.linalg.solve(minus, plus))     # LAPACK's is Fortran-ordered
+
+
+@njit(cache=True, nogil=True)
 def _expm_one(a: np.ndarray, theta: np.ndarray, degrees: np.ndarray,
               coefficients: np.ndarray) -> np.ndarray:
     """``exp(a)`` of one square matrix (Higham 2005, Algorithm 2.3)."""
@@ -57,21 +81,14 @@ def _expm_one(a: np.ndarray, theta: np.ndarray, degrees: np.ndarray,
         for i in range(n):
             column += abs(a[i, j])
         norm = max(norm, column)
-    eye = np.eye(n)
     for level in range(4):
         if norm <= theta[level]:
-            b = coefficients[level]
             m = degrees[level]
-            a2 = a @ a
-            power = eye.copy()                       # A^(2k)
-            u_sum = b[1] * eye
-            v = b[0] * eye
-            for k in range(1, m // 2 + 1):
-                power = power @ a2
-                u_sum = u_sum + b[2 * k + 1] * power
-                v = v + b[2 * k] * power
-            u = a @ u_sum
-            return np.ascontiguousarray(np.linalg.solve(v - u, v + u))
+            powers = np.empty((m // 2, n, n))
+            powers[0] = a @ a
+            for k in range(1, m // 2):
+                powers[k] = powers[k - 1] @ powers[0]
+            return _pade_ratio(a, powers, coefficients[level], m)
     s = 0
     if norm > theta[4]:
         s = max(0, math.ceil(math.log2(norm / theta[4])))
@@ -80,6 +97,7 @@ def _expm_one(a: np.ndarray, theta: np.ndarray, degrees: np.ndarray,
     a2 = scaled @ scaled
     a4 = a2 @ a2
     a6 = a4 @ a2
+    eye = np.eye(n)
     inner_u = b[13] * a6 + b[11] * a4 + b[9] * a2
     u = scaled @ (a6 @ inner_u + b[7] * a6 + b[5] * a4 + b[3] * a2 + b[1] * eye)
     inner_v = b[12] * a6 + b[10] * a4 + b[8] * a2

@@ -136,7 +136,7 @@ class _Problem:
         lower = np.zeros((3, 3))
         lower[np.tril_indices(3)] = p[:6]
         lower[np.diag_indices(3)] = np.exp(lower[np.diag_indices(3)])
-        model = ScheduledPhysicalModel(
+        model = ScheduledPhysicalModel._trusted(
             _INERTIA * lower @ lower.T, _ANISOTROPY * p[6:8], np.exp(p[8:8 + n]) / (2 * np.pi),
             np.exp(p[8 + n:8 + 2 * n]), _COUPLING * p[8 + 2 * n:8 + 5 * n].reshape(n, 3),
             self.turning, np.zeros(self.sensors.size) if tips is None else tips, self.sensors,

@@ -134,6 +134,35 @@ class ScheduledPhysicalModel:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
 
+    @classmethod
+    def _trusted(cls, rest_inertia: np.ndarray, drive_anisotropy: np.ndarray,
+                 frequencies_hz: np.ndarray, damping: np.ndarray, couplings: np.ndarray,
+                 turning: np.ndarray, tips: np.ndarray, sensor_appendage: np.ndarray,
+                 drive_axis: np.ndarray) -> ScheduledPhysicalModel:
+        """A model from a fit's parametrization, which fixes the shapes, the symmetry of
+        ``rest_inertia`` (``L L^T``), ``turning``, ``sensor_appendage`` and
+        ``drive_axis`` (taken from a checked model): only what a parameter vector can
+        still break is checked (finiteness, ``S`` positive definite, frequencies > 0,
+        damping >= 0; :class:`ValueError` as the constructor's). The fit builds one
+        model per residual and Jacobian column; the constructor's full checks were a
+        seventh of its time."""
+        values = {"rest_inertia": rest_inertia, "drive_anisotropy": drive_anisotropy,
+                  "frequencies_hz": frequencies_hz, "damping": damping,
+                  "couplings": couplings, "tips": tips}
+        if not all(np.all(np.isfinite(x)) for x in values.values()):
+            raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
+        if np.linalg.eigvalsh(rest_inertia).min() <= 0:
+            raise ValueError("rest_inertia must be symmetric positive definite")
+        if np.any(frequencies_hz <= 0) or np.any(damping < 0):
+            raise ValueError("frequencies_hz must be > 0 and damping >= 0")
+        model = object.__new__(cls)
+        values.update(turning=turning, sensor_appendage=sensor_appendage, drive_axis=drive_axis)
+        for name, value in values.items():
+            value = np.array(value)                 # a read-only copy, as the constructor's
+            value.setflags(write=False)
+            object.__setattr__(model, name, value)
+        return model
+
     @property
     def n_modes(self) -> int:
         """N, the number of appendage modes."""

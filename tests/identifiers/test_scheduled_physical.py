@@ -169,6 +169,24 @@ def test_the_fits_jacobian_is_the_forward_difference_of_its_residuals(disturbanc
     np.testing.assert_allclose(jac / scale, expected / scale, rtol=0, atol=1e-6)
 
 
+def test_the_fits_unchecked_constructor_builds_the_checked_model():
+    # the fit's parametrization fixes shapes and symmetry: _trusted checks only what a
+    # parameter vector can break, and builds the model the constructor builds
+    checked = _model()
+    fields = {f.name: np.array(getattr(checked, f.name)) for f in dataclasses.fields(checked)}
+    trusted = ScheduledPhysicalModel._trusted(**fields)
+    for name, value in fields.items():
+        np.testing.assert_array_equal(getattr(trusted, name), value)
+        assert getattr(trusted, name).dtype == value.dtype
+        assert not getattr(trusted, name).flags.writeable
+    np.testing.assert_array_equal(trusted.zoh(0.4, 0.1)[0], checked.zoh(0.4, 0.1)[0])
+    for change, message in (({"rest_inertia": -REST}, "positive definite"),
+                            ({"damping": np.array([0.01, np.nan, 0.01, 0.01])}, "finite"),
+                            ({"frequencies_hz": np.array([0.07, 0.0, 0.09, 0.12])}, "> 0")):
+        with pytest.raises(ValueError, match=message):
+            ScheduledPhysicalModel._trusted(**{**fields, **change})
+
+
 @pytest.mark.parametrize(("change", "message"), [
     ({"rest_inertia": -REST}, "symmetric positive definite"),
     ({"couplings": np.zeros((3, 3))}, r"couplings must have shape \(4, 3\)"),
