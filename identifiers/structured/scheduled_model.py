@@ -58,9 +58,16 @@ def plane_basis(axis: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     ``e1 x e2 = axis`` (for the y axis: z and x)."""
     k = np.asarray(axis, dtype=float)
     seed = np.eye(3)[int(np.argmin(np.abs(k)))]
-    e1 = np.cross(k, seed)
+    e1 = _cross(k, seed)
     e1 /= np.linalg.norm(e1)
-    return e1, np.cross(k, e1)
+    return e1, _cross(k, e1)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors: ``np.cross``'s arithmetic (each product rounded, then
+    the difference) without its generic-shape overhead (a fit calls this 8000 times)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from identifiers import (
     fit_scheduled_model,
 )
 from identifiers.structured.scheduled_fit import noise_floor
-from identifiers.structured.scheduled_model import drive_rotation, plane_basis
+from identifiers.structured.scheduled_model import _cross, drive_rotation, plane_basis
 from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
@@ -167,6 +167,11 @@ def test_the_fits_jacobian_is_the_forward_difference_of_its_residuals(disturbanc
     scale = np.linalg.norm(expected, axis=0)
     assert np.all(scale[-problem.n_state:] > 0)      # the state's columns are not empty
     np.testing.assert_allclose(jac / scale, expected / scale, rtol=0, atol=1e-6)
+
+
+def test_the_three_vector_cross_product_is_numpys_bit_for_bit():
+    for a, b in np.random.default_rng(3).normal(size=(500, 2, 3)) * [[1e-3], [1e4]]:
+        np.testing.assert_array_equal(_cross(a, b), np.cross(a, b))
 
 
 def test_the_fits_unchecked_constructor_builds_the_checked_model():
