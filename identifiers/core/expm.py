@@ -113,7 +113,7 @@ def _expm_all(stack: np.ndarray, theta: np.ndarray, degrees: np.ndarray,
               coefficients: np.ndarray) -> np.ndarray:
     out = np.empty_like(stack)
     for k in range(stack.shape[0]):
-        out[k] = _expm_one(stack[k].copy(), theta, degrees, coefficients)
+        out[k] = _expm_one(stack[k], theta, degrees, coefficients)
     return out
 
 

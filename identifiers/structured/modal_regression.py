@@ -25,7 +25,7 @@ from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
 from spacecraft_conventions import MEASURES
 
 __all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE", "REPLAY",
-           "ModalRegression", "mean_square_step"]
+           "ModalRegression"]
 
 #: Initial covariance of every gain (unit-RMS regressors, units of the output
 #: noise variance): a vague prior.
@@ -45,7 +45,7 @@ FILTER_TAIL = 300
 
 
 @njit(cache=True, nogil=True)
-def mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
+def _mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
     """``level <- keep * level + weight * x**2`` in place: one step of an exponentially
     weighted mean square (the arithmetic of the NumPy expression)."""
     for i in range(x.shape[0]):
@@ -211,17 +211,22 @@ class ModalRegression:
             errs[:, rows], accepted = rls.update_many(phis[:, cols], y_fs[:, rows], use=ok)
             ok &= accepted
         for j in np.flatnonzero(ok):
-            if self._resvar is None:
-                self._resvar, self._sigvar = errs[j] ** 2, y_fs[j] ** 2
-            else:
-                mean_square_step(self._resvar, errs[j], 0.995, 0.005)
-                mean_square_step(self._sigvar, y_fs[j], 0.995, 0.005)
+            self._track_levels(errs[j], y_fs[j])
         if ok.any() and self._last_innovation is None:          # before the filter runs
             self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
         if self._tracker is not None and sensitivities is not None:
             for j in np.flatnonzero(use):
                 self._tracker.update(phis[j], sensitivities[0][j], sensitivities[1][j],
                                      y_fs[j])
+
+    def _track_levels(self, err: np.ndarray, y_f: np.ndarray) -> None:
+        """One sample's step of the running mean squares of the gains' a-priori errors
+        and of the high-passed signals (the first sample sets them)."""
+        if self._resvar is None:
+            self._resvar, self._sigvar = err**2, y_f**2
+        else:
+            _mean_square_step(self._resvar, err, 0.995, 0.005)
+            _mean_square_step(self._sigvar, y_f, 0.995, 0.005)
 
     def _signals(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The current sample's high-passed regressor and, with tracking, its flexible

@@ -75,7 +75,7 @@ from identifiers.structured.modal_basis import (
     Resonator,
     highpass_noise_gain,
 )
-from identifiers.structured.modal_regression import ModalRegression, mean_square_step
+from identifiers.structured.modal_regression import ModalRegression
 from identifiers.structured.modal_tracker import ModalTracker
 from identifiers.structured.state_filter import StateFilter
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
@@ -355,11 +355,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
                 if event is not None:
                     self._react(event)
             if err is not None:
-                if self._resvar is None:
-                    self._resvar, self._sigvar = err**2, y_f**2
-                else:           # running mean squares of the errors and the signals
-                    mean_square_step(self._resvar, err, 0.995, 0.005)
-                    mean_square_step(self._sigvar, y_f, 0.995, 0.005)
+                self._track_levels(err, y_f)
                 if self._last_innovation is None:       # before the filter runs
                     self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
             if self._tracker is not None and sensitivity is not None:

@@ -70,6 +70,23 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[0] * b[1] - a[1] * b[0]])
 
 
+def _check_values(values: dict[str, np.ndarray], structure: bool) -> None:
+    """What a parameter vector can break in a model of the right shapes: every value
+    finite, ``rest_inertia`` positive definite, frequencies > 0, damping >= 0; with
+    ``structure`` also what a fit's parametrization fixes: ``rest_inertia``
+    symmetric, ``drive_axis`` a unit vector (:class:`ValueError` otherwise)."""
+    if not all(np.all(np.isfinite(x)) for x in values.values()):
+        raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
+    s = values["rest_inertia"]
+    if (structure and not np.allclose(s, s.T, rtol=1e-9, atol=0.0)) \
+            or np.linalg.eigvalsh(s).min() <= 0:
+        raise ValueError("rest_inertia must be symmetric positive definite")
+    if structure and abs(np.linalg.norm(values["drive_axis"]) - 1.0) > 1e-9:
+        raise ValueError(f"drive_axis must be a unit vector, got {values['drive_axis']}")
+    if np.any(values["frequencies_hz"] <= 0) or np.any(values["damping"] < 0):
+        raise ValueError("frequencies_hz must be > 0 and damping >= 0")
+
+
 @dataclass(frozen=True)
 class ScheduledPhysicalModel:
     """Hub plus one cantilever mode per appendage, scheduled on the drive angle.
@@ -127,15 +144,7 @@ class ScheduledPhysicalModel:
             raise ValueError(f"turning must have one flag per mode ({n}), got {turning.shape}")
         if sensors.size and (sensors.min() < 0 or sensors.max() >= n):
             raise ValueError(f"sensor_appendage must be indices in [0, {n}), got {sensors}")
-        if not all(np.all(np.isfinite(x)) for x in v.values()):
-            raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
-        s = v["rest_inertia"]
-        if not np.allclose(s, s.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(s).min() <= 0:
-            raise ValueError("rest_inertia must be symmetric positive definite")
-        if abs(np.linalg.norm(v["drive_axis"]) - 1.0) > 1e-9:
-            raise ValueError(f"drive_axis must be a unit vector, got {v['drive_axis']}")
-        if np.any(v["frequencies_hz"] <= 0) or np.any(v["damping"] < 0):
-            raise ValueError("frequencies_hz must be > 0 and damping >= 0")
+        _check_values(v, structure=True)
         v["turning"], v["sensor_appendage"] = turning, sensors
         for name, value in v.items():
             value.setflags(write=False)
@@ -156,12 +165,7 @@ class ScheduledPhysicalModel:
         values = {"rest_inertia": rest_inertia, "drive_anisotropy": drive_anisotropy,
                   "frequencies_hz": frequencies_hz, "damping": damping,
                   "couplings": couplings, "tips": tips}
-        if not all(np.all(np.isfinite(x)) for x in values.values()):
-            raise ValueError("every parameter of a ScheduledPhysicalModel must be finite")
-        if np.linalg.eigvalsh(rest_inertia).min() <= 0:
-            raise ValueError("rest_inertia must be symmetric positive definite")
-        if np.any(frequencies_hz <= 0) or np.any(damping < 0):
-            raise ValueError("frequencies_hz must be > 0 and damping >= 0")
+        _check_values(values, structure=False)
         model = object.__new__(cls)
         values.update(turning=turning, sensor_appendage=sensor_appendage, drive_axis=drive_axis)
         for name, value in values.items():

@@ -130,8 +130,8 @@ def regressor_gram(z: np.ndarray, p: int, phi: np.ndarray | None = None) -> np.n
     p : int
         VARX lags.
     phi : (N - p, p (r + m)) ndarray, optional
-        The regressor matrix, if the caller has it (its first block column gives
-        the first block row in one product).
+        The regressor matrix, if the caller has it (built otherwise): its first
+        block column gives the first block row in one product.
 
     Returns
     -------
@@ -140,13 +140,10 @@ def regressor_gram(z: np.ndarray, p: int, phi: np.ndarray | None = None) -> np.n
     """
     n_samples, zr = z.shape
     d = p * zr
-    g = np.empty((p, zr, d))
     if phi is None:
-        z0 = z[p - 1:n_samples - 1]
-        for j in range(p):
-            g[0, :, j * zr:(j + 1) * zr] = z0.T @ z[p - 1 - j:n_samples - 1 - j]
-    else:
-        g[0] = phi[:, :zr].T @ phi
+        phi = regressor_matrix(z, p)
+    g = np.empty((p, zr, d))
+    g[0] = phi[:, :zr].T @ phi
     if p > 1:
         enters = z[p - 2::-1][:p - 1].ravel()              # z_{p-2-i}, i = 0 .. p-2
         leaves = z[n_samples - p:n_samples - 1][::-1].ravel()    # z_{N-2-i}
