@@ -46,6 +46,7 @@ from controllers import (
     PrivilegedFeatures,
 )
 from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent, paired_ratio
+from spacecraft_lab.score_cache import default_cache
 from spacecraft_lab.training import _evaluate, _make_env, _one_torch_thread, _score_comparators
 
 __all__ = ["COLLECTION_SEED", "SOURCES", "adaptation_table", "run_adaptation"]
@@ -105,7 +106,7 @@ def _group_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
 def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
                    seeds: Sequence[int] = HELD_OUT_SEEDS, workers: int | None = None,
-                   progress: bool = True) -> dict[str, Any]:
+                   progress: bool = True, cache: bool = True) -> dict[str, Any]:
     """The RMA comparison of one or more policies trained on the truth's parameters.
 
     Parameters
@@ -122,6 +123,9 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
         Processes scoring the LQG comparators (default: the cores).
     progress : bool
         Show a progress bar.
+    cache : bool
+        Read the comparators' scores from :func:`spacecraft_lab.score_cache.default_cache`
+        and store new ones there (default); False scores them again.
 
     Returns
     -------
@@ -157,7 +161,7 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
 
     collection = tuple(range(COLLECTION_SEED, COLLECTION_SEED + int(episodes)))
     comparators = _score_comparators(scenario, env_kwargs, seeds, workers, progress,
-                                     when="First")
+                                     when="First", cache=default_cache() if cache else None)
     import torch
 
     results = []

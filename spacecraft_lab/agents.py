@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from controllers.lqg import INTEGRAL_SETTLE_S
+from spacecraft_lab.score_cache import default_cache
 from spacecraft_lab.training import (
     ALGORITHMS,
     COMPARATORS,
@@ -175,7 +176,8 @@ def paired_ratio(mine: Sequence[float], theirs: Sequence[float]) -> dict[str, fl
 
 
 def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
-                   workers: int | None = None, progress: bool = True) -> dict[str, Any]:
+                   workers: int | None = None, progress: bool = True,
+                   cache: bool = True) -> dict[str, Any]:
     """Score a saved agent and the LQG comparators on the same episodes.
 
     Parameters
@@ -189,6 +191,9 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
         the scores do not depend on it.
     progress : bool
         Show progress bars.
+    cache : bool
+        Read the comparators' scores from :func:`spacecraft_lab.score_cache.default_cache`
+        and store new ones there (default); False scores them again.
 
     Returns
     -------
@@ -211,7 +216,8 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
                           settings["env_kwargs"], seeds,
                           base_settle_s=settings["base_integral_settle_s"])
     scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
-                                                   seeds, workers, progress, when="Then")}
+                                                   seeds, workers, progress, when="Then",
+                                                   cache=default_cache() if cache else None)}
     mine = score["cost_after_100s_per_seed"]
     agent_over = {key: paired_ratio(mine, scores[key]["cost_after_100s_per_seed"])
                   for key, _ in COMPARATORS}

@@ -487,6 +487,13 @@ def build_parser() -> argparse.ArgumentParser:
     adapt.add_argument("--out", type=_output_directory, default="results/adapt",
                        help="output directory (adaptation.json, table.md, adaptation.png)")
 
+    for scoring in (train, evaluate, adapt):
+        scoring.add_argument("--no-cache", dest="cache", action="store_false",
+                             help="score the LQG comparators again instead of reading "
+                                  "their scores from the cache (SPACECRAFT_CACHE_DIR, "
+                                  "default ~/.cache/flexible-spacecraft; keyed by the "
+                                  "settings, the episodes and the code)")
+
     table = command("rl-table", help="comparison table of 'train' output directories")
     table.add_argument("dirs", nargs="+", type=_run_directory, metavar="DIR",
                        help="output directories of 'spacecraft train'")
@@ -577,7 +584,8 @@ def _train(args: argparse.Namespace) -> int:
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
-                     workers=args.workers, envs=args.envs, log_std_init=args.log_std)
+                     workers=args.workers, envs=args.envs, log_std_init=args.log_std,
+                     cache=args.cache)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
                                "repeat", "reward", "envs", "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",
@@ -595,7 +603,7 @@ def _train(args: argparse.Namespace) -> int:
 
 def _evaluate(args: argparse.Namespace) -> int:
     seeds = tuple(range(args.first_seed, args.first_seed + args.episodes))
-    result = evaluate_agent(args.agent, seeds, workers=args.workers)
+    result = evaluate_agent(args.agent, seeds, workers=args.workers, cache=args.cache)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     table = evaluation_table(result)
@@ -608,7 +616,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _adapt(args: argparse.Namespace) -> int:
     seeds = tuple(range(HELD_OUT_SEEDS[0], HELD_OUT_SEEDS[0] + args.scored_episodes))
-    result = run_adaptation(args.agents, args.episodes, seeds, workers=args.workers)
+    result = run_adaptation(args.agents, args.episodes, seeds, workers=args.workers,
+                            cache=args.cache)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     table = adaptation_table(result)

@@ -84,6 +84,7 @@ from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ActionRepeat, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
+from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
@@ -284,19 +285,39 @@ def _score_comparator(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tup
 
 def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
                        workers: int | None, progress: bool,
-                       when: str = "Before training") -> dict[str, dict[str, Any]]:
+                       when: str = "Before training",
+                       cache: ScoreCache | None = None) -> dict[str, dict[str, Any]]:
     """The comparators on the evaluation episodes, on a process pool when
-    ``workers`` (default: the cores) is above 1; ``when`` opens the line that says so."""
+    ``workers`` (default: the cores) is above 1; ``when`` opens the line that says so.
+    ``cache``: scores found there are read, not computed, and new ones stored
+    (:mod:`spacecraft_lab.score_cache`; None: score every comparator)."""
+    inputs = {key: {"scenario": scenario, "env_kwargs": env_kwargs,
+                    "seeds": list(eval_seeds), "controller": key} for key, _ in COMPARATORS}
+    scores = {key: cache.get(inputs[key]) for key, _ in COMPARATORS} if cache else {}
+    todo = [(key, make) for key, make in COMPARATORS if scores.get(key) is None]
     if progress:
-        names = ", ".join(key.replace("_", " ") for key, _ in COMPARATORS)
-        tqdm.write(f"{when}: scoring the {len(COMPARATORS)} comparison controllers "
-                   f"({names}) on the {len(eval_seeds)} evaluation episodes the agents are "
-                   "judged on; each tick is one controller's episodes.")
-    with tqdm(total=len(COMPARATORS), desc="comparison controllers",
-              disable=not progress) as bar:
-        scores = map_in_order(partial(_score_comparator, scenario, env_kwargs, eval_seeds),
-                              [make for _, make in COMPARATORS], workers, bar.update)
-    return {key: score for (key, _), score in zip(COMPARATORS, scores, strict=True)}
+        names = ", ".join(key.replace("_", " ") for key, _ in todo)
+        found = (f"{len(COMPARATORS) - len(todo)} of the {len(COMPARATORS)} comparison "
+                 f"controllers' scores on these episodes come from the cache ({cache.directory}"
+                 "; --no-cache scores them again)") if len(todo) < len(COMPARATORS) else ""
+        if todo:
+            tqdm.write(f"{when}: scoring the {len(todo)} comparison controllers "
+                       f"({names}) on the {len(eval_seeds)} evaluation episodes the agents "
+                       "are judged on; each tick is one controller's episodes."
+                       + (f" The other {found}." if found else ""))
+        else:
+            tqdm.write(f"{when}: all {found}.")
+    if todo:
+        with tqdm(total=len(todo), desc="comparison controllers",
+                  disable=not progress) as bar:
+            computed = map_in_order(partial(_score_comparator, scenario, env_kwargs,
+                                            eval_seeds),
+                                    [make for _, make in todo], workers, bar.update)
+        for (key, _), score in zip(todo, computed, strict=True):
+            scores[key] = score
+            if cache is not None:
+                cache.put(inputs[key], score)
+    return {key: scores[key] for key, _ in COMPARATORS}
 
 
 @contextmanager
@@ -336,7 +357,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  randomize: bool = False, repeat: int | None = None,
                  reward: str = "bounded", first_seed: int = 0,
                  eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None,
-                 envs: int = 1, log_std_init: float | None = None) -> dict:
+                 envs: int = 1, log_std_init: float | None = None,
+                 cache: bool = True) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -361,6 +383,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     normalized action units (default: :data:`HYPERPARAMETERS`' -1, or
     :data:`RESIDUAL_HYPERPARAMETERS`' -3 for the residual settings, whose action is
     scaled by :data:`RESIDUAL_SCALE`); PPO only.
+
+    ``cache``: read the comparators' scores from, and store them in,
+    :func:`spacecraft_lab.score_cache.default_cache` (they depend only on the scenario,
+    the env's arguments, the episodes and the code, so every run after the first with
+    the same settings skips them); False scores them again.
 
     ``envs``: environments stepped side by side while training (default 1: one
     ``DummyVecEnv`` env in this process; above 1, a ``SubprocVecEnv`` of that many
@@ -420,7 +447,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    comparators = _score_comparators(scenario, env_kwargs, eval_seeds, workers, progress)
+    comparators = _score_comparators(scenario, env_kwargs, eval_seeds, workers, progress,
+                                     cache=default_cache() if cache else None)
     baseline = comparators["adaptive_lqg"]
     # the threshold on the score itself (the cost from 100 s, median episode): the
     # whole-episode attitude RMS is dominated by the slew, which every policy flies alike

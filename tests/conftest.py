@@ -48,3 +48,13 @@ def _expression(text: str) -> str:
         elif ch in ",#\n" and depth == 0:
             return text[:i].strip()
     return text.strip()
+
+
+@pytest.fixture(autouse=True)
+def _private_score_cache(tmp_path_factory: pytest.TempPathFactory,
+                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test its own cache of the comparators' scores
+    (:mod:`spacecraft_lab.score_cache`, also for the commands it runs as
+    subprocesses): nothing is read from or written to the user's cache, and no
+    test sees what another stored, whatever the order."""
+    monkeypatch.setenv("SPACECRAFT_CACHE_DIR", str(tmp_path_factory.mktemp("score-cache")))

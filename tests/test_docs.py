@@ -244,13 +244,14 @@ def test_entry_point_examples_run():
     )
     from identifiers import ClassicalRPBSID, ImprovedRPBSID, StateSpaceModel, default_identifier
     from spacecraft_env import FlexibleSpacecraftEnv, check_parameter
+    from spacecraft_lab.score_cache import ScoreCache
 
     finder = doctest.DocTestFinder(recurse=False)
     runner = doctest.DocTestRunner()
     failed, report = 0, []
     for obj in (FlexibleSpacecraftEnv, default_identifier, ImprovedRPBSID, ClassicalRPBSID,
                 StateSpaceModel.modal, AdaptiveLQG, run_episode, compare, Trajectory,
-                PhysicalFeatures, IdentifiedModelFeatures, check_parameter):
+                PhysicalFeatures, IdentifiedModelFeatures, check_parameter, ScoreCache):
         tests = [t for t in finder.find(obj) if t.examples]
         assert tests, f"{obj.__qualname__} has no doctest examples"
         for test in tests:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import pickle
 import tempfile
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -51,6 +53,8 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     run = m["runs"][0]
     assert run["final"] == {k: v for k, v in run["curve"][-1].items() if k != "timesteps"}
     assert m["eval_seeds"] == [1000, 1001]
+    # the comparators' scores are kept for the next run with these settings
+    assert len(list(Path(os.environ["SPACECRAFT_CACHE_DIR"]).glob("*.json"))) == 5
     # the learning-speed threshold is on the score (the cost from 100 s), and every mean
     # names its worst episode
     assert m["threshold"] == "cost_after_100s"
