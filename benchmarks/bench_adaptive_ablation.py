@@ -66,6 +66,7 @@ from controllers import (
     RobustLQG,
     TrueModelIdentifier,
     compare,
+    fast_identifier,
 )
 from controllers.baselines import process_noise
 from controllers.harness import SCORED_FROM_S
@@ -193,7 +194,8 @@ def true_resonators(env: gym.Env, t: float = 0.0) -> list[Resonator]:
 
 
 def _adaptive(env: gym.Env) -> AdaptiveLQG:
-    return AdaptiveLQG(env, weights=LQRWeights())
+    # the structured recursive identifier's loop, which this ablation takes apart
+    return AdaptiveLQG(env, weights=LQRWeights(), identifier=fast_identifier(env))
 
 
 def _true_gain(env: gym.Env) -> AdaptiveLQG:
@@ -319,7 +321,8 @@ def hub_passivity(a: np.ndarray, b: np.ndarray, c: np.ndarray, rate_rows: np.nda
 def frozen_loops(registered: str, kwargs: dict, at_s: float, seed: int) -> None:
     env = gym.make(registered, **kwargs)
     truth = env.unwrapped.model
-    adaptive, oracle = AdaptiveLQG(env, weights=LQRWeights()), OracleLQG(env, LQRWeights())
+    adaptive = AdaptiveLQG(env, weights=LQRWeights(), identifier=fast_identifier(env))
+    oracle = OracleLQG(env, LQRWeights())
     obs, info = env.reset(seed=seed)
     adaptive.reset(seed)
     for _ in range(round(at_s / truth.dt)):

@@ -9,12 +9,14 @@ per step: both medians are printed side by side.
 Printed: the adaptive step's median and 90th percentile beside the
 from-scratch Riccati solve, and their ratio.
 
-With ``--identifier scheduled`` the loop flies the drive-scheduled physical
-fit (``spacecraft_lab.control.scheduled_physical_identifier``); its one-off
-fit at the end of the warm-up is printed apart, the steps after it are timed
-as usual.
+The loop flies the adaptive LQG's default identifier, the drive-scheduled
+physical fit (``controllers.scheduled_identifier``; ``--identifier scheduled``,
+the default since 2026-11-28): its fits (the warm-up's, then the refits on the
+growing record) are printed apart, the steps between them are timed as usual.
+``--identifier fast`` flies the structured recursive identifier
+(``controllers.fast_identifier``, the default before), every step timed.
 
-Usage: ``python benchmarks/bench_control.py [--steps 1500] [--identifier default|scheduled]``
+Usage: ``python benchmarks/bench_control.py [--steps 1500] [--identifier scheduled|fast]``
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from controllers import AdaptiveLQG
+from controllers import AdaptiveLQG, fast_identifier, scheduled_identifier
 from controllers.lqg import augment_integral
 from spacecraft_conventions import single_threaded_blas
 
@@ -34,15 +36,11 @@ from spacecraft_conventions import single_threaded_blas
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1500)
-    parser.add_argument("--identifier", choices=("default", "scheduled"), default="default")
+    parser.add_argument("--identifier", choices=("scheduled", "fast"), default="scheduled")
     args = parser.parse_args()
     env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v2")
-    if args.identifier == "scheduled":
-        from spacecraft_lab.control import scheduled_physical_identifier
-
-        ctrl = AdaptiveLQG(env.unwrapped, identifier=scheduled_physical_identifier(env))
-    else:
-        ctrl = AdaptiveLQG(env.unwrapped)
+    make = scheduled_identifier if args.identifier == "scheduled" else fast_identifier
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=make(env))
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     step_times, models = [], []

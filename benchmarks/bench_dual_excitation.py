@@ -13,11 +13,13 @@ prints, side by side, the adaptive LQG's and the oracle LQG's common cost from
 100 s and torque RMS over the last 100 s (all axes, N m), with the bars: cost at
 most 1.2x the oracle's, torque RMS at most 1.5x the oracle's + 0.005 N m.
 
-``--identifier scheduled`` flies the drive-scheduled physical fit instead of the
-default identifier (``spacecraft_lab.control.scheduled_physical_identifier``).
+``--identifier scheduled`` (the default since 2026-11-28) flies the adaptive LQG's
+default identifier, the drive-scheduled physical fit
+(``controllers.scheduled_identifier``); ``--identifier fast`` the structured
+recursive identifier (``controllers.fast_identifier``, the default before).
 
 Usage: ``python benchmarks/bench_dual_excitation.py [--seeds 3] [--long 1000]
-[--identifier default|scheduled]``
+[--identifier scheduled|fast]``
 """
 
 from __future__ import annotations
@@ -28,16 +30,20 @@ import gymnasium as gym
 import numpy as np
 
 import spacecraft_env  # noqa: F401  (registers the environments)
-from controllers import AdaptiveLQG, OracleLQG, episode_metrics, run_episode
+from controllers import (
+    AdaptiveLQG,
+    OracleLQG,
+    episode_metrics,
+    fast_identifier,
+    run_episode,
+    scheduled_identifier,
+)
 
 
 def adaptive(env, identifier: str) -> AdaptiveLQG:
-    """The adaptive LQG on ``env`` with the default or the scheduled identifier."""
-    if identifier == "scheduled":
-        from spacecraft_lab.control import scheduled_physical_identifier
-
-        return AdaptiveLQG(env.unwrapped, identifier=scheduled_physical_identifier(env))
-    return AdaptiveLQG(env.unwrapped)
+    """The adaptive LQG on ``env`` with the scheduled or the fast identifier."""
+    make = scheduled_identifier if identifier == "scheduled" else fast_identifier
+    return AdaptiveLQG(env.unwrapped, identifier=make(env))
 
 
 def windows(traj, events) -> dict[str, float]:
@@ -61,7 +67,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--long", type=float, default=1000.0,
                         help="length of the constant-plant run, s (0: skip it)")
-    parser.add_argument("--identifier", choices=("default", "scheduled"), default="default")
+    parser.add_argument("--identifier", choices=("scheduled", "fast"), default="scheduled")
     args = parser.parse_args()
     print("excitation RMS (N m, all axes), median [worst] over seeds")
     for env_id in ("FlexibleSpacecraft-v2", "FlexibleSpacecraftDocking-v2"):
@@ -78,7 +84,7 @@ def main() -> None:
         long_run(args.seeds, args.long, args.identifier)
 
 
-def long_run(seeds: int, seconds: float, identifier: str = "default") -> None:
+def long_run(seeds: int, seconds: float, identifier: str = "scheduled") -> None:
     """The constant plant over ``seconds``: cost and late torque, adaptive beside oracle."""
     steps = round(seconds / 0.1)
     print(f"constant plant over {seconds:.0f} s: adaptive / oracle LQG, paired seeds")

@@ -1,7 +1,7 @@
 """The drive-scheduled physical fit: what one fit of the warm-up's record costs.
 
 Flies the adaptive LQG on the drive-scheduled identifier
-(``spacecraft_lab.control.scheduled_physical_identifier``) through its 30 s
+(``controllers.scheduled_identifier``) through its 30 s
 warm-up on paddle rotation, captures the record the identifier fits, then
 times, on that record:
 
@@ -29,10 +29,10 @@ import time
 import gymnasium as gym
 import numpy as np
 
-import identifiers.structured.scheduled_identifier as scheduled_identifier
-from controllers import AdaptiveLQG, LQRWeights, episode_metrics, run_episode
+import identifiers.structured.scheduled_identifier as scheduled_module
+from controllers import AdaptiveLQG, LQRWeights, episode_metrics, run_episode, scheduled_identifier
 from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
-from spacecraft_lab.control import env_id, env_kwargs_for, scheduled_physical_identifier
+from spacecraft_lab.control import env_id, env_kwargs_for
 
 
 def _loop(snr_db: float | None, **options) -> tuple[gym.Env, AdaptiveLQG]:
@@ -41,27 +41,27 @@ def _loop(snr_db: float | None, **options) -> tuple[gym.Env, AdaptiveLQG]:
     env = gym.make(env_id("paddle_rotation"),
                    **env_kwargs_for("paddle_rotation", task="slew", snr_db=snr_db))
     return env, AdaptiveLQG(env, weights=LQRWeights(),
-                            identifier=scheduled_physical_identifier(env, **options))
+                            identifier=scheduled_identifier(env, **options))
 
 
 def _record(seed: int, snr_db: float | None) -> tuple[tuple, dict]:
     """The arguments of the identifier's fit call at the end of its warm-up."""
     env, ctrl = _loop(snr_db)
     captured: list = []
-    real_fit = scheduled_identifier.fit_scheduled_model
+    real_fit = scheduled_module.fit_scheduled_model
 
     def capture(*args, **kwargs):
         captured.append((args, kwargs))
         return real_fit(*args, **kwargs)
 
-    scheduled_identifier.fit_scheduled_model = capture
+    scheduled_module.fit_scheduled_model = capture
     try:
         obs, info = env.reset(seed=seed)
         ctrl.reset(seed)
         while not captured:
             obs, _, _, _, info = env.step(ctrl.act(obs, info))
     finally:
-        scheduled_identifier.fit_scheduled_model = real_fit
+        scheduled_module.fit_scheduled_model = real_fit
     return captured[0]
 
 
@@ -109,8 +109,8 @@ def main() -> None:
     snr = None if args.snr_db < 0 else args.snr_db
     fit_args, fit_kwargs = _record(args.seed, snr)
     u, _, angle, dt = fit_args[:4]
-    fit = scheduled_identifier.fit_scheduled_model(*fit_args, **fit_kwargs)   # compiles
-    seconds = _best_of(lambda: scheduled_identifier.fit_scheduled_model(*fit_args,
+    fit = scheduled_module.fit_scheduled_model(*fit_args, **fit_kwargs)   # compiles
+    seconds = _best_of(lambda: scheduled_module.fit_scheduled_model(*fit_args,
                                                                          **fit_kwargs),
                        args.repeats)
     record_s = u.shape[0] * dt

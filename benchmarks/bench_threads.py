@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from controllers import AdaptiveLQG, IdentifiedModelFeatures
+from controllers import AdaptiveLQG, IdentifiedModelFeatures, fast_identifier
 from identifiers import default_identifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel
@@ -64,7 +64,7 @@ def features_path(steps: int) -> Callable[[], float]:
 def adaptive_path(steps: int) -> Callable[[], float]:
     def run() -> float:
         env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
-        ctrl = AdaptiveLQG(env.unwrapped)
+        ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
         obs, info = env.reset(seed=0)
         ctrl.reset(0)
         start = time.perf_counter()

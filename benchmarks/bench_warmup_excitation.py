@@ -14,14 +14,16 @@ rigid gain's median error from 60 s, for three identifiers side by side:
 * ``truth``: the same law handed the true model after the warm-up (the
   ceiling of any identifier behind this warm-up);
 * ``scheduled``: the drive-scheduled physical fit
-  (``spacecraft_lab.control.scheduled_physical_identifier``);
+  (``controllers.scheduled_identifier``, the adaptive LQG's default since
+  2026-11-28);
 * ``scheduled-held``: the same fit held after the warm-up
   (``accumulate=False``; the default refits as its record doubles);
-* ``default``: the default identifier.
+* ``fast``: the structured recursive identifier (``controllers.fast_identifier``,
+  the adaptive LQG's default before; ``default`` in the commands printed before).
 
 Usage: ``python benchmarks/bench_warmup_excitation.py [--scenario paddle_rotation]
 [--task regulation] [--snr-db 40] [--seeds 10] [--amplitudes 1.0 0.5]
-[--identifiers truth scheduled default] [--workers 2]``
+[--identifiers truth scheduled fast] [--workers 2]``
 """
 
 from __future__ import annotations
@@ -35,9 +37,17 @@ import numpy as np
 from bench_adaptive_ablation import CLOSED_LOOP_SETTINGS, LateTruth
 
 import spacecraft_env  # noqa: F401  (registers the environments)
-from controllers import AdaptiveLQG, LQRWeights, OracleLQG, episode_metrics, run_episode
+from controllers import (
+    AdaptiveLQG,
+    LQRWeights,
+    OracleLQG,
+    episode_metrics,
+    fast_identifier,
+    run_episode,
+    scheduled_identifier,
+)
 from controllers.excitation import BinaryExcitation
-from spacecraft_lab.control import env_id, env_kwargs_for, scheduled_physical_identifier
+from spacecraft_lab.control import env_id, env_kwargs_for
 
 PARTS = ("attitude", "rate", "deflection", "torque")
 
@@ -49,13 +59,12 @@ def _controller(env: gym.Env, identifier: str, amplitude: float):
         ident = LateTruth(env)
         ident.warmup = CLOSED_LOOP_SETTINGS["warmup"]
     elif identifier == "scheduled":
-        ident = scheduled_physical_identifier(env)
+        ident = scheduled_identifier(env)
     elif identifier == "scheduled-held":
-        ident = scheduled_physical_identifier(env, accumulate=False)
+        ident = scheduled_identifier(env, accumulate=False)
     else:
-        ident = None
-    options = {} if ident is None else {"identifier": ident}
-    ctrl = AdaptiveLQG(env, weights=LQRWeights(), **options)
+        ident = fast_identifier(env)
+    ctrl = AdaptiveLQG(env, weights=LQRWeights(), identifier=ident)
     # the default's excitation with another warm-up amplitude
     ctrl.excitation = BinaryExcitation(warmup_amplitude=amplitude, amplitude=0.0,
                                        warmup_steps=ctrl.excitation.warmup_steps)
@@ -82,8 +91,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--amplitudes", type=float, nargs="+", default=[1.0, 0.5],
                         help="warm-up amplitudes to compare, N m per axis")
-    parser.add_argument("--identifiers", nargs="+", default=["truth", "scheduled", "default"],
-                        choices=("truth", "scheduled", "scheduled-held", "default"))
+    parser.add_argument("--identifiers", nargs="+", default=["truth", "scheduled", "fast"],
+                        choices=("truth", "scheduled", "scheduled-held", "fast"))
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     snr = None if args.snr_db < 0 else args.snr_db

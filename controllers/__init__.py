@@ -54,6 +54,11 @@ from controllers.harness import (
     run_episode,
     stage_costs,
 )
+from controllers.loop_identifiers import (
+    closed_loop_identifier,
+    fast_identifier,
+    scheduled_identifier,
+)
 from controllers.lqg import (
     LQGLaw,
     LQRWeights,
@@ -94,6 +99,7 @@ __all__ = [
     "TrueModelIdentifier",
     "__version__",
     "check_weights",
+    "closed_loop_identifier",
     "compare",
     "controller_shares",
     "dlqr",
@@ -101,10 +107,12 @@ __all__ = [
     "episode_metrics",
     "equilibrium_state",
     "fallback_causes",
+    "fast_identifier",
     "input_disk_margin",
     "nominal_model",
     "output_weight",
     "run_episode",
+    "scheduled_identifier",
     "set_integral_settle",
     "spectral_radius",
     "stage_costs",

@@ -74,8 +74,9 @@ from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
+from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights, equilibrium_state
-from identifiers import CLOSED_LOOP_SETTINGS, OnlineIdentifier, default_identifier
+from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["EXCITATION_WINDOW_S", "FALLBACK_CAUSES", "FALLBACK_WARNING_S", "AdaptiveLQG",
@@ -229,10 +230,8 @@ class AdaptiveLQG(_LQGController):
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
                  warmup_controller: Controller | None = None) -> None:
         super().__init__(env, weights)
-        model = self.env.model
         if identifier is None:
-            identifier = default_identifier(self.measured_layout, n=model.n, dt=model.dt,
-                                            **CLOSED_LOOP_SETTINGS)
+            identifier = closed_loop_identifier(env)
         if rigid_state not in ("kalman", "filter", "measured"):
             raise ValueError(f"rigid_state must be 'kalman', 'filter' or 'measured', "
                              f"got {rigid_state!r}")

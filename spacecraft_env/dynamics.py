@@ -323,6 +323,9 @@ class FlexibleSpacecraftModel:
         self.sensor_appendage = tuple(i for i, a in enumerate(p.appendages)
                                       for _ in a.sensor_positions)
         self.appendage_turns = tuple(bool(a.rotates) for a in p.appendages)
+        #: The drive's axis in the body frame (:data:`DRIVE_AXIS`), for a
+        #: consumer that may not import this package (a controller's identifier).
+        self.drive_axis = DRIVE_AXIS
 
     # --------------------------------------------------------- configuration
     def configuration(self, t: float) -> Configuration:

@@ -360,10 +360,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output directory")
     ctl.add_argument("--controllers", nargs="+", choices=sorted(CONTROLLER_KEYS), default=None,
                      help="controllers to run (default: all but the three options "
-                          "adaptive-lqg-physical and adaptive-lqg-scheduled, the adaptive LQG "
-                          "on a physical model fitted to its warm-up, held or scheduled on the "
-                          "paddle angle, and adaptive-lqg-structured-rpbsid, on the paper's "
-                          "improved RPBSID with an exact rigid block)")
+                          "adaptive-lqg-physical, the adaptive LQG on a physical model "
+                          "fitted to its warm-up and held, adaptive-lqg-scheduled, the same "
+                          "loop as adaptive-lqg (whose default identifier is that fit, "
+                          "scheduled on the paddle angle), and adaptive-lqg-structured-rpbsid, "
+                          "on the paper's improved RPBSID with an exact rigid block; "
+                          "adaptive-lqg-fast flies the structured recursive identifier)")
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "
                           "+-2 deg")

@@ -15,7 +15,7 @@ import pytest
 from filelock import FileLock
 from threadpoolctl import threadpool_limits
 
-from controllers import AdaptiveLQG, IdentifiedModelFeatures, dlqr
+from controllers import AdaptiveLQG, IdentifiedModelFeatures, dlqr, fast_identifier
 from identifiers import (
     ClassicalRPBSID,
     ImprovedRPBSID,
@@ -189,7 +189,7 @@ def test_features_wrapper_feeds_every_sample_and_the_identifier_counts_nans():
 
 def test_adaptive_lqg_feeds_nan_samples_to_the_identifier():
     env = FlexibleSpacecraftEnv("docking")
-    ctrl = AdaptiveLQG(env)
+    ctrl = AdaptiveLQG(env, identifier=fast_identifier(env))
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     for k in range(50):

@@ -20,7 +20,7 @@ import pytest
 from threadpoolctl import threadpool_info
 
 import spacecraft_lab.control as control_job
-from controllers import AdaptiveLQG
+from controllers import AdaptiveLQG, fast_identifier
 from identifiers import (
     ClassicalRPBSID,
     ImprovedRPBSID,
@@ -70,7 +70,7 @@ def multisine():
 # ----------------------------------------------------------------- D1
 def _fallback_tail(fault: str, seed: int) -> tuple[float, AdaptiveLQG]:
     env = FlexibleSpacecraftEnv("paddle_rotation")
-    ctrl = AdaptiveLQG(env)
+    ctrl = AdaptiveLQG(env, identifier=fast_identifier(env))
     obs, info = env.reset(seed=seed)
     ctrl.reset(seed)
     flown = []

@@ -24,6 +24,7 @@ from controllers import (
     check_weights,
     dlqr,
     episode_metrics,
+    fast_identifier,
     input_disk_margin,
     run_episode,
 )
@@ -180,7 +181,7 @@ def test_stability_verdict_flags_a_saturated_limit_cycle():
 
 def test_adaptive_lqg_runs_and_counts_its_safeguards():
     env = gym.make("FlexibleSpacecraftDocking-v2")
-    ctrl = AdaptiveLQG(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
     traj = run_episode(env, ctrl, seed=0, max_steps=650)
     stats = traj.controller_stats
     assert stats["steps"] == 650
@@ -210,7 +211,7 @@ def test_the_warmup_controller_flies_until_the_identifier_has_a_model():
     identified gain passes: see the integral test below)."""
     env = gym.make("FlexibleSpacecraftDocking-v2", task="slew")
     warm = _RecordedPD(env.unwrapped)
-    ctrl = AdaptiveLQG(env.unwrapped, warmup_controller=warm)
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env), warmup_controller=warm)
     handed = []
     transfer = ctrl._transfer_integral
     ctrl._transfer_integral = lambda to_identified: (handed.append(to_identified),
@@ -228,7 +229,8 @@ def test_the_warmup_controller_flies_until_the_identifier_has_a_model():
     assert handed and handed[0] is True and ctrl.stats["fallback_steps"] > first
     # one controller for both roles: the robust design flies the warm-up
     robust = RobustLQG(env.unwrapped)
-    both = AdaptiveLQG(env.unwrapped, fallback=robust, warmup_controller=robust,
+    both = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env), fallback=robust,
+                       warmup_controller=robust,
                        excitation=BinaryExcitation(0.0, 0.0))
     alone = RobustLQG(env.unwrapped)
     a = run_episode(env, both, seed=0, max_steps=100).actions
@@ -279,7 +281,7 @@ def test_disk_margin_skips_a_frequency_at_an_undamped_pole():
 
 def test_adaptive_lqg_reads_attitude_and_rate_states_from_the_sensors():
     env = gym.make("FlexibleSpacecraftDocking-v2")
-    ctrl = AdaptiveLQG(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
     traj = run_episode(env, ctrl, seed=0, max_steps=560)
     y = traj.observations[-1][ctrl._meas_obs].astype(float)
     x = ctrl.identifier.filtered_state(y)
@@ -291,13 +293,13 @@ def test_adaptive_lqg_reads_attitude_and_rate_states_from_the_sensors():
     assert np.max(np.abs(c[rows] @ x - y[rows])) > 1e-9
     np.testing.assert_array_equal(measured[6:], x[6:])          # flexible states untouched
     with pytest.raises(ValueError, match="rigid_state"):
-        AdaptiveLQG(env.unwrapped, rigid_state="sensors")
+        AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env), rigid_state="sensors")
 
 
 def test_adaptive_lqg_rejects_gains_whose_loop_margin_is_too_small():
     env = gym.make("FlexibleSpacecraftDocking-v2")
     # the prediction test off: only the margin can reject the identified gains
-    strict = AdaptiveLQG(env.unwrapped, acceptance=GainAcceptance(
+    strict = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env), acceptance=GainAcceptance(
         max_prediction_error=np.inf, min_disk_margin=0.999))
     traj = run_episode(env, strict, seed=0, max_steps=560)
     assert traj.controller_stats["rejected_by"].get("margin", 0) > 0
@@ -317,7 +319,8 @@ def test_the_dual_excitation_runs_only_in_its_window_after_the_warm_up_or_a_chan
     def run(window, steps=420, event_at=None, more=0):
         reported.clear()
         env = FlexibleSpacecraftEnv("docking")
-        ctrl = AdaptiveLQG(env, uncertainty_tolerance=1e-9, excitation_window_s=window)
+        ctrl = AdaptiveLQG(env, identifier=fast_identifier(env), uncertainty_tolerance=1e-9,
+                           excitation_window_s=window)
         obs, info = env.reset(seed=0)
         ctrl.reset(0)
         excitation, warm_at = [], None
@@ -358,7 +361,8 @@ def test_every_fallback_step_after_60s_has_its_cause(acceptance, cause):
     from controllers.adaptive import FALLBACK_CAUSES
 
     env = gym.make("FlexibleSpacecraftDocking-v2")
-    ctrl = AdaptiveLQG(env.unwrapped, acceptance=GainAcceptance(**acceptance))
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env),
+                       acceptance=GainAcceptance(**acceptance))
     traj = run_episode(env, ctrl, seed=0, max_steps=700)
     stats = traj.controller_stats
     assert stats["steps_after_60s"] == 100 and stats["redesigns"] == 0
@@ -377,7 +381,7 @@ def test_the_fallback_causes_of_a_default_loop_add_up():
     from controllers.adaptive import FALLBACK_CAUSES
 
     env = gym.make("FlexibleSpacecraftPaddleRotation-v2", snr_db=None)
-    ctrl = AdaptiveLQG(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the fallback warning, on clean data
         traj = run_episode(env, ctrl, seed=0, max_steps=800)
@@ -390,7 +394,7 @@ def test_the_fallback_causes_of_a_default_loop_add_up():
 
 def test_nan_observation_reaches_the_identifier_which_skips_and_counts_it():
     env = FlexibleSpacecraftEnv("docking")
-    ctrl = AdaptiveLQG(env)
+    ctrl = AdaptiveLQG(env, identifier=fast_identifier(env))
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     for _ in range(5):
@@ -482,7 +486,7 @@ def test_set_integral_settle_reaches_the_adaptive_loop_and_its_fallback():
     from controllers.lqg import INTEGRAL_SETTLE_S
 
     env = gym.make("FlexibleSpacecraftDocking-v2")
-    adaptive = AdaptiveLQG(env)
+    adaptive = AdaptiveLQG(env, identifier=fast_identifier(env))
     assert adaptive.law.settle_s == adaptive.fallback.law.settle_s == INTEGRAL_SETTLE_S
     assert set_integral_settle(adaptive, 0.0) is adaptive
     assert adaptive.law.settle_s == adaptive.fallback.law.settle_s == 0.0
@@ -504,7 +508,8 @@ def test_integral_action_leaves_no_steady_state_error_under_a_constant_torque(ma
 
     def quiet(env):    # the adaptive loop without its excitation, so the mean is the offset
         if make is AdaptiveLQG:
-            return AdaptiveLQG(env, excitation=BinaryExcitation(0.0, 0.0))
+            return AdaptiveLQG(env, identifier=fast_identifier(env),
+                               excitation=BinaryExcitation(0.0, 0.0))
         return make(env)
 
     assert steady_error(PD).max() > 5e-3
@@ -557,7 +562,7 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
     vec = DummyVecEnv([lambda: Monitor(gym.make("FlexibleSpacecraft-v2", **kwargs))
                        for _ in range(2)])
     vec.seed(100)
-    ctrl = AdaptiveLQG(vec.envs[0].unwrapped)
+    ctrl = AdaptiveLQG(vec.envs[0].unwrapped, identifier=fast_identifier(vec.envs[0]))
     returns, _ = evaluate_policy(ctrl, vec, n_eval_episodes=2, return_episode_rewards=True)
     copies = ctrl._batch
     assert len(copies) == 2 and copies[0].identifier is not copies[1].identifier
@@ -568,7 +573,7 @@ def test_evaluate_policy_on_two_envs_equals_each_env_alone():
     alone = []
     for i in range(2):
         env = gym.make("FlexibleSpacecraft-v2", **kwargs)
-        solo = AdaptiveLQG(env.unwrapped)
+        solo = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
         obs, info = env.reset(seed=100 + i)
         solo.reset(seed=episode_seed(obs))     # an episode through predict: seeded by its start
         total, done = 0.0, False
@@ -600,7 +605,8 @@ def test_batched_evaluate_policy_equals_per_env_evaluation_to_1e9(env_id, output
     def evaluate(n_envs, seed):
         vec = make_vec_env(f"spacecraft_env:{env_id}", n_envs=n_envs, seed=seed,
                            env_kwargs=kwargs)
-        ctrl = AdaptiveLQG(gym.make(f"spacecraft_env:{env_id}", **kwargs))
+        env = gym.make(f"spacecraft_env:{env_id}", **kwargs)
+        ctrl = AdaptiveLQG(env, identifier=fast_identifier(env))
         returns, _ = evaluate_policy(ctrl, vec, n_eval_episodes=n_envs,
                                      return_episode_rewards=True)
         return returns

@@ -16,6 +16,7 @@ from controllers import (
     FixedLQG,
     ResidualControl,
     episode_metrics,
+    fast_identifier,
     run_episode,
 )
 
@@ -36,10 +37,10 @@ def test_zero_residual_flies_the_base_controller_exactly():
     # the adaptive LQG inside the wrapper, with a silent agent, is the adaptive
     # LQG alone: same torques, same identifier, bit for bit
     alone_env = gym.make(ID)
-    alone = AdaptiveLQG(alone_env.unwrapped)
+    alone = AdaptiveLQG(alone_env.unwrapped, identifier=fast_identifier(alone_env))
     ref = run_episode(alone_env, alone, seed=3, max_steps=700)
     env = gym.make(ID)
-    wrapped = ResidualControl(env, AdaptiveLQG(env.unwrapped))
+    wrapped = ResidualControl(env, AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env)))
     got = run_episode(wrapped, _Constant(np.zeros(3)), seed=3, max_steps=700)
     np.testing.assert_array_equal(got.torque, ref.torque)
     np.testing.assert_array_equal(got.states, ref.states)
@@ -62,7 +63,7 @@ def test_residual_is_scaled_added_and_saturated():
 
 def test_identifier_learns_from_the_applied_torque_not_the_base_action():
     env = gym.make(ID)
-    ctrl = AdaptiveLQG(env.unwrapped)
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=fast_identifier(env))
     sent: list[np.ndarray] = []
     update = ctrl.identifier.update
     wrapped = ResidualControl(env, ctrl)
@@ -105,8 +106,8 @@ def test_residual_env_passes_both_checkers_pickles_and_is_seeded():
         return np.array(out)
 
     e1, e2 = gym.make(ID), gym.make(ID)
-    first = rollout(ResidualControl(e1, AdaptiveLQG(e1.unwrapped)))
-    second = rollout(ResidualControl(e2, AdaptiveLQG(e2.unwrapped)))
+    first = rollout(ResidualControl(e1, AdaptiveLQG(e1.unwrapped, identifier=fast_identifier(e1))))
+    second = rollout(ResidualControl(e2, AdaptiveLQG(e2.unwrapped, identifier=fast_identifier(e2))))
     np.testing.assert_array_equal(first, second)
     clone = pickle.loads(pickle.dumps(wrapped))
     a = np.array([0.2, -0.1, 0.05], dtype=np.float32)

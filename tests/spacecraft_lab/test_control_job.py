@@ -10,6 +10,7 @@ import pytest
 from spacecraft_env import DockingScenario
 from spacecraft_lab.cli import build_parser, main
 from spacecraft_lab.control import (
+    CONTROLLER_KEYS,
     CONTROLLER_NAMES,
     PHYSICAL,
     SCENARIO_NAMES,
@@ -85,14 +86,23 @@ def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendage
     assert ctrl.identifier.sensor_appendage == tuple(model.sensor_appendage)
     assert any(ctrl.identifier.turning) and not all(ctrl.identifier.turning)
     # the warm-up excites at the amplitude the identifier asks for (0.5 N m), the
-    # default identifier's loop at 1 N m
+    # fast identifier's loop at 1 N m
     assert ctrl.excitation.warmup_amplitude == ctrl.identifier.warmup_amplitude == 0.5
-    assert CONTROLLERS(LQRWeights())["adaptive LQG"](env).excitation.warmup_amplitude == 1.0
+    # since 2026-11-28 the same loop is the default adaptive LQG; the previous default
+    # is the option "fast", in the default comparison
+    default = CONTROLLERS(LQRWeights())["adaptive LQG"](env)
+    assert isinstance(default.identifier, ScheduledPhysicalIdentifier)
+    assert default.identifier.turning == ctrl.identifier.turning
+    assert default.excitation.warmup_amplitude == 0.5
+    fast = CONTROLLERS(LQRWeights())[CONTROLLER_KEYS["adaptive-lqg-fast"]](env)
+    assert fast.name == "adaptive LQG" and fast.excitation.warmup_amplitude == 1.0
+    assert type(fast.identifier).__name__ == "RigidFlexibleIdentifier"
+    assert CONTROLLER_KEYS["adaptive-lqg-fast"] in CONTROLLER_NAMES
     # its fit accumulates by default; the factory passes the identifier's options on
-    from spacecraft_lab.control import scheduled_physical_identifier
+    from controllers import scheduled_identifier
 
     assert ctrl.identifier.accumulate
-    held = scheduled_physical_identifier(env, accumulate=False, max_record=600)
+    held = scheduled_identifier(env, accumulate=False, max_record=600)
     assert not held.accumulate and held.max_record == 600
     assert held.turning == ctrl.identifier.turning
 

@@ -1,0 +1,169 @@
+"""The identifiers an adaptive loop flies, built for an environment.
+
+:class:`~controllers.AdaptiveLQG` needs an online identifier of the plant it
+controls. Two are offered, each built from what a designer knows of the
+spacecraft without knowing its parameters (the sensors it carries, which
+appendages the paddle drive turns, which sensor sits on which appendage):
+
+* :func:`scheduled_identifier`, the default where the environment's model
+  describes its appendages: the hub plus one mode per appendage fitted by
+  output error to the warm-up and again on the loop's later data, the
+  paddles' inertia and couplings turned with the drive's encoder
+  (:class:`identifiers.ScheduledPhysicalIdentifier`). Within 1.5x the oracle
+  LQG's cost and below the robust design at the median on every condition of
+  docs/results/control.md, at 15-40 s of computation per 250 s episode (its
+  fits stop the simulation for seconds each).
+* :func:`fast_identifier`: the structured recursive identifier
+  (:func:`identifiers.default_identifier` with
+  :data:`identifiers.CLOSED_LOOP_SETTINGS`), about 0.5 s per 250 s episode,
+  1.2-5.7x the oracle LQG on the same conditions.
+
+:func:`closed_loop_identifier` picks the default for an environment.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from identifiers import (
+    CLOSED_LOOP_SETTINGS,
+    OnlineIdentifier,
+    ScheduledPhysicalIdentifier,
+    default_identifier,
+)
+
+__all__ = ["closed_loop_identifier", "fast_identifier", "scheduled_identifier"]
+
+#: What a model must say of its appendages for the scheduled fit.
+_APPENDAGES = ("appendage_turns", "sensor_appendage", "drive_axis")
+
+
+def _model(env: gym.Env) -> Any:
+    base = env.unwrapped if isinstance(env, gym.Env) else env
+    model = getattr(base, "model", None)
+    if model is None or not hasattr(base, "observation_layout"):
+        raise TypeError(f"env must be a flexible-spacecraft environment (with a model and an "
+                        f"observation layout), got {type(base).__name__}")
+    return base, model
+
+
+def scheduled_identifier(env: gym.Env, **options: Any) -> ScheduledPhysicalIdentifier:
+    """The drive-scheduled physical fit for ``env``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A flexible-spacecraft environment (wrappers allowed) whose model
+        describes its appendages (``appendage_turns``, ``sensor_appendage``,
+        ``drive_axis``).
+    **options
+        Other keywords of :class:`identifiers.ScheduledPhysicalIdentifier`
+        (e.g. ``accumulate=False`` to hold the warm-up's fit).
+
+    Returns
+    -------
+    identifiers.ScheduledPhysicalIdentifier
+        Fed the env's sensors, its appendages' layout and the drive's axis;
+        the sample time is the model's.
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a flexible-spacecraft environment.
+    ValueError
+        If its model does not describe its appendages, or the env does not
+        observe attitude, rate and the tip deflections.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import scheduled_identifier
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftPaddleRotation-v2")
+    >>> ident = scheduled_identifier(env)
+    >>> type(ident).__name__, ident.warmup, ident.warmup_amplitude
+    ('ScheduledPhysicalIdentifier', 300, 0.5)
+    """
+    base, model = _model(env)
+    missing = [name for name in _APPENDAGES if not hasattr(model, name)]
+    if missing:
+        raise ValueError(f"the env's model must describe its appendages; it has no "
+                         f"{', '.join(missing)}")
+    return ScheduledPhysicalIdentifier(
+        base.observation_layout.sensors(), turning=model.appendage_turns,
+        sensor_appendage=model.sensor_appendage, drive_axis=model.drive_axis, dt=model.dt,
+        **options)
+
+
+def fast_identifier(env: gym.Env, **options: Any) -> OnlineIdentifier:
+    """The structured recursive identifier with the closed-loop settings, for ``env``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A flexible-spacecraft environment (wrappers allowed).
+    **options
+        Overrides of :data:`identifiers.CLOSED_LOOP_SETTINGS` and the other
+        keywords of :func:`identifiers.default_identifier`.
+
+    Returns
+    -------
+    OnlineIdentifier
+        A :class:`identifiers.RigidFlexibleIdentifier` of the model's order
+        and sample time on the env's sensors.
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a flexible-spacecraft environment.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import fast_identifier
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
+    >>> ident = fast_identifier(env)
+    >>> type(ident).__name__, ident.n, ident.warmup
+    ('RigidFlexibleIdentifier', 22, 300)
+    """
+    base, model = _model(env)
+    settings = {**CLOSED_LOOP_SETTINGS, **options}
+    return default_identifier(base.observation_layout.sensors(), n=model.n, dt=model.dt,
+                              **settings)
+
+
+def closed_loop_identifier(env: gym.Env) -> OnlineIdentifier:
+    """The identifier :class:`~controllers.AdaptiveLQG` flies on ``env`` by default.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A flexible-spacecraft environment (wrappers allowed).
+
+    Returns
+    -------
+    OnlineIdentifier
+        :func:`scheduled_identifier` where the env's model describes its
+        appendages (every registered environment's does) and the env
+        observes the tip deflections the fit needs (the default outputs
+        do), else :func:`fast_identifier`.
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a flexible-spacecraft environment.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import closed_loop_identifier
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftSolarRotation-v2")
+    >>> type(closed_loop_identifier(env)).__name__
+    'ScheduledPhysicalIdentifier'
+    """
+    base, model = _model(env)
+    if ("deflection" in base.observation_layout.sensors().names
+            and all(hasattr(model, name) for name in _APPENDAGES)):
+        return scheduled_identifier(env)
+    return fast_identifier(env)
