@@ -239,8 +239,11 @@ def test_entry_point_examples_run():
         IdentifiedModelFeatures,
         PhysicalFeatures,
         Trajectory,
+        closed_loop_identifier,
         compare,
+        fast_identifier,
         run_episode,
+        scheduled_identifier,
     )
     from identifiers import ClassicalRPBSID, ImprovedRPBSID, StateSpaceModel, default_identifier
     from spacecraft_env import FlexibleSpacecraftEnv, check_parameter
@@ -251,7 +254,8 @@ def test_entry_point_examples_run():
     failed, report = 0, []
     for obj in (FlexibleSpacecraftEnv, default_identifier, ImprovedRPBSID, ClassicalRPBSID,
                 StateSpaceModel.modal, AdaptiveLQG, run_episode, compare, Trajectory,
-                PhysicalFeatures, IdentifiedModelFeatures, check_parameter, ScoreCache):
+                PhysicalFeatures, IdentifiedModelFeatures, check_parameter, ScoreCache,
+                closed_loop_identifier, fast_identifier, scheduled_identifier):
         tests = [t for t in finder.find(obj) if t.examples]
         assert tests, f"{obj.__qualname__} has no doctest examples"
         for test in tests:
