@@ -108,6 +108,8 @@ _IDENTIFIED = {
     "identified-kept": {"keep_identifier": True, "include_state": True},
     "identified-kept-no-state": {"keep_identifier": True, "include_state": False},
 }
+
+
 def fast_adaptive_lqg(env: gym.Env) -> AdaptiveLQG:
     """The adaptive LQG the agents are based on and scored beside.
 
