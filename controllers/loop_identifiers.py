@@ -40,13 +40,23 @@ __all__ = ["closed_loop_identifier", "fast_identifier", "scheduled_identifier"]
 _APPENDAGES = ("appendage_turns", "sensor_appendage", "drive_axis")
 
 
-def _model(env: gym.Env) -> Any:
+def _model(env: gym.Env) -> tuple[Any, Any]:
+    """The unwrapped env and its model."""
     base = env.unwrapped if isinstance(env, gym.Env) else env
     model = getattr(base, "model", None)
     if model is None or not hasattr(base, "observation_layout"):
         raise TypeError(f"env must be a flexible-spacecraft environment (with a model and an "
                         f"observation layout), got {type(base).__name__}")
     return base, model
+
+
+def _not_schedulable(base: Any, model: Any) -> list[str]:
+    """What the scheduled fit needs and ``base`` lacks: the model's description of its
+    appendages, and the tip deflections among the observed sensors (empty: nothing)."""
+    missing = [f"model.{name}" for name in _APPENDAGES if not hasattr(model, name)]
+    if "deflection" not in base.observation_layout.sensors().names:
+        missing.append("deflection sensors")
+    return missing
 
 
 def scheduled_identifier(env: gym.Env, **options: Any) -> ScheduledPhysicalIdentifier:
@@ -86,9 +96,10 @@ def scheduled_identifier(env: gym.Env, **options: Any) -> ScheduledPhysicalIdent
     ('ScheduledPhysicalIdentifier', 300, 0.5)
     """
     base, model = _model(env)
-    missing = [name for name in _APPENDAGES if not hasattr(model, name)]
+    missing = _not_schedulable(base, model)
     if missing:
-        raise ValueError(f"the env's model must describe its appendages; it has no "
+        raise ValueError(f"the scheduled fit needs the model's description of its "
+                         f"appendages and the tip deflections; the env has no "
                          f"{', '.join(missing)}")
     return ScheduledPhysicalIdentifier(
         base.observation_layout.sensors(), turning=model.appendage_turns,
@@ -163,7 +174,4 @@ def closed_loop_identifier(env: gym.Env) -> OnlineIdentifier:
     'ScheduledPhysicalIdentifier'
     """
     base, model = _model(env)
-    if ("deflection" in base.observation_layout.sensors().names
-            and all(hasattr(model, name) for name in _APPENDAGES)):
-        return scheduled_identifier(env)
-    return fast_identifier(env)
+    return fast_identifier(env) if _not_schedulable(base, model) else scheduled_identifier(env)
