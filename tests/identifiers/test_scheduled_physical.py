@@ -169,6 +169,44 @@ def test_the_fits_jacobian_is_the_forward_difference_of_its_residuals(disturbanc
     np.testing.assert_allclose(jac / scale, expected / scale, rtol=0, atol=1e-6)
 
 
+@pytest.mark.parametrize("anisotropy", [(800.0, -300.0), (0.0, 0.0)])
+@pytest.mark.parametrize("angle", [0.0, 0.7, 2.5])
+def test_the_gains_derivative_is_its_central_difference(anisotropy, angle):
+    """The closed-form derivative of ``J(a)^-1`` with respect to the inertia's
+    parameters (rest inertia's upper triangle, anisotropy, couplings) equals central
+    differences of the gain through the model's own constructor, turning and fixed
+    appendages both, at ``P = 0`` too (where ``|P|`` has no derivative: 0 both)."""
+    from identifiers.structured.scheduled_uncertainty import (
+        _gain_derivative,
+        _inertia_parameters,
+    )
+
+    model = _model(anisotropy)
+    theta = _inertia_parameters(model)
+
+    def gain(t):
+        rest = np.zeros((3, 3))
+        rest[np.triu_indices(3)] = t[:6]
+        rest = rest + np.triu(rest, 1).T
+        return ScheduledPhysicalModel(rest, t[6:8], model.frequencies_hz, model.damping,
+                                      t[8:].reshape(4, 3), TURNING, model.tips,
+                                      model.sensor_appendage, model.drive_axis).gain(angle)
+
+    expected = np.empty((9, theta.size))
+    for i in range(theta.size):
+        h = 1e-4 * max(abs(theta[i]), 1.0)
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        expected[:, i] = (gain(up) - gain(down)).ravel() / (2 * h)
+    derivative = _gain_derivative(model, angle)
+    assert derivative.shape == (9, 8 + 3 * 4)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(derivative, expected, rtol=0, atol=1e-6 * scale)
+    # every parameter moves the gain
+    assert np.all(np.abs(derivative).max(axis=0) > 1e-6 * scale)
+
+
 def test_the_three_vector_cross_product_is_numpys_bit_for_bit():
     for a, b in np.random.default_rng(3).normal(size=(500, 2, 3)) * [[1e-3], [1e4]]:
         np.testing.assert_array_equal(_cross(a, b), np.cross(a, b))
