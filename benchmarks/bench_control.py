@@ -13,7 +13,9 @@ The loop flies the adaptive LQG's default identifier, the drive-scheduled
 physical fit (``controllers.scheduled_identifier``; ``--identifier scheduled``,
 the default since 2026-11-28): its fits (the warm-up's, then the refits on the
 growing record: steps longer than 0.5 s) are printed apart with their times,
-the steps between them are timed as usual.
+the steps between them are timed as usual, and the refits counted: kept, kept
+out by the guard (less certain than the held fit), skipped by the screen
+(``screen_refits``: predicted so at the held parameters, not fitted).
 ``--identifier fast`` flies the structured recursive identifier
 (``controllers.fast_identifier``, the default before), every step timed.
 
@@ -93,6 +95,10 @@ def main() -> None:
         print("the fits, each one step: " + ", ".join(
             f"{after[i]:.1f} s at t = {(warm + i) * dt:.0f} s" for i in fits)
             + f"; {after[fits].sum():.1f} s in all")
+        ident = ctrl.identifier
+        print(f"accumulating refits: {ident.n_refits} kept, {ident.n_refits_kept_out} kept "
+              f"out by the guard, {ident.n_refits_skipped} skipped by the screen (judged "
+              f"at the held parameters, not fitted)")
 
 
 if __name__ == "__main__":

@@ -148,7 +148,7 @@ class AdaptiveLQG(_LQGController):
         (:func:`~controllers.fast_identifier`: :func:`identifiers.default_identifier`
         for the measured sensor groups with
         :data:`identifiers.CLOSED_LOOP_SETTINGS`; the default until 2026-11-28,
-        about 0.5 s of computation per 250 s episode against the fit's 15-40 s).
+        about 0.5 s of computation per 250 s episode against the fit's 11-32 s).
     weights : LQRWeights
     excitation : BinaryExcitation, optional
         The signal: default the identifier's ``warmup_amplitude`` (N m per

@@ -11,7 +11,7 @@ appendages the paddle drive turns, which sensor sits on which appendage):
   paddles' inertia and couplings turned with the drive's encoder
   (:class:`identifiers.ScheduledPhysicalIdentifier`). Within 1.5x the oracle
   LQG's cost and below the robust design at the median on every condition of
-  docs/results/control.md, at 15-40 s of computation per 250 s episode (its
+  docs/results/control.md, at 11-32 s of computation per 250 s episode (its
   fits stop the simulation for seconds each).
 * :func:`fast_identifier`: the structured recursive identifier
   (:func:`identifiers.default_identifier` with

@@ -59,7 +59,7 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
         :class:`~controllers.adaptive.AdaptiveLQG` on
         :func:`~controllers.fast_identifier` (the structured recursive
         identifier: the loop's default, the drive-scheduled fit, computes
-        15-40 s per 250 s episode, more than training can pay).
+        11-32 s per 250 s episode, more than training can pay).
     scale : float
         Authority of the agent, as a fraction of full torque: an agent
         action of 1 adds ``scale * max_torque`` (default 0.25, 2.5 N m on

@@ -140,7 +140,7 @@ PHYSICAL = "adaptive LQG, physical fit"
 SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
 #: The adaptive law on the structured recursive identifier
 #: (:func:`controllers.fast_identifier`): the adaptive LQG's default until
-#: 2026-11-28, about 0.5 s of computation per 250 s episode against 15-40 s.
+#: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.
 FAST = "adaptive LQG, fast identifier"
 #: The adaptive law on the paper's improved RPBSID with an exact rigid block
 #: (:class:`identifiers.StructuredRPBSID`): the source paper's algorithm in the loop.

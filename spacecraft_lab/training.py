@@ -113,7 +113,7 @@ _IDENTIFIED = {
 def fast_adaptive_lqg(env: gym.Env) -> AdaptiveLQG:
     """The adaptive LQG the agents are based on and scored beside.
 
-    The loop's default identifier, the drive-scheduled fit, computes 15-40 s
+    The loop's default identifier, the drive-scheduled fit, computes 11-32 s
     per 250 s episode, which training on millions of env steps cannot pay; the
     agents' base and comparator fly the structured recursive identifier
     (:func:`controllers.fast_identifier`), as every RL result in the docs did.

@@ -24,7 +24,8 @@ fits the hub-plus-appendage :class:`ScheduledPhysicalModel`
 (:mod:`~identifiers.structured.scheduled_model`, fitted by
 :mod:`~identifiers.structured.scheduled_fit` from the starts of
 :mod:`~identifiers.structured.scheduled_start`) whose turning appendages follow
-a drive angle.
+a drive angle; its refits are judged before they run by
+:mod:`~identifiers.structured.scheduled_information`.
 
 :class:`StructuredRPBSID` (:mod:`~identifiers.structured.structured_rpbsid`) is
 the paper's improved RPBSID on the flexible part beside an exact

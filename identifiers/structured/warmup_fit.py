@@ -76,6 +76,7 @@ class WarmupFit(ModelFilter):
         self.accumulating_refit = False
         self.n_refits = 0
         self.n_refits_kept_out = 0
+        self.n_refits_skipped = 0
         # the accumulating refits: the last max_record samples and the filter's prior
         # state at each (NaN before the first fit), the sample count at which the
         # held fit's record started, its length and the samples since
@@ -200,7 +201,8 @@ class WarmupFit(ModelFilter):
         """Fit the last ``max_record`` samples again, the held model refined first from
         its state at the record's first sample; keep the held model if the fit fails
         or knows the rigid-body gain less well (a record that no longer holds the
-        warm-up's excitation can)."""
+        warm-up's excitation can), and skip the fit where the host predicts that
+        (:meth:`_refit_worthwhile`; ``n_refits_skipped``)."""
         length = len(self._history)
         origin = self._count - length
         start = self._priors[0]
@@ -211,8 +213,16 @@ class WarmupFit(ModelFilter):
         self._record = list(self._history)
         # what the fit replaces (the held fit, its matrices, its filter: the host's as
         # well), restored if the refit is kept out
-        held = dict(self.__dict__)
         held_std = self._gain_relative_std()
+        if not self._refit_worthwhile(held_std):
+            # what a refit the guard keeps out leaves, without fitting
+            self._record = []
+            self._since_fit = 0
+            self.n_refits_skipped += 1
+            self.refit_start = None
+            self._watch()
+            return
+        held = dict(self.__dict__)
         self.accumulating_refit = True
         try:
             fitted = self._fit()
@@ -228,6 +238,11 @@ class WarmupFit(ModelFilter):
             self.n_refits_kept_out += 1
         self.refit_start = None
         self._watch()
+
+    def _refit_worthwhile(self, held_std: float) -> bool:
+        """Whether to run the accumulating refit of ``_record`` (from ``refit_start``)
+        at all; the host may predict that it would be kept out (default True)."""
+        return True
 
     def _gain_relative_std(self) -> float:
         """The held fit's relative standard deviation of the rigid-body gain (inf if the

@@ -473,7 +473,7 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
                                  (False, [(40, None)])):
         calls.clear()
         ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120,
-                                            accumulate=accumulate)
+                                            accumulate=accumulate, screen_refits=False)
         for k, (u, y) in enumerate(data):
             ident.set_schedule(0.01 * k)
             ident.update(u, y)
@@ -485,7 +485,7 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
     assert starts[:5] == ["default"] + [()] * 4        # the accumulating run, then the held
     starts.clear()
     ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120,
-                                        refit_restarts=True,
+                                        refit_restarts=True, screen_refits=False,
                                         fit_options={"filter_constants": (1.0, 2.0)})
     for k, (u, y) in enumerate(data[:100]):
         ident.set_schedule(0.01 * k)
@@ -501,7 +501,8 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         return fits[-1]
 
     monkeypatch.setattr(module, "fit_scheduled_model", widening)
-    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120)
+    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120,
+                                        screen_refits=False)
     for k, (u, y) in enumerate(data[:170]):
         ident.set_schedule(0.01 * k)
         ident.update(u, y)
@@ -516,6 +517,71 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         ScheduledPhysicalIdentifier(accumulate="yes")
     with pytest.raises(TypeError, match="refit_restarts must be a bool"):
         ScheduledPhysicalIdentifier(refit_restarts=1)
+    with pytest.raises(TypeError, match="screen_refits must be a bool"):
+        ScheduledPhysicalIdentifier(screen_refits="no")
+
+
+def test_the_information_a_record_holds_at_a_fits_own_parameters_is_its_covariance():
+    """Judged at a fit's own parameters and initial state on its own record, the
+    predicted gain covariance is the fit's with the record's noise floor for the
+    residual variance (the Jacobian's forward differences at the re-packed parameters
+    agree to rounding, which the ill-conditioned ``(J^T J)^-1`` amplifies to about
+    1e-3)."""
+    from identifiers.structured.scheduled_information import predicted_gain_covariance
+
+    truth = _model()
+    rng = np.random.default_rng(11)
+    u, y, angle = _record(truth, 200, rng)
+    y = y + rng.normal(size=y.shape) * 1e-2 * STANDARD_OUTPUTS.scales()
+    fit = fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                              filter_constants=(1.0,))
+    np.testing.assert_array_equal(fit.disturbance_torque, np.zeros(3))
+    predicted = predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                                          fit.initial_state)
+    n_residuals, n_parameters = y.size, 8 + 5 * 4 + truth.order
+    residual_variance = fit.cost * n_residuals / (n_residuals - n_parameters)
+    expected = fit.gain_covariance(angle[-1]) * fit.noise_floor / residual_variance
+    assert 0.8 < fit.noise_floor / residual_variance < 1.25
+    np.testing.assert_allclose(predicted, expected, rtol=0,
+                               atol=1e-2 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="initial_state must have shapes"):
+        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                                  np.zeros(3))
+    with pytest.raises(ValueError, match="must be finite"):
+        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+                                  np.full(truth.order, np.nan))
+
+
+@pytest.mark.parametrize("held_variance, refits, skipped", [(1e-12, 0, 9), (1e6, 4, 0)])
+def test_a_refit_the_record_cannot_pay_for_is_skipped(monkeypatch, held_variance, refits,
+                                                      skipped):
+    """``screen_refits``: a held fit whose gain is known far better than any record of
+    this length can tell is not refitted at all (``n_refits_skipped``); one known far
+    worse is refitted every time (at 80, 160, 280 and 400 samples). A skipped refit
+    leaves what a refit the guard keeps out leaves: the next is tried as many samples
+    later as the held fit used (every 40 here)."""
+    import identifiers.structured.scheduled_identifier as module
+    from identifiers import ScheduledFit
+
+    truth = _model()
+    calls = []
+
+    def fake(u, y, angle, *args, initial=None, **kwargs):
+        calls.append(len(u))
+        return ScheduledFit(truth, np.zeros(truth.order), np.eye(20) * held_variance, 1.0,
+                            1.0)
+
+    monkeypatch.setattr(module, "fit_scheduled_model", fake)
+    rng = np.random.default_rng(12)
+    u, y, angle = _record(truth, 400, rng)
+    y = y + rng.normal(size=y.shape) * 1e-2 * STANDARD_OUTPUTS.scales()
+    ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=40, max_record=120)
+    for k in range(400):
+        ident.set_schedule(angle[k])
+        ident.update(u[k], y[k])
+    assert calls[0] == 40 and len(calls) == 1 + refits
+    assert ident.n_refits == refits and ident.n_refits_kept_out == 0
+    assert ident.n_refits_skipped == skipped
 
 
 def test_a_change_the_innovations_show_is_reported_and_refitted():

@@ -1,0 +1,99 @@
+"""What a record would tell the drive-scheduled fit about the rigid-body gain, judged
+at a held fit's parameters before fitting it.
+
+An accumulating refit (:class:`~identifiers.ScheduledPhysicalIdentifier`) is a
+nonlinear fit of seconds; on a record without the warm-up's excitation its gain
+comes out less certain than the held fit's, and it is kept out. One Jacobian of
+the output error at the held parameters on the new record (the Gauss-Newton
+covariance, ``sigma^2 (J^T J)^-1``, mapped to ``J(a)^-1`` as the fit maps its
+own) predicts that in 0.05-0.25 s, where the refits it finds not worth running
+took 1-31 s each in the closed loop.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identifiers.structured.scheduled_fit import ScheduledFit, _Problem
+from identifiers.structured.scheduled_uncertainty import (
+    _gain_derivative,
+    _inertia_covariance,
+    noise_floor,
+)
+from spacecraft_conventions import OutputLayout, single_threaded_blas
+
+__all__ = ["predicted_gain_covariance"]
+
+
+@single_threaded_blas
+def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
+                              angle: ArrayLike, dt: float, layout: OutputLayout,
+                              turning: Sequence[bool], initial_state: ArrayLike, *,
+                              sensor_appendage: Sequence[int] | None = None,
+                              drive_axis: ArrayLike = (0.0, 1.0, 0.0)) -> np.ndarray:
+    """The covariance of ``J(a)^-1`` a fit of the record would have at ``fit``'s
+    parameters, at the record's last drive angle.
+
+    Parameters
+    ----------
+    fit : ScheduledFit
+        The held fit; its constant disturbance torque is among the parameters
+        where it kept one.
+    u, y, angle, dt, layout, turning, sensor_appendage, drive_axis
+        The record and the appendages, as for
+        :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
+        (default output weights).
+    initial_state : (6 + 2 N,) array_like
+        The held model's state at the record's first sample (physical units).
+
+    Returns
+    -------
+    (9, 9) ndarray
+        Covariance of ``J(a)^-1``'s row-major entries, (rad/s^2 per N m)^2: the
+        record's white-noise floor (:func:`~identifiers.structured.scheduled_fit.noise_floor`,
+        what a refit's residuals reach: 1.04-1.14x it in the closed loop)
+        times ``(J^T J)^-1`` of the output error's Jacobian at the held
+        parameters, mapped as
+        :meth:`~identifiers.structured.scheduled_fit.ScheduledFit.gain_covariance`.
+        Against the refit's own covariance, on the closed-loop refits measured
+        (docs/design/control.md): its standard deviation 0.4-2.1x the refit's.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match the held model, or non-finite torques,
+        angles or initial state.
+    """
+    u, y, angle = (np.asarray(v, dtype=float) for v in (u, y, angle))
+    model = fit.model
+    x0 = np.asarray(initial_state, dtype=float).reshape(-1)
+    if u.ndim != 2 or u.shape[1] != 3 or y.shape != (u.shape[0], layout.size) \
+            or angle.shape != (u.shape[0],) or x0.shape != (model.order,):
+        raise ValueError(f"u, y, angle and initial_state must have shapes (T, 3), "
+                         f"(T, {layout.size}), (T,) and ({model.order},), got {u.shape}, "
+                         f"{y.shape}, {angle.shape} and {x0.shape}")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(angle))
+            and np.all(np.isfinite(x0))):
+        raise ValueError("u, angle and initial_state must be finite")
+    turning = np.asarray(turning, dtype=bool).reshape(-1)
+    n_tip = layout.indices("deflection").size
+    sensors = np.arange(n_tip) if sensor_appendage is None else \
+        np.asarray(sensor_appendage, dtype=int).reshape(-1)
+    axis = np.asarray(drive_axis, dtype=float).reshape(3)
+    disturbance = bool(np.any(fit.disturbance_torque != 0))
+    problem = _Problem(u, y, angle, float(dt), layout, 1.0 / layout.scales(), turning,
+                       sensors, axis / np.linalg.norm(axis), disturbance)
+    p = problem.pack(model.rest_inertia, model.drive_anisotropy,
+                     2 * np.pi * np.asarray(model.frequencies_hz), model.damping,
+                     model.couplings, x0, fit.disturbance_torque)
+    lo, hi = problem.bounds(p.size)
+    p = np.clip(p, lo + 1e-9, hi - 1e-9)
+    jac = problem.jacobian(p, lo, hi)
+    # the noise a refit would leave, not the held model's misfit of the new record:
+    # that inflated the prediction 4-6x where the held fit had drifted from the plant
+    cov = noise_floor(y, problem.w) * np.linalg.pinv(jac.T @ jac)
+    d = _gain_derivative(model, float(angle[-1]))
+    return d @ _inertia_covariance(problem, p, cov) @ d.T
