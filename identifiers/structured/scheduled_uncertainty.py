@@ -47,8 +47,8 @@ def _gain_derivative(model: ScheduledPhysicalModel, angle: float) -> np.ndarray:
     column of ``F`` is a coupling, turned by ``R(a)^T`` where the drive carries
     its appendage) and, through ``|P|``, not differentiable at ``P = 0`` (there
     the derivative of ``|P|`` is taken as 0, the central difference's value).
-    Until 2026-11-28 central differences, 16 gains per call (13 ms, a quarter of
-    the adaptive loop's time between fits); the two agree to about 1e-8 relative."""
+    Until 2026-11-28 central differences, 16 gains per call (13 ms, about a third
+    of the adaptive loop's time between fits in a profile); the two agree to about 1e-8 relative."""
     gain = model.gain(angle)
     n = model.n_modes
     d_inertia = np.zeros((8 + 3 * n, 3, 3))

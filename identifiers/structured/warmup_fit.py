@@ -211,8 +211,6 @@ class WarmupFit(ModelFilter):
         self.refit_start = start if start is not None and np.all(np.isfinite(start)) \
             else None
         self._record = list(self._history)
-        # what the fit replaces (the held fit, its matrices, its filter: the host's as
-        # well), restored if the refit is kept out
         held_std = self._gain_relative_std()
         if not self._refit_worthwhile(held_std):
             # what a refit the guard keeps out leaves, without fitting
@@ -222,6 +220,8 @@ class WarmupFit(ModelFilter):
             self.refit_start = None
             self._watch()
             return
+        # what the fit replaces (the held fit, its matrices, its filter: the host's as
+        # well), restored if the refit is kept out
         held = dict(self.__dict__)
         self.accumulating_refit = True
         try:
