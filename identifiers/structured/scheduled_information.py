@@ -6,8 +6,9 @@ nonlinear fit of seconds; on a record without the warm-up's excitation its gain
 comes out less certain than the held fit's, and it is kept out. One Jacobian of
 the output error at the held parameters on the new record (the Gauss-Newton
 covariance ``sigma^2 (J^T J)^-1`` with the record's noise floor for
-``sigma^2``, mapped to ``J(a)^-1`` as the fit maps its own) predicts that in 0.05-0.25 s, where the refits it finds not worth running
-took 1-31 s each in the closed loop.
+``sigma^2``, mapped to ``J(a)^-1`` as the fit maps its own) predicts that in
+0.05-0.25 s, where the refits it finds not worth running took 1-31 s each in
+the closed loop.
 """
 
 from __future__ import annotations
