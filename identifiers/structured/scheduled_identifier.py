@@ -263,9 +263,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         u, y, angle = self._record_arrays()
         try:
             cov = predicted_gain_covariance(self.fit, u, y, angle, self.dt, self.layout,
-                                            self.turning, self.refit_start,
-                                            sensor_appendage=self.sensor_appendage,
-                                            drive_axis=self.drive_axis)
+                                            self.refit_start)
         except (np.linalg.LinAlgError, ValueError):
             return True
         predicted = RigidGainEstimate(self.fit.model.gain(float(angle[-1])), cov)

@@ -13,8 +13,6 @@ the closed loop.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -32,19 +30,18 @@ __all__ = ["predicted_gain_covariance"]
 @single_threaded_blas
 def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
                               angle: ArrayLike, dt: float, layout: OutputLayout,
-                              turning: Sequence[bool], initial_state: ArrayLike, *,
-                              sensor_appendage: Sequence[int] | None = None,
-                              drive_axis: ArrayLike = (0.0, 1.0, 0.0)) -> np.ndarray:
+                              initial_state: ArrayLike) -> np.ndarray:
     """The covariance of ``J(a)^-1`` a fit of the record would have at ``fit``'s
     parameters, at the record's last drive angle.
 
     Parameters
     ----------
     fit : ScheduledFit
-        The held fit; its constant disturbance torque is among the parameters
-        where it kept one.
-    u, y, angle, dt, layout, turning, sensor_appendage, drive_axis
-        The record and the appendages, as for
+        The held fit; its model carries the appendages (which turn, which
+        sensor sits on which, the drive's axis), and its constant disturbance
+        torque is among the parameters where it kept one.
+    u, y, angle, dt, layout
+        The record, as for
         :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
         (default output weights).
     initial_state : (6 + 2 N,) array_like
@@ -79,14 +76,9 @@ def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(angle))
             and np.all(np.isfinite(x0))):
         raise ValueError("u, angle and initial_state must be finite")
-    turning = np.asarray(turning, dtype=bool).reshape(-1)
-    n_tip = layout.indices("deflection").size
-    sensors = np.arange(n_tip) if sensor_appendage is None else \
-        np.asarray(sensor_appendage, dtype=int).reshape(-1)
-    axis = np.asarray(drive_axis, dtype=float).reshape(3)
     disturbance = bool(np.any(fit.disturbance_torque != 0))
-    problem = _Problem(u, y, angle, float(dt), layout, 1.0 / layout.scales(), turning,
-                       sensors, axis / np.linalg.norm(axis), disturbance)
+    problem = _Problem(u, y, angle, float(dt), layout, 1.0 / layout.scales(), model.turning,
+                       model.sensor_appendage, model.drive_axis, disturbance)
     p = problem.pack(model.rest_inertia, model.drive_anisotropy,
                      2 * np.pi * np.asarray(model.frequencies_hz), model.damping,
                      model.couplings, x0, fit.disturbance_torque)

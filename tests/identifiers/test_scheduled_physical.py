@@ -536,7 +536,7 @@ def test_the_information_a_record_holds_at_a_fits_own_parameters_is_its_covarian
     fit = fit_scheduled_model(u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
                               filter_constants=(1.0,))
     np.testing.assert_array_equal(fit.disturbance_torque, np.zeros(3))
-    predicted = predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+    predicted = predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS,
                                           fit.initial_state)
     n_residuals, n_parameters = y.size, 8 + 5 * 4 + truth.order
     residual_variance = fit.cost * n_residuals / (n_residuals - n_parameters)
@@ -545,10 +545,9 @@ def test_the_information_a_record_holds_at_a_fits_own_parameters_is_its_covarian
     np.testing.assert_allclose(predicted, expected, rtol=0,
                                atol=1e-2 * np.abs(expected).max())
     with pytest.raises(ValueError, match="initial_state must have shapes"):
-        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
-                                  np.zeros(3))
+        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, np.zeros(3))
     with pytest.raises(ValueError, match="must be finite"):
-        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS, TURNING,
+        predicted_gain_covariance(fit, u, y, angle, 0.1, STANDARD_OUTPUTS,
                                   np.full(truth.order, np.nan))
 
 
