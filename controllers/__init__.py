@@ -62,6 +62,7 @@ from controllers.loop_identifiers import (
 from controllers.lqg import (
     LQGLaw,
     LQRWeights,
+    equilibrium_map,
     equilibrium_state,
     output_weight,
     set_integral_settle,
@@ -105,6 +106,7 @@ __all__ = [
     "dlqr",
     "effective_gains",
     "episode_metrics",
+    "equilibrium_map",
     "equilibrium_state",
     "fallback_causes",
     "fast_identifier",

@@ -139,7 +139,7 @@ def input_disk_margin(a: np.ndarray, b: np.ndarray, c: np.ndarray, k: np.ndarray
     if n_int:
         comp[:, :, m:] += g_z
     ret = np.eye(r) + comp @ plant
-    if not np.all(np.isfinite(ret)):
+    if not np.isfinite(ret).all():
         return 0.0
     return float(np.linalg.svd(ret, compute_uv=False)[:, -1].min())
 
@@ -233,7 +233,8 @@ class GainAcceptance:
             raise ValueError(f"max_prediction_error must be > 0, got {self.max_prediction_error}")
         if not 0 <= self.min_disk_margin < 1:
             raise ValueError(f"min_disk_margin must be in [0, 1), got {self.min_disk_margin}")
-        self._unit_states: tuple | None = None
+        self._per_model: tuple | None = None     # ((A, B, C), (X_p, X_d, A_a, B_a), key)
+        self._verdict: tuple | None = None
 
     def check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
               att_rows: np.ndarray, rate_rows: np.ndarray, reference: tuple[float, float],
@@ -257,27 +258,45 @@ class GainAcceptance:
         the margin, which costs more than the rest, only for a gain that
         passes these.
         """
-        n = a.shape[0]
-        if not np.all(np.isfinite(gain)):
+        if not np.isfinite(gain).all():
             return "non-finite gain"
         if not np.isfinite(prediction_error) or prediction_error > self.max_prediction_error:
             return "prediction"
-        cached = self._unit_states
-        if (cached is None or not np.array_equal(cached[0], a)
-                or not np.array_equal(cached[1], c)):
-            # the unit states depend on the model alone: a model kept over several
-            # steps (an identifier exports every few samples) pays for them once
-            cached = self._unit_states = (a.copy(), c.copy(),
-                                          *unit_states(a, c, att_rows, rate_rows))
-        k_p, k_d = gain[:, :n] @ cached[2], gain[:, :n] @ cached[3]
+        # the tests below depend on the model and the gain alone: a design handed back
+        # unchanged for an unchanged model (RiccatiTracker) keeps its verdict
+        arrays, key = (a, b, c, att_rows, rate_rows), (tuple(reference), float(dt))
+        kept = self._verdict        # (arrays, gain, key, reason) of the last design judged
+        if (kept is not None and kept[1] is gain and kept[2] == key
+                and all(np.array_equal(old, new) for old, new in zip(kept[0], arrays,
+                                                                     strict=True))):
+            return kept[3]
+        reason = self._design_check(a, b, c, gain, att_rows, rate_rows, reference, dt)
+        # kept by reference where nobody can change them (a model's read-only arrays)
+        self._verdict = (tuple(m.copy() if m.flags.writeable else m
+                               for m in map(np.asarray, arrays)), gain, key, reason)
+        return reason
+
+    def _design_check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
+                      att_rows: np.ndarray, rate_rows: np.ndarray,
+                      reference: tuple[float, float], dt: float) -> str | None:
+        """Tests 1.-3. of :meth:`check` (stiffness, damping, stability)."""
+        n = a.shape[0]
+        integral = gain.shape[1] > n
+        cached = self._per_model
+        if cached is None or cached[2] != (integral, dt) or not all(
+                np.array_equal(old, new) for old, new in zip(cached[0], (a, b, c), strict=True)):
+            # the unit states and the augmented model depend on the model alone: a model
+            # kept over several steps (an identifier exports every few samples) pays once
+            aug = augment_integral(a, b, c[att_rows], dt) if integral else (a, b)
+            cached = self._per_model = (
+                tuple(m.copy() if m.flags.writeable else m for m in map(np.asarray, (a, b, c))),
+                (*unit_states(a, c, att_rows, rate_rows), *aug), (integral, dt))
+        x_p, x_d, a_cl, b_cl = cached[1]
+        k_p, k_d = gain[:, :n] @ x_p, gain[:, :n] @ x_d
         if _softest(k_p) < self.floor * reference[0]:
             return "stiffness"
         if _softest(k_d) < self.floor * reference[1]:
             return "damping"
-        if gain.shape[1] > n:
-            a_cl, b_cl = augment_integral(a, b, c[att_rows], dt)
-        else:
-            a_cl, b_cl = a, b
         if spectral_radius(a_cl - b_cl @ gain) >= 1.0:
             return "unstable"
         return None

@@ -67,6 +67,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 from controllers.acceptance import REJECTION_REASONS, GainAcceptance, input_disk_margin
@@ -75,7 +76,7 @@ from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
-from controllers.lqg import LQRWeights, equilibrium_state
+from controllers.lqg import LQRWeights
 from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
 
@@ -130,6 +131,16 @@ FALLBACK_CAUSES = (*REJECTION_REASONS, "failed design", "growing", "bridge", "dw
 class FallbackWarning(UserWarning):
     """The adaptive loop has flown only its fallback for a long time: the identified
     models were all rejected (the identifier may not suit the loop)."""
+
+
+@njit(cache=True, nogil=True)
+def _propagate(a: np.ndarray, b: np.ndarray, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """``x_H`` of ``x_{k+1} = A x_k + B u_k`` from ``x0`` under the ``H`` rows of
+    ``inputs``, compiled."""
+    x = x0
+    for k in range(inputs.shape[0]):
+        x = a @ x + b @ inputs[k]
+    return x
 
 
 class AdaptiveLQG(_LQGController):
@@ -340,11 +351,10 @@ class AdaptiveLQG(_LQGController):
         """
         rates = y[self._rate_rows]
         past = self._past
-        if x is not None and np.all(np.isfinite(rates)) and len(past) == AGREEMENT_HORIZON:
-            x0, y0 = past[0][0], past[0][1]
-            xp = x0
-            for _, _, u in past:
-                xp = model.A @ xp + model.B @ u
+        if x is not None and np.isfinite(rates).all() and len(past) == AGREEMENT_HORIZON:
+            y0 = past[0][1]
+            xp = _propagate(np.ascontiguousarray(model.A), np.ascontiguousarray(model.B),
+                            past[0][0], np.array([u for _, _, u in past]))
             e2 = float(np.sum((rates - model.C[self._rate_rows] @ xp) ** 2))
             d2 = float(np.sum((rates - y0) ** 2))
             # a non-finite term (a model that overflows over the horizon) never enters the
@@ -376,7 +386,7 @@ class AdaptiveLQG(_LQGController):
             cached = self._rigid_maps = (c.copy(), maps)
         x = x.copy()
         for rows, cols, rest, inverse, others in cached[1]:
-            if np.all(np.isfinite(y[rows])):
+            if np.isfinite(y[rows]).all():
                 x[cols] = inverse @ (y[rows] - others @ x[rest])
         return x
 
@@ -386,7 +396,7 @@ class AdaptiveLQG(_LQGController):
         with the noise the baselines' filters assume
         (:func:`~controllers.baselines.process_noise`, the sensors' specified noise)."""
         a, b, c = model.A, model.B, model.C
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.isfinite(c))):
+        if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return None
         return self._filter(a, b, c, process_noise(b), self._noise_var,
                             np.where(np.isfinite(y), y, np.nan), info)
@@ -394,8 +404,8 @@ class AdaptiveLQG(_LQGController):
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:
         """Keep (filtered state, rates, applied torque) of the last samples; a sample
         with a non-finite entry breaks the record (it restarts from the next good one)."""
-        if (x is None or not np.all(np.isfinite(x)) or not np.all(np.isfinite(torque))
-                or not np.all(np.isfinite(y[self._rate_rows]))):
+        if (x is None or not np.isfinite(x).all() or not np.isfinite(torque).all()
+                or not np.isfinite(y[self._rate_rows]).all()):
             self._past.clear()
             return
         self._past.append((x, y[self._rate_rows], torque))
@@ -530,7 +540,7 @@ class AdaptiveLQG(_LQGController):
         if self._defl_rows.size:
             level = np.concatenate([level, np.abs(y[self._defl_rows])
                                     / self._scales[self._defl_rows]])
-        if np.all(np.isfinite(level)):
+        if np.isfinite(level).all():
             self._peak = max(self._peak, float(level.max()))
         if (self._k + 1) % self._window_steps:
             return
@@ -563,7 +573,7 @@ class AdaptiveLQG(_LQGController):
         self.stats["steps"] += 1
         self._commit(info)
         obs = self._observation(obs)
-        if not np.all(np.isfinite(obs)):
+        if not np.isfinite(obs).all():
             self.stats["nonfinite_observations"] += 1
         y = obs[self._meas_obs]
         fallback_action = self.fallback.act(obs, info)     # keeps its filter current
@@ -576,7 +586,7 @@ class AdaptiveLQG(_LQGController):
         self._watch_events()
         x = None
         self._reason = "no model" if model is None else None
-        if model is not None and np.all(np.isfinite(model.A)):
+        if model is not None and np.isfinite(model.A).all():
             if self.rigid_state == "kalman":
                 x = self._own_filter(model, y, info)
             else:
@@ -589,7 +599,7 @@ class AdaptiveLQG(_LQGController):
         ref = self._reference(info)
         self._supervise(y, ref)
         held = self._k < self._hold_until
-        usable = x is not None and np.all(np.isfinite(x))
+        usable = x is not None and np.isfinite(x).all()
         wanted = self.gain is not None and usable and not bridging and not held
         if wanted:
             self._flying_gain = self.gain
@@ -613,14 +623,14 @@ class AdaptiveLQG(_LQGController):
                 by[cause] = by.get(cause, 0) + 1
             self._warn_if_never_flown()
             torque = fallback_action.astype(float) * self.max_torque
-            if np.all(np.isfinite(obs[self._att])):
+            if np.isfinite(obs[self._att]).all():
                 self.law.integrate(obs[self._att] - ref, saturated=True)   # hold the integral
         else:
-            x_ref = equilibrium_state(model.A, model.C[self._att_rows], ref)
+            x_ref = self.law.equilibrium(model.A, model.C[self._att_rows], ref)
             torque = self.law.torque(self._flying_gain, x, x_ref)
-            if np.all(np.isfinite(obs[self._att])):
+            if np.isfinite(obs[self._att]).all():
                 self.law.integrate(obs[self._att] - ref,
-                                   bool(np.any(np.abs(torque) > self.max_torque)))
+                                   bool((np.abs(torque) > self.max_torque).any()))
         if self._k % 10 == 0:
             self._update_excitation()
         excitation = self.excitation()

@@ -71,7 +71,7 @@ class BinaryExcitation:
             return
         cov = 0.5 * (np.asarray(covariance, dtype=float) + np.asarray(covariance).T)
         vals, vecs = np.linalg.eigh(cov)
-        if not (np.all(np.isfinite(vals)) and vals.max() > 0):
+        if not (np.isfinite(vals).all() and vals.max() > 0):
             self._shape = np.eye(3)
             return
         root = np.sqrt(np.clip(vals, 0.0, None) / vals.max())

@@ -34,7 +34,8 @@ from controllers.riccati import RiccatiTracker, check_weights
 from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
 
 __all__ = ["INTEGRAL_BAND", "INTEGRAL_SETTLE_S", "LQGLaw", "LQRWeights", "augment_integral",
-           "check_settle_time", "equilibrium_state", "output_weight", "set_integral_settle"]
+           "check_settle_time", "equilibrium_map", "equilibrium_state", "output_weight",
+           "set_integral_settle"]
 
 #: Attitude error (rad) within which the integral runs: 0.2 deg.
 INTEGRAL_BAND = np.deg2rad(0.2)
@@ -133,6 +134,32 @@ def equilibrium_state(a: np.ndarray, c_att: np.ndarray, reference: np.ndarray) -
     return np.linalg.lstsq(lhs, rhs, rcond=None)[0]
 
 
+def equilibrium_map(a: np.ndarray, c_att: np.ndarray) -> np.ndarray:
+    """The linear map from reference attitude to :func:`equilibrium_state`.
+
+    The least-squares solution is linear in the reference, so
+    ``equilibrium_state(a, c_att, ref) == equilibrium_map(a, c_att) @ ref`` (to
+    rounding): a controller whose model is kept over several steps pays for
+    the solve once.
+
+    Parameters
+    ----------
+    a : (n, n) ndarray
+        Discrete-time state matrix.
+    c_att : (k, n) ndarray
+        Rows of the output matrix giving the attitude (rad).
+
+    Returns
+    -------
+    (n, k) ndarray
+        The equilibrium state per rad of reference attitude.
+    """
+    n, k = a.shape[0], c_att.shape[0]
+    lhs = np.vstack([a - np.eye(n), c_att])
+    rhs = np.vstack([np.zeros((n, k)), np.eye(k)])
+    return np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+
+
 def augment_integral(a: np.ndarray, b: np.ndarray, c_att: np.ndarray,
                      dt: float) -> tuple[np.ndarray, np.ndarray]:
     """``(A_a, B_a)`` of the model augmented with the attitude-error integral."""
@@ -187,6 +214,9 @@ class LQGLaw:
         self._qz = weights.integral / (NOMINAL_SCALE["attitude"] ** 2)
         self.tracker: RiccatiTracker | None = None
         self.gain: np.ndarray | None = None
+        self._equilibrium: tuple[np.ndarray, ...] | None = None
+        #: ((A, B, C, C_att), (Q_a, A_a, B_a)) of the last design's model
+        self._designed_on: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] | None = None
         self.reset()
 
     @property
@@ -226,14 +256,31 @@ class LQGLaw:
         ValueError
             If the Riccati equation has no stabilizing solution.
         """
-        q = self.weight_matrix(c)
-        if self.integral:
-            a, b = augment_integral(a, b, c_att, self.dt)
+        kept = self._designed_on
+        if kept is not None and all(np.array_equal(old, new) for old, new in
+                                    zip(kept[0], (a, b, c, c_att), strict=True)):
+            q, a, b = kept[1]      # the model of the last design: its weight and augmentation
+        else:
+            model = tuple(m.copy() if m.flags.writeable else m
+                          for m in map(np.asarray, (a, b, c, c_att)))
+            q = self.weight_matrix(c)
+            if self.integral:
+                a, b = augment_integral(a, b, c_att, self.dt)
+            self._designed_on = (model, (q, a, b))
         if self.tracker is None or self.tracker.q.shape != q.shape:
             self.tracker = RiccatiTracker(q, self.r, self.iterations)
         else:
             self.tracker.q = q
         return self.tracker.design(a, b)
+
+    def equilibrium(self, a: np.ndarray, c_att: np.ndarray, reference: np.ndarray
+                    ) -> np.ndarray:
+        """:func:`equilibrium_state` of the model, its map kept while the model is
+        unchanged (:func:`equilibrium_map`)."""
+        kept = self._equilibrium
+        if kept is None or not (np.array_equal(kept[0], a) and np.array_equal(kept[1], c_att)):
+            kept = self._equilibrium = (a.copy(), c_att.copy(), equilibrium_map(a, c_att))
+        return kept[2] @ reference
 
     def torque(self, gain: np.ndarray, x_hat: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
         """``-G_x (xhat - x_ref) - G_z z``, N m."""
@@ -247,7 +294,7 @@ class LQGLaw:
         """Advance the integral by ``dt * error`` if near the reference (for
         ``settle_s`` already, this step included) and not saturated; a held call
         (``saturated``) still counts the time in the band."""
-        near = bool(np.all(np.isfinite(attitude_error))
+        near = bool(np.isfinite(attitude_error).all()
                     and np.abs(attitude_error).max() < self.band)
         self._in_band_steps = self._in_band_steps + 1 if near else 0
         if (self.integral and not saturated and near

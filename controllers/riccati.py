@@ -10,14 +10,18 @@
 :class:`RiccatiTracker` re-designs every step for a slowly varying model by
 a few Riccati (value) iterations warm-started from the last solution,
 O(n^3) with small constants, falling back to the exact solver when the
-iteration has not converged or the model jumped.
+iteration has not converged or the model jumped; a model it has already
+converged on (an identifier that exports a new model every few samples)
+gets that design back without iterating.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
+from scipy.linalg.lapack import dgeev as _dgeev
 
 from spacecraft_conventions import single_threaded_blas
 
@@ -56,7 +60,7 @@ def check_weights(q: ArrayLike, r: ArrayLike, n: int | None = None,
             raise ValueError(f"{name} must be a square matrix, got shape {mat.shape}")
         if size is not None and mat.shape[0] != size:
             raise ValueError(f"{name} must have shape ({size}, {size}), got {mat.shape}")
-        if not np.all(np.isfinite(mat)):
+        if not np.isfinite(mat).all():
             raise ValueError(f"{name} must be finite")
         if not np.allclose(mat, mat.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(mat).max())):
             raise ValueError(f"{name} must be symmetric")
@@ -83,7 +87,7 @@ def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     if b.ndim != 2 or b.shape[0] != n or b.shape[1] == 0:
         raise ValueError(f"B must have shape ({n}, m) for A of shape {a.shape}, got {b.shape} "
                          "(a single input is a column: B.reshape(-1, 1))")
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError("A and B must be finite")
     return a, b
 
@@ -100,13 +104,50 @@ def spectral_radius(a: np.ndarray) -> float:
     -------
     float
         ``max |eig(a)|`` (< 1: a stable discrete-time system).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        For a matrix with non-finite entries, or if the QR algorithm does not
+        converge (as ``numpy.linalg.eigvals``).
     """
-    return float(np.abs(np.linalg.eigvals(a)).max())
+    a = np.asarray(a, dtype=float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1]:
+        raise np.linalg.LinAlgError(f"a must be a square matrix, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise np.linalg.LinAlgError("a must not contain infs or NaNs")
+    # LAPACK's dgeev without eigenvectors, as numpy.linalg.eigvals, without its
+    # per-call overhead (a third of the call at n = 17, once per adaptive step)
+    wr, wi, _, _, info = _dgeev(a, compute_vl=0, compute_vr=0)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"eigenvalues did not converge (LAPACK info {info})")
+    return float(np.hypot(wr, wi).max())
 
 
-def _gain(a, b, r, p):
+@njit(cache=True, nogil=True)
+def _gain(a: np.ndarray, b: np.ndarray, r: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``G = (R + B^T P B)^-1 B^T P A``, compiled."""
     btp = b.T @ p
     return np.linalg.solve(r + btp @ b, btp @ a)
+
+
+@njit(cache=True, nogil=True)
+def _iterate(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, p: np.ndarray,
+             iterations: int, tol: float) -> tuple[np.ndarray, float]:
+    """Up to ``iterations`` Riccati (value) iterations from ``p``, compiled; stops once
+    P changes by less than ``tol`` relative. Returns P and its last relative change
+    (inf if no iteration ran, NaN once P is not finite)."""
+    change = np.inf
+    for _ in range(iterations):
+        btp = b.T @ p
+        k = np.linalg.solve(r + btp @ b, btp @ a)
+        p_new = a.T @ p @ (a - b @ k) + q
+        p_new = 0.5 * (p_new + p_new.T)
+        change = np.abs(p_new - p).max() / max(np.abs(p_new).max(), 1e-300)
+        p = p_new
+        if change < tol:
+            break
+    return p, change
 
 
 @single_threaded_blas
@@ -149,7 +190,7 @@ def dlqr(a: ArrayLike, b: ArrayLike, q: ArrayLike,
         p = solve_discrete_are(a, b, q, r)
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(f"no stabilizing Riccati solution: {exc}") from None
-    gain = _gain(a, b, r, p)
+    gain = _gain(*(np.ascontiguousarray(m) for m in (a, b, r, p)))
     rho = spectral_radius(a - b @ gain)
     if not rho < 1.0 - 1e-12:
         raise ValueError(f"no stabilizing Riccati solution: the closed loop A - B G keeps a "
@@ -169,6 +210,16 @@ class RiccatiTracker:
         Riccati iterations per re-design, each O(n^3).
     tol : float
         Relative change of P below which the iteration has converged.
+
+    Attributes
+    ----------
+    n_exact : int
+        Designs solved from scratch (:func:`dlqr`).
+    n_reused : int
+        Designs returned unchanged: the model and ``q`` equal to those of the
+        last design, which had converged (the exact solution, or an iteration
+        whose last step changed P by less than ``tol``); iterating again would
+        move P by less than that tolerance.
     """
 
     def __init__(self, q: np.ndarray, r: np.ndarray, iterations: int = 4,
@@ -178,6 +229,9 @@ class RiccatiTracker:
         self.tol = float(tol)
         self.p: np.ndarray | None = None
         self.n_exact = 0
+        self.n_reused = 0
+        #: (A, B, Q, G) of the last design, kept only when it converged
+        self._converged: tuple[np.ndarray, ...] | None = None
 
     @single_threaded_blas
     def design(self, a: ArrayLike, b: ArrayLike) -> np.ndarray:
@@ -189,24 +243,29 @@ class RiccatiTracker:
             As :func:`dlqr` (shapes, or no stabilizing solution).
         """
         a, b = check_model(a, b)
+        last = self._converged
+        if (last is not None and np.array_equal(last[0], a) and np.array_equal(last[1], b)
+                and np.array_equal(last[2], self.q)):
+            self.n_reused += 1
+            return last[3]
+        self._converged = None
         if self.p is None or self.p.shape != a.shape:
             gain, self.p = dlqr(a, b, self.q, self.r)
             self.n_exact += 1
-            return gain
-        p = self.p
-        change = np.inf
-        for _ in range(self.iterations):
-            btp = b.T @ p
-            k = np.linalg.solve(self.r + btp @ b, btp @ a)
-            p_new = a.T @ p @ (a - b @ k) + self.q
-            p_new = 0.5 * (p_new + p_new.T)
-            change = np.abs(p_new - p).max() / max(np.abs(p_new).max(), 1e-300)
-            p = p_new
-            if change < self.tol:
-                break
-        if not np.all(np.isfinite(p)) or change > 0.1:
+            return self._keep(a, b, gain)
+        a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+        p, change = _iterate(a, b, np.ascontiguousarray(self.q), np.ascontiguousarray(self.r),
+                             np.ascontiguousarray(self.p), self.iterations, self.tol)
+        if not np.isfinite(p).all() or change > 0.1:
             gain, self.p = dlqr(a, b, self.q, self.r)
             self.n_exact += 1
-            return gain
+            return self._keep(a, b, gain)
         self.p = p
-        return _gain(a, b, self.r, p)
+        gain = _gain(a, b, np.ascontiguousarray(self.r), p)
+        return self._keep(a, b, gain) if change < self.tol else gain
+
+    def _keep(self, a: np.ndarray, b: np.ndarray, gain: np.ndarray) -> np.ndarray:
+        """Remember a converged design (copies: the caller may change its arrays)."""
+        gain.flags.writeable = False        # handed out again: nobody may change it
+        self._converged = (a.copy(), b.copy(), self.q.copy(), gain)
+        return gain

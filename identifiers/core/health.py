@@ -141,7 +141,7 @@ def _estimators(obj: Any) -> Iterator[Any]:
 
 def _positive_definite(p: np.ndarray) -> bool:
     """Finite, positive diagonal, and a Cholesky factor exists."""
-    if not np.all(np.isfinite(p)) or np.any(np.diag(p) <= 0):
+    if not np.isfinite(p).all() or np.any(np.diag(p) <= 0):
         return False
     try:
         np.linalg.cholesky(p)
@@ -154,7 +154,7 @@ def _positive_semidefinite(p: np.ndarray) -> bool:
     """Finite, symmetric to rounding, no eigenvalue below -1e-9 of the largest diagonal
     entry (a Kalman filter's covariance is singular along states the model leaves
     inert)."""
-    if not np.all(np.isfinite(p)):
+    if not np.isfinite(p).all():
         return False
     scale = max(float(np.abs(np.diag(p)).max(initial=0.0)), 1e-300)
     if np.abs(p - p.T).max(initial=0.0) > 1e-9 * scale:
@@ -186,18 +186,18 @@ def state_problem(identifier: Any, matrices: tuple | None, state: np.ndarray | N
     """
     for i, est in enumerate(_estimators(identifier)):
         if isinstance(est, RecursiveLeastSquares):
-            if not np.all(np.isfinite(est.theta)):
+            if not np.isfinite(est.theta).all():
                 return f"estimate {i} not finite"
             if not _positive_definite(est.P):
                 return f"covariance {i} not positive definite"
         else:
-            if est.x is not None and not np.all(np.isfinite(est.x)):
+            if est.x is not None and not np.isfinite(est.x).all():
                 return f"filter state {i} not finite"
             if not _positive_semidefinite(est.P):
                 return f"filter covariance {i} not positive semi-definite"
-    if matrices is not None and not all(np.all(np.isfinite(m)) for m in matrices
+    if matrices is not None and not all(np.isfinite(m).all() for m in matrices
                                         if m is not None):
         return "model not finite"
-    if state is not None and not np.all(np.isfinite(state)):
+    if state is not None and not np.isfinite(state).all():
         return "state not finite"
     return None

@@ -65,6 +65,12 @@ def steady_state_gain(a: ArrayLike, c: ArrayLike, q: ArrayLike,
     return p @ c.T @ np.linalg.inv(c @ p @ c.T + r), p
 
 
+def _f64(m: ArrayLike) -> np.ndarray:
+    """``m`` as a C-contiguous float64 array (no copy when it is one): what the
+    compiled kernels take."""
+    return np.ascontiguousarray(m, dtype=np.float64)
+
+
 @njit(cache=True, nogil=True)
 def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
                  q: np.ndarray, r: np.ndarray, u: np.ndarray, y: np.ndarray
@@ -88,6 +94,32 @@ def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     pn = a @ pf @ a.T + q
     pn = 0.5 * (pn + pn.T)
     return a @ xf + b @ u, pn, a @ gain, e, s, True
+
+
+@njit(cache=True, nogil=True)
+def _correct_all(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Measurement update with every output of ``y``, compiled: ``x_{k|k}``, ``P_{k|k}``,
+    the filter gain ``L``, the innovation, its covariance and whether the latter
+    could be factored (if not: the prediction unchanged and a zero gain)."""
+    pct = p @ c.T
+    s = c @ pct
+    for i in range(s.shape[0]):
+        s[i, i] += r[i]
+    e = y - c @ x
+    try:
+        gain = np.linalg.solve(s, pct.T).T
+    except Exception:                  # numba raises a plain exception on a singular matrix
+        return x, p, np.zeros((x.shape[0], y.shape[0])), e, s, False
+    return x + gain @ e, p - gain @ pct.T, gain, e, s, True
+
+
+@njit(cache=True, nogil=True)
+def _predict(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, q: np.ndarray,
+             u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time update, compiled: ``(A x + B u, sym(A P A^T + Q))``."""
+    pn = a @ p @ a.T + q
+    return a @ x + b @ u, 0.5 * (pn + pn.T)
 
 
 @njit(cache=True, nogil=True)
@@ -209,9 +241,12 @@ class KalmanPredictor:
         x, p, gain, innovation, s = self._correction(c, r, y)
         if gain is not None:
             seen = np.isfinite(y)
-            full = np.zeros((self.n, c.shape[0]))
-            full[:, seen] = gain if a is None else a @ gain
-            self.gain = full
+            if seen.all():
+                self.gain = gain if a is None else a @ gain
+            else:
+                full = np.zeros((self.n, c.shape[0]))
+                full[:, seen] = gain if a is None else a @ gain
+                self.gain = full
             self.innovation = innovation
             self.innovation_covariance = s if seen.all() else None
         self.x, self.P = x, p
@@ -219,9 +254,7 @@ class KalmanPredictor:
 
     def predict(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Time update with the input applied: the filter now holds ``x_{k+1|k}``."""
-        p = a @ self.P @ a.T + q
-        self.x = a @ self.x + b @ u
-        self.P = 0.5 * (p + p.T)
+        self.x, self.P = _predict(self.x, self.P, _f64(a), _f64(b), _f64(q), _f64(u))
         return self.x
 
     def _correction(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> tuple:
@@ -230,6 +263,9 @@ class KalmanPredictor:
         if y is None:
             return x, p, None, None, None
         seen = np.isfinite(y)
+        if seen.all():
+            xf, pf, gain, e, s, _ = _correct_all(x, p, _f64(c), _f64(r), _f64(y))
+            return xf, pf, gain, e, s
         if not seen.any():
             return x, p, None, None, None
         cs = c[seen]

@@ -148,7 +148,7 @@ class RecursiveLeastSquares:
         if regularization is None:
             regularization = 1.0 / self.initial_covariance
         delta = np.broadcast_to(np.asarray(regularization, dtype=float), (n_regressors,))
-        if not (np.all(np.isfinite(delta)) and np.all(delta >= 0)):
+        if not (np.isfinite(delta).all() and np.all(delta >= 0)):
             raise ValueError(f"regularization must be >= 0 (a scalar or ({n_regressors},)), "
                              f"got {regularization}")
         self.regularization = delta.copy()
@@ -157,7 +157,7 @@ class RecursiveLeastSquares:
             raise ValueError(f"hold must be a boolean array of shape ({n_regressors},)")
         self.hold = hold_mask.copy()
         drift_arr = np.broadcast_to(np.asarray(drift, dtype=float), (n_regressors,))
-        if not (np.all(np.isfinite(drift_arr)) and np.all(drift_arr >= 0)):
+        if not (np.isfinite(drift_arr).all() and np.all(drift_arr >= 0)):
             raise ValueError(f"drift must be >= 0 (a scalar or ({n_regressors},)), got {drift}")
         self.drift = drift_arr.copy()
         # the floor's pseudo-rows: w^2 = d (1 - lambda) delta replaces what forgetting
@@ -284,7 +284,7 @@ class RecursiveLeastSquares:
         """
         p = np.asarray(covariance, dtype=float)
         d = self.theta.shape[1]
-        if p.shape != (d, d) or not np.all(np.isfinite(p)) or not np.allclose(p, p.T):
+        if p.shape != (d, d) or not np.isfinite(p).all() or not np.allclose(p, p.T):
             raise ValueError(f"covariance must be a finite symmetric ({d}, {d}) matrix")
         self._q = np.array(p, order="F")          # a copy: updated in place
         self._scale = 1.0

@@ -170,7 +170,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
                              f"sensors one of the {len(self.turning)} appendages, each "
                              f"appendage at least one sensor; got {self.sensor_appendage}")
         axis = np.asarray(drive_axis, dtype=float)
-        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or not np.any(axis):
+        if axis.shape != (3,) or not np.isfinite(axis).all() or not np.any(axis):
             raise ValueError(f"drive_axis must be a finite non-zero 3-vector, got {drive_axis}")
         self.drive_axis = tuple(float(v) for v in axis / np.linalg.norm(axis))
         self.schedule_resolution = positive_float("schedule_resolution", schedule_resolution)

@@ -208,7 +208,7 @@ class WarmupFit(ModelFilter):
         start = self._priors[0]
         if origin == self._fit_origin:
             start = self._fit_initial_state()     # the held fit's record starts there too
-        self.refit_start = start if start is not None and np.all(np.isfinite(start)) \
+        self.refit_start = start if start is not None and np.isfinite(start).all() \
             else None
         self._record = list(self._history)
         held_std = self._gain_relative_std()

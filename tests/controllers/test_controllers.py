@@ -24,9 +24,12 @@ from controllers import (
     check_weights,
     dlqr,
     episode_metrics,
+    equilibrium_map,
+    equilibrium_state,
     fast_identifier,
     input_disk_margin,
     run_episode,
+    spectral_radius,
 )
 from controllers.base import episode_seed
 from spacecraft_env import ENV_IDS, ConstantScenario, FlexibleSpacecraftEnv
@@ -67,6 +70,49 @@ def test_riccati_tracker_converges_to_exact_solution():
     for _ in range(20):
         gain = tracker.design(a2, b)
     np.testing.assert_allclose(gain, dlqr(a2, b, q, r)[0], rtol=1e-8, atol=1e-12)
+
+
+def test_riccati_tracker_hands_back_a_converged_design_for_an_unchanged_model():
+    rng = np.random.default_rng(1)
+    a = np.diag([1.0, 0.95, 0.9]) + 0.05 * rng.normal(size=(3, 3))
+    b = rng.normal(size=(3, 1))
+    q, r = np.eye(3), np.array([[1.0]])
+    tracker = RiccatiTracker(q, r, iterations=4, tol=1e-9)
+    gain = tracker.design(a, b)                     # the cold start: exact, so converged
+    again = tracker.design(a.copy(), b.copy())      # equal values, other arrays
+    assert again is gain and tracker.n_reused == 1 and not again.flags.writeable
+    moved = tracker.design(a + 1e-3, b)             # a new model: iterated, not reused
+    assert moved is not gain and tracker.n_reused == 1
+    for _ in range(200):                            # iterate until converged, then kept
+        latest = tracker.design(a + 1e-3, b)
+    assert tracker.n_reused > 100
+    np.testing.assert_allclose(latest, dlqr(a + 1e-3, b, q, r)[0], rtol=1e-7)
+    tracker.q = 2 * q                               # another weight: designed again
+    assert tracker.design(a + 1e-3, b) is not latest
+
+
+def test_spectral_radius_matches_numpy_and_refuses_non_finite_matrices():
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 5, 17):
+        a = rng.normal(size=(n, n))
+        assert spectral_radius(a) == pytest.approx(np.abs(np.linalg.eigvals(a)).max(),
+                                                   rel=1e-12)
+    assert spectral_radius(np.array([[0.0, -1.0], [1.0, 0.0]])) == pytest.approx(1.0)
+    with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
+        spectral_radius(np.array([[np.nan]]))
+    with pytest.raises(np.linalg.LinAlgError, match="square"):
+        spectral_radius(np.ones((2, 3)))
+
+
+def test_equilibrium_map_is_the_equilibrium_state_per_unit_reference():
+    a = np.eye(4)
+    a[:2, 2:] = 0.1 * np.eye(2)                     # two double integrators
+    c_att = np.hstack([np.eye(2), np.zeros((2, 2))])
+    ref = np.array([0.02, -0.01])
+    np.testing.assert_allclose(equilibrium_map(a, c_att) @ ref,
+                               equilibrium_state(a, c_att, ref), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(equilibrium_state(a, c_att, ref), [0.02, -0.01, 0, 0],
+                               atol=1e-15)
 
 
 @pytest.mark.parametrize(

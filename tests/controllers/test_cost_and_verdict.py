@@ -258,3 +258,23 @@ def test_run_episode_refuses_a_step_budget_that_is_not_a_positive_integer(steps)
     env = _env(steps=10)
     with pytest.raises(ValueError, match="max_steps must be an integer >= 1"):
         run_episode(env, RobustLQG(env.unwrapped), seed=0, max_steps=steps)
+
+
+def test_acceptance_judges_a_handed_back_gain_again_only_for_the_same_model():
+    """The verdict kept for a gain handed back unchanged (RiccatiTracker) is reused for
+    the same model and recomputed for another, and equals a fresh judge's."""
+    dt = 0.1
+    a = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+    b = np.vstack([0.5 * dt**2 * np.eye(3), dt * np.eye(3)])
+    c = np.eye(6)
+    att, rate = np.arange(3), np.arange(3, 6)
+    gain = np.hstack([2.0 * np.eye(3), 3.0 * np.eye(3)])
+    gain.flags.writeable = False
+    judge = GainAcceptance()
+    args = (att, rate, (1.0, 1.0), 0.1, dt)
+    assert judge.check(a, b, c, gain, *args) is None
+    assert judge.check(a.copy(), b, c, gain, *args) is None         # kept
+    unstable = 1.5 * a                                               # the same gain, another model
+    assert judge.check(unstable, b, c, gain, *args) == GainAcceptance().check(
+        unstable, b, c, gain, *args) == "unstable"
+    assert judge.check(a, b, c, gain, *args) is None

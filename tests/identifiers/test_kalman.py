@@ -51,3 +51,35 @@ def test_steady_state_gain_rejects_an_undetectable_unstable_model():
     c = np.array([[0.0, 1.0]])          # the unstable mode is not seen
     with pytest.raises(ValueError, match="Riccati"):
         steady_state_gain(a, c, np.zeros((2, 2)), np.array([1.0]))
+
+
+def test_split_updates_equal_the_textbook_filter_with_all_or_some_outputs():
+    """correct + predict (the controllers' filters; compiled where every output is
+    seen) against the equations written out, with a partly missing sample too."""
+    rng = np.random.default_rng(3)
+    n, m = 4, 3
+    a = 0.9 * np.eye(n) + 0.05 * rng.normal(size=(n, n))
+    b = rng.normal(size=(n, 2))
+    c = rng.normal(size=(m, n))
+    q, r = 0.01 * np.eye(n), np.array([0.1, 0.2, 0.3])
+    kf = KalmanPredictor(n, initial_covariance=2.0)
+    x, p = np.zeros(n), 2.0 * np.eye(n)
+    for k in range(30):
+        y, u = rng.normal(size=m), rng.normal(size=2)
+        if k % 5 == 4:
+            y[1] = np.nan                                  # one output missing
+        seen = np.isfinite(y)
+        cs = c[seen]
+        s = cs @ p @ cs.T + np.diag(r[seen])
+        gain = p @ cs.T @ np.linalg.inv(s)
+        x, p = x + gain @ (y[seen] - cs @ x), p - gain @ cs @ p
+        np.testing.assert_allclose(kf.correct(c, r, y, a=a), x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(kf.P, p, rtol=1e-10, atol=1e-12)
+        expected_gain = np.zeros((n, m))
+        expected_gain[:, seen] = a @ gain
+        np.testing.assert_allclose(kf.gain, expected_gain, rtol=1e-10, atol=1e-12)
+        assert (kf.innovation_covariance is None) == (not seen.all())
+        x, p = a @ x + b @ u, a @ p @ a.T + q
+        np.testing.assert_allclose(kf.predict(a, b, q, u), x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(kf.P, p, rtol=1e-10, atol=1e-12)
+        assert np.array_equal(kf.P, kf.P.T)              # kept exactly symmetric
