@@ -39,6 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from controllers.lqg import augment_integral
 from controllers.riccati import spectral_radius
@@ -202,7 +203,14 @@ def unit_states(a: np.ndarray, c: np.ndarray, att_rows: np.ndarray,
 
 
 def _softest(matrix: np.ndarray) -> float:
-    return float(np.linalg.eigvalsh(0.5 * (matrix + matrix.T)).min())
+    """Smallest eigenvalue of the symmetric part of a square matrix."""
+    return float(_smallest_symmetric_eigenvalue(np.ascontiguousarray(matrix, dtype=float)))
+
+
+@njit(cache=True, nogil=True)
+def _smallest_symmetric_eigenvalue(matrix: np.ndarray) -> float:
+    """Compiled: numpy's per-call overhead is most of the cost at 3 x 3."""
+    return np.linalg.eigvalsh(0.5 * (matrix + matrix.T)).min()
 
 
 @dataclass
