@@ -316,6 +316,8 @@ class AdaptiveLQG(_LQGController):
         self._margin: float | None = None
         self._margin_due = 0
         self._rigid_maps: tuple | None = None
+        #: (B, process noise through B) of the own filter's last model
+        self._process_noise_of: tuple[np.ndarray, np.ndarray] | None = None
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
         self._sample: tuple[np.ndarray | None, np.ndarray, float | None] | None = None
         self._uncertainty = float("inf")
@@ -398,7 +400,10 @@ class AdaptiveLQG(_LQGController):
         a, b, c = model.A, model.B, model.C
         if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return None
-        return self._filter(a, b, c, process_noise(b), self._noise_var,
+        kept = self._process_noise_of
+        if kept is None or not np.array_equal(kept[0], b):
+            kept = self._process_noise_of = (b.copy(), process_noise(b))   # per model
+        return self._filter(a, b, c, kept[1], self._noise_var,
                             np.where(np.isfinite(y), y, np.nan), info)
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:

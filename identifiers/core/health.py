@@ -167,7 +167,7 @@ def degenerate(matrices: tuple | None) -> str | None:
     if matrices is None:
         return None
     for name, index in (("A", 0), ("C", 2)):
-        if not np.any(matrices[index]):
+        if not np.asarray(matrices[index]).any():
             return f"degenerate: the model's {name} is zero (nothing learnt)"
     return None
 
