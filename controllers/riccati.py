@@ -11,8 +11,8 @@
 a few Riccati (value) iterations warm-started from the last solution,
 O(n^3) with small constants, falling back to the exact solver when the
 iteration has not converged or the model jumped; a model it has already
-converged on (an identifier that exports a new model every few samples)
-gets that design back without iterating.
+converged on (an identifier that holds its model between changes) gets that
+design back without iterating.
 """
 
 from __future__ import annotations
