@@ -72,31 +72,6 @@ def _f64(m: ArrayLike) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
-                 q: np.ndarray, r: np.ndarray, u: np.ndarray, y: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Measurement update with every output of ``y`` and the time update, compiled.
-
-    Returns ``x_{k+1|k}``, ``P_{k+1|k}``, the predictor gain ``A L``, the innovation,
-    its covariance and whether the innovation covariance could be factored."""
-    pct = p @ c.T
-    s = c @ pct
-    for i in range(s.shape[0]):
-        s[i, i] += r[i]
-    e = y - c @ x
-    try:
-        gain_t = np.linalg.solve(s, pct.T)                 # L^T
-    except Exception:                  # numba raises a plain exception on a singular matrix
-        return x, p, np.zeros((x.shape[0], y.shape[0])), e, s, False
-    gain = gain_t.T
-    xf = x + gain @ e
-    pf = p - gain @ pct.T
-    pn = a @ pf @ a.T + q
-    pn = 0.5 * (pn + pn.T)
-    return a @ xf + b @ u, pn, a @ gain, e, s, True
-
-
-@njit(cache=True, nogil=True)
 def _correct_all(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Measurement update with every output of ``y``, compiled: ``x_{k|k}``, ``P_{k|k}``,
@@ -120,6 +95,21 @@ def _predict(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, q: np.n
     """Time update, compiled: ``(A x + B u, sym(A P A^T + Q))``."""
     pn = a @ p @ a.T + q
     return a @ x + b @ u, 0.5 * (pn + pn.T)
+
+
+@njit(cache=True, nogil=True)
+def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                 q: np.ndarray, r: np.ndarray, u: np.ndarray, y: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Measurement update with every output of ``y`` and the time update, compiled.
+
+    Returns ``x_{k+1|k}``, ``P_{k+1|k}``, the predictor gain ``A L``, the innovation,
+    its covariance and whether the innovation covariance could be factored."""
+    xf, pf, gain, e, s, ok = _correct_all(x, p, c, r, y)
+    if not ok:
+        return x, p, gain, e, s, False
+    xn, pn = _predict(xf, pf, a, b, q, u)
+    return xn, pn, a @ gain, e, s, True
 
 
 @njit(cache=True, nogil=True)
