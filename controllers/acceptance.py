@@ -41,7 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from controllers.lqg import augment_integral
+from controllers.kept import KeptWhileEqual
+from controllers.lqg import augment_integral, equilibrium_map
 from controllers.riccati import spectral_radius
 
 __all__ = ["REJECTION_REASONS", "GainAcceptance", "effective_gains", "input_disk_margin",
@@ -192,8 +193,7 @@ def unit_states(a: np.ndarray, c: np.ndarray, att_rows: np.ndarray,
     if not n:
         return np.zeros((0, 3)), np.zeros((0, 3))
     eye = np.eye(3)
-    lhs_p = np.vstack([a - np.eye(n), c[att_rows]])
-    x_p = np.linalg.lstsq(lhs_p, np.vstack([np.zeros((n, 3)), eye]), rcond=None)[0]
+    x_p = equilibrium_map(a, c[att_rows])
     rows = np.concatenate([att_rows, rate_rows])
     others = np.setdiff1d(np.arange(c.shape[0]), rows)
     lhs_d = np.vstack([c[rows], c[others]])
@@ -241,8 +241,10 @@ class GainAcceptance:
             raise ValueError(f"max_prediction_error must be > 0, got {self.max_prediction_error}")
         if not 0 <= self.min_disk_margin < 1:
             raise ValueError(f"min_disk_margin must be in [0, 1), got {self.min_disk_margin}")
-        self._per_model: tuple | None = None     # ((A, B, C), (X_p, X_d, A_a, B_a), key)
-        self._verdict: tuple | None = None
+        #: (X_p, X_d, A_a, B_a) of the model last judged
+        self._per_model: KeptWhileEqual[tuple[np.ndarray, ...]] = KeptWhileEqual()
+        #: the reason (None: passed) of the gain and model last judged
+        self._verdict: KeptWhileEqual[str | None] = KeptWhileEqual()
 
     def check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
               att_rows: np.ndarray, rate_rows: np.ndarray, reference: tuple[float, float],
@@ -272,17 +274,9 @@ class GainAcceptance:
             return "prediction"
         # the tests below depend on the model and the gain alone: a design handed back
         # unchanged for an unchanged model (RiccatiTracker) keeps its verdict
-        arrays, key = (a, b, c, att_rows, rate_rows), (tuple(reference), float(dt))
-        kept = self._verdict        # (arrays, gain, key, reason) of the last design judged
-        if (kept is not None and kept[1] is gain and kept[2] == key
-                and all(np.array_equal(old, new) for old, new in zip(kept[0], arrays,
-                                                                     strict=True))):
-            return kept[3]
-        reason = self._design_check(a, b, c, gain, att_rows, rate_rows, reference, dt)
-        # kept by reference where nobody can change them (a model's read-only arrays)
-        self._verdict = (tuple(m.copy() if m.flags.writeable else m
-                               for m in map(np.asarray, arrays)), gain, key, reason)
-        return reason
+        return self._verdict.get(
+            (gain, a, b, c, att_rows, rate_rows, reference, dt),
+            lambda: self._design_check(a, b, c, gain, att_rows, rate_rows, reference, dt))
 
     def _design_check(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, gain: np.ndarray,
                       att_rows: np.ndarray, rate_rows: np.ndarray,
@@ -290,16 +284,12 @@ class GainAcceptance:
         """Tests 1.-3. of :meth:`check` (stiffness, damping, stability)."""
         n = a.shape[0]
         integral = gain.shape[1] > n
-        cached = self._per_model
-        if cached is None or cached[2] != (integral, dt) or not all(
-                np.array_equal(old, new) for old, new in zip(cached[0], (a, b, c), strict=True)):
-            # the unit states and the augmented model depend on the model alone: a model
-            # kept over several steps (an identifier exports every few samples) pays once
-            aug = augment_integral(a, b, c[att_rows], dt) if integral else (a, b)
-            cached = self._per_model = (
-                tuple(m.copy() if m.flags.writeable else m for m in map(np.asarray, (a, b, c))),
-                (*unit_states(a, c, att_rows, rate_rows), *aug), (integral, dt))
-        x_p, x_d, a_cl, b_cl = cached[1]
+        # the unit states and the augmented model depend on the model alone: a model
+        # kept over several steps (an identifier exports every few samples) pays once
+        x_p, x_d, a_cl, b_cl = self._per_model.get(
+            (a, b, c, att_rows, rate_rows, integral, dt),
+            lambda: (*unit_states(a, c, att_rows, rate_rows),
+                     *(augment_integral(a, b, c[att_rows], dt) if integral else (a, b))))
         k_p, k_d = gain[:, :n] @ x_p, gain[:, :n] @ x_d
         if _softest(k_p) < self.floor * reference[0]:
             return "stiffness"

@@ -75,6 +75,7 @@ from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
+from controllers.kept import KeptWhileEqual
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
 from identifiers import OnlineIdentifier
@@ -315,9 +316,10 @@ class AdaptiveLQG(_LQGController):
         self._err2 = self._sig2 = 0.0
         self._margin: float | None = None
         self._margin_due = 0
-        self._rigid_maps: tuple | None = None
-        #: (B, process noise through B) of the own filter's last model
-        self._process_noise_of: tuple[np.ndarray, np.ndarray] | None = None
+        #: per sensor group, the maps of :meth:`_measured_rigid` for the last model's C
+        self._rigid_maps: KeptWhileEqual[list[tuple[np.ndarray, ...]]] = KeptWhileEqual()
+        #: the process noise through the own filter's last model's B
+        self._process_noise: KeptWhileEqual[np.ndarray] = KeptWhileEqual()
         self._past: deque = deque(maxlen=AGREEMENT_HORIZON)
         self._sample: tuple[np.ndarray | None, np.ndarray, float | None] | None = None
         self._uncertainty = float("inf")
@@ -374,20 +376,20 @@ class AdaptiveLQG(_LQGController):
         slices = self.identifier.rigid_states
         if slices is None:
             return x
-        cached = self._rigid_maps
-        if cached is None or not np.array_equal(cached[0], c):
+        def maps() -> list[tuple[np.ndarray, ...]]:
             # per sensor group: the pseudo-inverse of its rigid block and the
             # block of the other states; they change only with the model
             states = np.arange(x.size)
-            maps = []
+            out = []
             for rows, cols in zip((self._att_rows, self._rate_rows), slices, strict=True):
                 rigid = states[cols]
                 rest = np.setdiff1d(states, rigid)
-                maps.append((rows, rigid, rest, np.linalg.pinv(c[np.ix_(rows, rigid)]),
-                             c[np.ix_(rows, rest)]))
-            cached = self._rigid_maps = (c.copy(), maps)
+                out.append((rows, rigid, rest, np.linalg.pinv(c[np.ix_(rows, rigid)]),
+                            c[np.ix_(rows, rest)]))
+            return out
+
         x = x.copy()
-        for rows, cols, rest, inverse, others in cached[1]:
+        for rows, cols, rest, inverse, others in self._rigid_maps.get((c,), maps):
             if np.isfinite(y[rows]).all():
                 x[cols] = inverse @ (y[rows] - others @ x[rest])
         return x
@@ -400,10 +402,8 @@ class AdaptiveLQG(_LQGController):
         a, b, c = model.A, model.B, model.C
         if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return None
-        kept = self._process_noise_of
-        if kept is None or not np.array_equal(kept[0], b):
-            kept = self._process_noise_of = (b.copy(), process_noise(b))   # per model
-        return self._filter(a, b, c, kept[1], self._noise_var,
+        noise = self._process_noise.get((b,), lambda: process_noise(b))     # per model
+        return self._filter(a, b, c, noise, self._noise_var,
                             np.where(np.isfinite(y), y, np.nan), info)
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.kept import KeptWhileEqual
 from controllers.riccati import RiccatiTracker, check_weights
 from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
 
@@ -214,9 +215,10 @@ class LQGLaw:
         self._qz = weights.integral / (NOMINAL_SCALE["attitude"] ** 2)
         self.tracker: RiccatiTracker | None = None
         self.gain: np.ndarray | None = None
-        self._equilibrium: tuple[np.ndarray, ...] | None = None
-        #: ((A, B, C, C_att), (Q_a, A_a, B_a)) of the last design's model
-        self._designed_on: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] | None = None
+        #: the equilibrium map of the model (A, C_att) last flown
+        self._equilibrium: KeptWhileEqual[np.ndarray] = KeptWhileEqual()
+        #: (Q_a, A_a, B_a) of the model (A, B, C, C_att) last designed on
+        self._design_model: KeptWhileEqual[tuple[np.ndarray, ...]] = KeptWhileEqual()
         self.reset()
 
     @property
@@ -256,17 +258,9 @@ class LQGLaw:
         ValueError
             If the Riccati equation has no stabilizing solution.
         """
-        kept = self._designed_on
-        if kept is not None and all(np.array_equal(old, new) for old, new in
-                                    zip(kept[0], (a, b, c, c_att), strict=True)):
-            q, a, b = kept[1]      # the model of the last design: its weight and augmentation
-        else:
-            model = tuple(m.copy() if m.flags.writeable else m
-                          for m in map(np.asarray, (a, b, c, c_att)))
-            q = self.weight_matrix(c)
-            if self.integral:
-                a, b = augment_integral(a, b, c_att, self.dt)
-            self._designed_on = (model, (q, a, b))
+        q, a, b = self._design_model.get((a, b, c, c_att), lambda: (
+            self.weight_matrix(c),
+            *(augment_integral(a, b, c_att, self.dt) if self.integral else (a, b))))
         if self.tracker is None or self.tracker.q.shape != q.shape:
             self.tracker = RiccatiTracker(q, self.r, self.iterations)
         else:
@@ -277,10 +271,7 @@ class LQGLaw:
                     ) -> np.ndarray:
         """:func:`equilibrium_state` of the model, its map kept while the model is
         unchanged (:func:`equilibrium_map`)."""
-        kept = self._equilibrium
-        if kept is None or not (np.array_equal(kept[0], a) and np.array_equal(kept[1], c_att)):
-            kept = self._equilibrium = (a.copy(), c_att.copy(), equilibrium_map(a, c_att))
-        return kept[2] @ reference
+        return self._equilibrium.get((a, c_att), lambda: equilibrium_map(a, c_att)) @ reference
 
     def torque(self, gain: np.ndarray, x_hat: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
         """``-G_x (xhat - x_ref) - G_z z``, N m."""

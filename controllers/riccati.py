@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 from scipy.linalg.lapack import dgeev as _dgeev
 
+from controllers.kept import KeptWhileEqual
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["RiccatiTracker", "check_model", "check_weights", "dlqr", "spectral_radius"]
@@ -230,8 +231,8 @@ class RiccatiTracker:
         self.p: np.ndarray | None = None
         self.n_exact = 0
         self.n_reused = 0
-        #: (A, B, Q, G) of the last design, kept only when it converged
-        self._converged: tuple[np.ndarray, ...] | None = None
+        #: the last design's gain, for its (A, B, Q), kept only when it converged
+        self._converged: KeptWhileEqual[np.ndarray] = KeptWhileEqual()
 
     @single_threaded_blas
     def design(self, a: ArrayLike, b: ArrayLike) -> np.ndarray:
@@ -243,12 +244,10 @@ class RiccatiTracker:
             As :func:`dlqr` (shapes, or no stabilizing solution).
         """
         a, b = check_model(a, b)
-        last = self._converged
-        if (last is not None and np.array_equal(last[0], a) and np.array_equal(last[1], b)
-                and np.array_equal(last[2], self.q)):
+        if self._converged.holds((a, b, self.q)):
             self.n_reused += 1
-            return last[3]
-        self._converged = None
+            return self._converged.value
+        self._converged.clear()
         if self.p is None or self.p.shape != a.shape:
             gain, self.p = dlqr(a, b, self.q, self.r)
             self.n_exact += 1
@@ -265,7 +264,6 @@ class RiccatiTracker:
         return self._keep(a, b, gain) if change < self.tol else gain
 
     def _keep(self, a: np.ndarray, b: np.ndarray, gain: np.ndarray) -> np.ndarray:
-        """Remember a converged design (copies: the caller may change its arrays)."""
+        """Remember a converged design."""
         gain.flags.writeable = False        # handed out again: nobody may change it
-        self._converged = (a.copy(), b.copy(), self.q.copy(), gain)
-        return gain
+        return self._converged.keep((a, b, self.q), gain)

@@ -59,11 +59,16 @@ def test_double_integrator_lqr_matches_python_control():
     assert np.abs(np.linalg.eigvals(a - b @ gain)).max() < 1
 
 
-def test_riccati_tracker_converges_to_exact_solution():
-    rng = np.random.default_rng(0)
+def _lqr_problem(rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """A 3-state, 1-input model near the unit circle and unit weights."""
     a = np.diag([1.0, 0.95, 0.9]) + 0.05 * rng.normal(size=(3, 3))
     b = rng.normal(size=(3, 1))
-    q, r = np.eye(3), np.array([[1.0]])
+    return a, b, np.eye(3), np.array([[1.0]])
+
+
+def test_riccati_tracker_converges_to_exact_solution():
+    rng = np.random.default_rng(0)
+    a, b, q, r = _lqr_problem(rng)
     tracker = RiccatiTracker(q, r, iterations=50, tol=1e-13)
     tracker.design(a, b)
     a2 = a + 1e-3 * rng.normal(size=(3, 3))          # slowly varying model
@@ -73,10 +78,7 @@ def test_riccati_tracker_converges_to_exact_solution():
 
 
 def test_riccati_tracker_hands_back_a_converged_design_for_an_unchanged_model():
-    rng = np.random.default_rng(1)
-    a = np.diag([1.0, 0.95, 0.9]) + 0.05 * rng.normal(size=(3, 3))
-    b = rng.normal(size=(3, 1))
-    q, r = np.eye(3), np.array([[1.0]])
+    a, b, q, r = _lqr_problem(np.random.default_rng(1))
     tracker = RiccatiTracker(q, r, iterations=4, tol=1e-9)
     gain = tracker.design(a, b)                     # the cold start: exact, so converged
     again = tracker.design(a.copy(), b.copy())      # equal values, other arrays
@@ -751,3 +753,21 @@ def test_a_scheduled_identifier_gets_each_samples_drive_angle():
     from spacecraft_env.dynamics import rotation_pitch
 
     np.testing.assert_allclose(drive_rotation(DRIVE_AXIS, 1.3), rotation_pitch(1.3), atol=1e-15)
+
+
+def test_a_kept_value_holds_while_its_inputs_are_equal_and_never_goes_stale():
+    from controllers.kept import KeptWhileEqual
+
+    kept: KeptWhileEqual = KeptWhileEqual()
+    calls = []
+    a, frozen = np.arange(4.0), np.ones(2)
+    frozen.flags.writeable = False
+    assert kept.get((a, frozen, 0.1), lambda: calls.append(1)) is None   # None is a value
+    assert kept.holds((a.copy(), frozen, 0.1)) and len(calls) == 1
+    assert kept.get((a, frozen, 0.1), lambda: calls.append(2)) is None and calls == [1]
+    a[0] = 5.0                     # changed in place: the copy kept tells
+    assert not kept.holds((a, frozen, 0.1))
+    assert not kept.holds((a, frozen, 0.2)) and not kept.holds((a, frozen))
+    assert kept.keep((a, frozen, 0.2), "x") == "x" and kept.value == "x"
+    kept.clear()
+    assert not kept.holds((a, frozen, 0.2)) and kept.value is None
