@@ -47,12 +47,16 @@ docs: $(MAIN_STAMP)
 	$(BIN)/python -W error -m pdoc -d numpy -t docs/api -o build/api spacecraft_conventions \
 	    spacecraft_env identifiers controllers spacecraft_lab
 
+# the suite on every core (pytest-xdist), at most four workers: its own tests start
+# process pools of their own
+PYTEST_WORKERS := -n auto --maxprocesses=4
+
 test: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q $(PYTEST_WORKERS)
 
 test-all: $(STAMP)
-	$(BIN)/pytest -q -m ""
+	$(BIN)/pytest -q -m "" $(PYTEST_WORKERS)
 
 test-peers: $(PEERS_STAMP)
 	$(PEERS_VENV)/bin/pytest -q -p no:randomly -m slow tests/identifiers/test_peers.py

@@ -254,7 +254,10 @@ def test_training_without_the_rl_extra_names_it_before_any_work(tmp_path, capsys
     ({"radius_every": 0}, ValueError, "radius_every must be an integer >= 1"),
     ({"seed": -1}, ValueError, "seed must be an integer >= 0"),
     ({"seed": "0"}, ValueError, "seed must be an integer >= 0"),
-    ({"controller": object()}, TypeError, "controller must have act"),
+    # an explicit id: an object's default repr (its address) differs between processes,
+    # and pytest-xdist's workers must collect the same test ids
+    pytest.param({"controller": object()}, TypeError, "controller must have act",
+                 id="controller-without-act"),
     ({"env": "FlexibleSpacecraft-v2"}, TypeError, "env must be a gymnasium.Env")])
 def test_run_episode_checks_its_arguments(kwargs, error, expected):
     env = gym.make("FlexibleSpacecraft-v2")
