@@ -771,3 +771,14 @@ def test_a_kept_value_holds_while_its_inputs_are_equal_and_never_goes_stale():
     assert kept.keep((a, frozen, 0.2), "x") == "x" and kept.value == "x"
     kept.clear()
     assert not kept.holds((a, frozen, 0.2)) and kept.value is None
+    # the key is the inputs' bits: the same bits give the same value, whatever they hold
+    nan = np.array([np.nan, 1.0])
+    kept.keep((nan,), "from nan")
+    assert kept.holds((nan.copy(),))
+    assert not kept.holds((np.array([np.nan, -1.0]),))
+    kept.keep((np.zeros(2),), "from +0")
+    assert not kept.holds((-np.zeros(2),))                   # equal values, other bits
+    assert not kept.holds((np.zeros(2, dtype=np.float32),))  # same values, other dtype
+    assert not kept.holds((np.zeros((2, 1)),))               # same bytes, other shape
+    with pytest.raises(TypeError, match="dtype object"):
+        kept.holds((np.array([object()]),))
