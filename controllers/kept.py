@@ -12,6 +12,7 @@ when one of them changes.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 from typing import Any, Generic, TypeVar
 
@@ -20,6 +21,8 @@ import numpy as np
 __all__ = ["KeptWhileEqual"]
 
 T = TypeVar("T")
+
+_DOUBLE = struct.Struct("<d")
 
 
 class KeptWhileEqual(Generic[T]):
@@ -41,12 +44,17 @@ class KeptWhileEqual(Generic[T]):
 
     @staticmethod
     def _bits(value: Any) -> tuple[Any, ...]:
-        array = value if type(value) is np.ndarray else np.asarray(value)
+        kind = type(value)
+        if kind is float:
+            return kind, _DOUBLE.pack(value)
+        if kind is int or kind is bool:
+            return kind, value
+        array = value if kind is np.ndarray else np.asarray(value)
         if array.dtype.hasobject:
             # an object array's bytes are addresses, not values
-            raise TypeError(f"inputs must be numeric arrays or scalars, got {type(value).__name__} "
+            raise TypeError(f"inputs must be numeric arrays or scalars, got {kind.__name__} "
                             f"of dtype object")
-        return array.shape, array.dtype.str, array.tobytes()
+        return array.shape, array.dtype, array.tobytes()
 
     def holds(self, inputs: Sequence[Any]) -> bool:
         """Whether a value is kept and every input has the bits (shape, dtype and

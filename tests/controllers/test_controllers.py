@@ -780,5 +780,7 @@ def test_a_kept_value_holds_while_its_inputs_are_equal_and_never_goes_stale():
     assert not kept.holds((-np.zeros(2),))                   # equal values, other bits
     assert not kept.holds((np.zeros(2, dtype=np.float32),))  # same values, other dtype
     assert not kept.holds((np.zeros((2, 1)),))               # same bytes, other shape
+    kept.keep((0.0, 1), "scalars")
+    assert kept.holds((0.0, 1)) and not kept.holds((-0.0, 1)) and not kept.holds((0.0, True))
     with pytest.raises(TypeError, match="dtype object"):
-        kept.holds((np.array([object()]),))
+        kept.holds((np.array([object()]), 1))
