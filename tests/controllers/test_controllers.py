@@ -220,6 +220,26 @@ def test_stability_verdict_sees_a_slowly_growing_envelope():
     assert m["verdict"] == "stable" and m["envelope_growth_per_100s"] < 1
 
 
+def test_stability_verdict_sees_a_slow_but_significant_growth():
+    """1.12x per 100 s (the fixed LQG at 90 deg: radius 1.00014) is below GROWTH_LIMIT
+    but a trend, which a stationary or decaying envelope is not."""
+    from controllers.harness import GROWTH_LIMIT, GROWTH_T, SLOW_GROWTH_LIMIT
+
+    t = np.arange(1, 2501) * 0.1
+    rate = np.log(1.12) / 100.0
+    ring = np.sin(2 * np.pi * 0.08 * t)
+    m = episode_metrics(*_synthetic(np.zeros(2500), deflection_m=0.05 * np.exp(rate * t) * ring))
+    assert SLOW_GROWTH_LIMIT < m["envelope_growth_per_100s"] < GROWTH_LIMIT
+    assert m["envelope_growth_t"] > GROWTH_T and m["verdict"] == "growing"
+    # the same growth below the envelope floor (sensor noise wanders there) is not judged
+    m = episode_metrics(*_synthetic(np.zeros(2500), deflection_m=1e-4 * np.exp(rate * t) * ring))
+    assert m["verdict"] == "stable"
+    # a stationary envelope with a random wander: no significant trend
+    wander = 0.2 * (1 + 0.3 * np.random.default_rng(0).standard_normal(250).repeat(10))
+    m = episode_metrics(*_synthetic(np.zeros(2500), deflection_m=wander * 0.01 * ring))
+    assert abs(m["envelope_growth_t"]) < GROWTH_T and m["verdict"] == "stable"
+
+
 def test_stability_verdict_flags_a_saturated_limit_cycle():
     traj, model = _synthetic(0.05 * np.sin(np.arange(2500) * 0.3))
     traj.actions[:] = np.sign(np.sin(np.arange(2500) * 0.3))[:, None]

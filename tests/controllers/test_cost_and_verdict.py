@@ -93,6 +93,36 @@ def test_the_fixed_design_is_judged_growing_where_its_true_loop_is_unstable():
     assert fixed["true_radius_max"] == pytest.approx(1.00055, abs=2e-5)
 
 
+class _DesignHidden:
+    """A controller as a wrapper or an agent shows it: ``act`` and ``reset``, no design."""
+
+    def __init__(self, controller):
+        self.controller = controller
+
+    def act(self, obs, info):
+        return self.controller.act(obs, info)
+
+    def reset(self, seed=None):
+        self.controller.reset(seed)
+
+
+@pytest.mark.parametrize(("angle", "verdict"), [(90.0, "growing"), (270.0, "stable")])
+def test_the_same_torques_get_the_same_verdict_with_the_design_hidden(angle, verdict):
+    """At 90 deg the fixed design's true loop grows 1.15x per 100 s (radius 1.00014),
+    at 270 deg it decays (0.99959): the envelope's trend tells them apart without the
+    radius, as for a wrapper or an agent."""
+    metrics = []
+    for hide in (False, True):
+        env = _env(steps=2500, scenario=ConstantScenario(paddle_angle_deg=angle))
+        ctrl = FixedLQG(env.unwrapped)
+        traj = run_episode(env, _DesignHidden(ctrl) if hide else ctrl, seed=0)
+        metrics.append(episode_metrics(traj, env.unwrapped.model))
+    exposed, hidden = metrics
+    assert hidden["true_radius_max"] is None and exposed["true_radius_max"] is not None
+    assert exposed["verdict"] == hidden["verdict"] == verdict
+    assert exposed["cost_after_100s"] == hidden["cost_after_100s"]
+
+
 @pytest.mark.slow
 def test_the_fixed_design_is_judged_growing_over_a_1000_s_solar_rotation():
     env = gym.make("spacecraft_env:FlexibleSpacecraftSolarRotation-v2", task="slew",
