@@ -110,8 +110,10 @@ SUPERVISOR_WINDOW_S = 10.0
 #: Windows whose peaks the supervisor fits (100 s): a log-linear fit growing by more
 #: than the harness's :data:`~controllers.harness.GROWTH_LIMIT` per 100 s, with the
 #: last peak above its envelope floor, takes the identified design off for
-#: :data:`SUPERVISOR_HOLD_S`: the verdict the harness would give from the truth,
-#: given by the controller from its sensors, while the loop is still small.
+#: :data:`SUPERVISOR_HOLD_S`: the harness's fast-growth verdict, given by the
+#: controller from its sensors while the loop is still small (the harness's slow,
+#: significant growth, :data:`~controllers.harness.SLOW_GROWTH_LIMIT`, is not watched:
+#: over 100 s of noisy measurements it would need its own validation).
 SUPERVISOR_WINDOWS = 10
 SUPERVISOR_HOLD_S = 60.0
 #: Seconds after :data:`~controllers.harness.JUDGED_FROM_S` without a single step of the
