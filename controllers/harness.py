@@ -628,8 +628,9 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         windowed peaks of the attitude error and the deflections, in their
         nominal scales, from t = 100 s, or from the middle of a shorter
         episode) and ``envelope_growth_t`` (its t-statistic: the log-peaks'
-        slope over its standard error); ``saturated_share`` (share of the last 10 % of steps with an
-        actuator at its limit); ``verdict`` and ``stable``; and the
+        slope over its standard error); ``saturated_share`` (share of the
+        last 10 % of steps with an actuator at its limit); ``verdict`` and
+        ``stable``; and the
         controller's ``excitation_rms_Nm``, ``rejected_share`` and
         ``fallback_share`` and ``fallback_share_after_60s``
         (:func:`controller_shares`); for controllers with an identifier,

@@ -33,9 +33,9 @@ class KeptWhileEqual(Generic[T]):
     Bits, not values, are the key: the kept value is a deterministic function
     of the inputs, so inputs with the same bits give the same value exactly
     (an input holding NaN keeps its value too), while ``0.0`` and ``-0.0``,
-    equal as values, are different inputs. Comparing bytes costs about a
-    sixth of ``numpy.array_equal`` on the 17 x 17 matrices of the adaptive
-    loop, which makes several such comparisons every step.
+    equal as values, are different inputs. Comparing bytes also costs a
+    fraction of ``numpy.array_equal``'s call on the small matrices of the
+    adaptive loop, which makes several such comparisons every step.
     """
 
     def __init__(self) -> None:
