@@ -67,7 +67,7 @@ from controllers.lqg import (
     output_weight,
     set_integral_settle,
 )
-from controllers.residual import ResidualControl, ResidualObservations
+from controllers.residual import BaseRelativeReward, ResidualControl, ResidualObservations
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
 from spacecraft_conventions import __version__
 
@@ -75,6 +75,7 @@ __all__ = [
     "PD",
     "AdaptationModule",
     "AdaptiveLQG",
+    "BaseRelativeReward",
     "BinaryExcitation",
     "ComparisonInterrupted",
     "Controller",

@@ -23,6 +23,7 @@ sample while the agent's correction is held for ``repeat`` samples.
 
 from __future__ import annotations
 
+import copy
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -33,7 +34,7 @@ from controllers.adaptive import AdaptiveLQG
 from controllers.base import Controller
 from controllers.loop_identifiers import fast_identifier
 
-__all__ = ["ResidualControl", "ResidualObservations"]
+__all__ = ["BaseRelativeReward", "ResidualControl", "ResidualObservations"]
 
 #: Seeds of the base controller's episodes (its excitation) are drawn below this.
 _SEED_BOUND = 2**31
@@ -119,6 +120,72 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["residual_action"] = (applied - base).astype(np.float32)
         self._obs, self._info = obs, info
         return obs, reward, terminated, truncated, info
+
+
+class BaseRelativeReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """The residual's reward minus what its base alone earns on the same episode.
+
+    At every reset the wrapped env (a :class:`ResidualControl` stack: a zero
+    action flies its base) is copied with its state, its random generators and
+    its base controller; the copy is stepped with a zero residual beside the
+    agent's env. Both meet the same plant draw and the same sensor noise, so
+    the reward ``r_k - r_k^base`` loses the variance the draw and the noise put
+    in the return while the base's term, which no action changes, leaves the
+    optimal policy and the policy gradient's expectation as they were (a
+    baseline: common random numbers). Once the copy's episode has ended its
+    term is 0.
+
+    What it buys a residual agent is measured by
+    ``python benchmarks/bench_residual_reward.py`` (docs/results/rl.md). It
+    costs a second env and base per training env.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An env with a :class:`ResidualControl` in its wrapper stack, whose
+        action space holds the zero action.
+
+    Raises
+    ------
+    ValueError
+        If no :class:`ResidualControl` is in the stack (a zero action would not
+        fly a base).
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        super().__init__(env)
+        layer: Any = env
+        while not isinstance(layer, ResidualControl):
+            if not isinstance(layer, gym.Wrapper):
+                raise ValueError("BaseRelativeReward needs a ResidualControl in the env's "
+                                 "wrapper stack: a zero action must fly the base")
+            layer = layer.env
+        self._twin: gym.Env | None = None
+        self._twin_done = True
+        self._zero = np.zeros(self.action_space.shape, dtype=self.action_space.dtype)
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        # the simulator is copied first: a controller's copy keeps the env it was
+        # given (Controller.__deepcopy__), which must be the twin's, not this one
+        memo: dict[int, Any] = {}
+        copy.deepcopy(self.env.unwrapped, memo)
+        self._twin = copy.deepcopy(self.env, memo)
+        self._twin_done = False
+        return obs, info
+
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
+                                              dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        base_reward = 0.0
+        if not self._twin_done and self._twin is not None:
+            _, twin_reward, twin_end, twin_cut, _ = self._twin.step(self._zero)
+            base_reward = float(twin_reward)
+            self._twin_done = bool(twin_end or twin_cut)
+        info["base_reward"] = base_reward
+        return obs, float(reward) - base_reward, terminated, truncated, info
 
 
 class ResidualObservations(gym.Wrapper, gym.utils.RecordConstructorArgs):

@@ -166,3 +166,38 @@ def test_residual_observations_append_the_error_the_torque_and_the_bases_state()
     np.testing.assert_allclose(again, first)
     with pytest.raises(TypeError, match="ResidualControl"):
         ResidualObservations(env)
+
+
+def test_base_relative_reward_subtracts_the_base_flown_on_the_same_episode():
+    from controllers import BaseRelativeReward
+
+    def make():
+        env = gym.make(ID, reward="cost")
+        return ResidualControl(env, FixedLQG(env.unwrapped), scale=0.5)
+
+    relative = BaseRelativeReward(make())
+    relative.reset(seed=4)
+    # a silent residual flies its base on the same draw and noise: nothing to gain
+    for _ in range(30):
+        _, r, _, _, info = relative.step(np.zeros(3, dtype=np.float32))
+        assert r == 0.0 and info["base_reward"] < 0.0
+    # an active one: its own reward minus what the base alone earns, step by step
+    own, base = make(), make()
+    own.reset(seed=4)
+    base.reset(seed=4)
+    relative.reset(seed=4)
+    for k in range(30):
+        action = np.array([0.4, -0.3, 0.2 * (k % 3)], dtype=np.float32)
+        r_own = own.step(action)[1]
+        r_base = base.step(np.zeros(3, dtype=np.float32))[1]
+        _, r, _, _, info = relative.step(action)
+        assert info["base_reward"] == r_base
+        assert r == pytest.approx(r_own - r_base, rel=1e-12, abs=1e-15)
+    assert r != 0.0                             # the pushes changed the cost
+    # the twin flew its own simulator: the agent's env ran 30 steps, not 60
+    assert relative.unwrapped.time == pytest.approx(3.0)
+    clone = pickle.loads(pickle.dumps(relative))
+    a = np.array([0.1, 0.0, -0.1], dtype=np.float32)
+    assert clone.step(a)[1] == relative.step(a)[1]
+    with pytest.raises(ValueError, match="ResidualControl"):
+        BaseRelativeReward(gym.make(ID))
