@@ -201,3 +201,18 @@ def test_base_relative_reward_subtracts_the_base_flown_on_the_same_episode():
     assert clone.step(a)[1] == relative.step(a)[1]
     with pytest.raises(ValueError, match="ResidualControl"):
         BaseRelativeReward(gym.make(ID))
+
+
+def test_base_relative_reward_passes_both_checkers():
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    from gymnasium.utils.env_checker import check_env
+
+    from controllers import BaseRelativeReward
+
+    env = gym.make(ID, reward="cost")
+    wrapped = BaseRelativeReward(ResidualControl(env, FixedLQG(env.unwrapped)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(wrapped, warn=True)
+        warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
+        check_env(wrapped, skip_render_check=True)
