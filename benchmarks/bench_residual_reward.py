@@ -3,64 +3,48 @@
 A PPO residual on a base controller (``--features``, default the fixed LQG) is
 trained on the task family with the common cost as reward (``reward="cost"``),
 once with that reward ("plain") and once with the base's reward on the same
-episode subtracted (:class:`controllers.BaseRelativeReward`: a twin of the env,
-same draw and same sensor noise, flown by the base alone). Everything else is
-the ``spacecraft train`` residual setting: the residual scaled by
-``RESIDUAL_SCALE``, a decision every ``RESIDUAL_REPEAT`` samples, the last layer
-zeroed (an untrained agent flies its base), ``VecNormalize``. Each arm is scored
-on the ten held-out episodes of ``spacecraft train`` beside its base.
+episode subtracted ("base-relative", ``spacecraft train --relative-to-base``:
+:class:`controllers.BaseRelativeReward`, a twin of the env with the same draw and
+the same sensor noise, flown by the base alone). Both arms are
+:func:`spacecraft_lab.training.run_training` runs of the residual setting (the
+residual scaled by ``RESIDUAL_SCALE``, a decision every ``RESIDUAL_REPEAT``
+samples, the last layer zeroed so an untrained agent flies its base,
+``VecNormalize``), scored on its ten held-out episodes beside the base, which
+is one of its comparators.
 
 Usage: ``python benchmarks/bench_residual_reward.py [--timesteps 800000] [--seed 1]
-[--log-std-init -2] [--arms plain base-relative] [--features residual-fixed]``
-(about 17 and 24 minutes for the two arms at 800k env steps on one core).
+[--log-std-init -2] [--arms plain base-relative] [--features residual-fixed]
+[--out results/bench_residual_reward]`` (about 17 and 24 minutes for the two arms
+at 800k env steps on one core, plus the comparators' first scoring).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import time
-from functools import partial
+from pathlib import Path
 
-from controllers import BaseRelativeReward
-from spacecraft_env import ActionRepeat
-from spacecraft_lab import training as T
+from spacecraft_lab.training import FEATURES, run_training
 
 SCENARIO = "family"
 
 
-def _env(features: str, relative: bool):
-    from stable_baselines3.common.monitor import Monitor
-
-    env = T._make_env(SCENARIO, features, T._training_env_kwargs(False, "cost"))
-    if relative:
-        env = BaseRelativeReward(env)
-    return Monitor(ActionRepeat(env, T.RESIDUAL_REPEAT))
-
-
 def train_and_score(features: str, relative: bool, timesteps: int, seed: int,
-                    log_std_init: float) -> dict:
-    import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.logger import Logger
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+                    log_std_init: float, out: Path) -> dict:
+    """One arm: a ``run_training`` run of one seed, evaluated once at the end; its final
+    scores, its base's on the same episodes, the exploration's end and the time."""
+    from stable_baselines3 import PPO  # the rl extra
 
-    torch.set_num_threads(1)
-    venv = VecNormalize(DummyVecEnv([partial(_env, features, relative)]), norm_obs=True,
-                        norm_reward=True, clip_obs=10.0)
-    venv.seed(seed)
-    model = PPO("MlpPolicy", venv, seed=seed, verbose=0,
-                policy_kwargs={"log_std_init": log_std_init})
-    model.set_logger(Logger(folder=None, output_formats=[]))
-    T._start_at_the_base(model)
-    tic = time.perf_counter()
-    model.learn(total_timesteps=-(-timesteps // T.RESIDUAL_REPEAT))
-    venv.training = False
-    policy = T.NormalizedPolicy(model, venv, "residual", T.RESIDUAL_REPEAT)
-    score = T._evaluate(policy, SCENARIO, features, T._training_env_kwargs(False, "cost"))
-    return {"minutes": (time.perf_counter() - tic) / 60, "median": score["cost_after_100s"],
-            "mean": score["cost_after_100s_mean"],
-            "per_episode": score["cost_after_100s_per_seed"],
+    m = run_training("ppo", features, timesteps, seeds=1, first_seed=seed, out=out,
+                     scenario=SCENARIO, eval_every=timesteps, reward="cost",
+                     log_std_init=log_std_init, relative_to_base=relative, progress=True)
+    run = m["runs"][0]
+    model = PPO.load(out / f"ppo-{features}-seed{seed}.zip", device="cpu")
+    return {"minutes": run["env_steps"] / run["env_steps_per_s"] / 60,
+            "median": run["final"]["cost_after_100s"],
+            "mean": run["final"]["cost_after_100s_mean"],
+            "per_episode": run["final"]["cost_after_100s_per_seed"],
+            "base": m[m["base_comparator"]],
             "log_std_end": float(model.policy.log_std.mean().detach())}
 
 
@@ -69,22 +53,24 @@ def main() -> None:
     parser.add_argument("--timesteps", type=int, default=800_000)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--log-std-init", type=float, default=-2.0)
-    parser.add_argument("--features", default="residual-fixed", choices=sorted(T._RESIDUAL))
+    parser.add_argument("--features", default="residual-fixed",
+                        choices=[f for f in FEATURES if f.startswith("residual-")])
     parser.add_argument("--arms", nargs="+", default=["plain", "base-relative"],
                         choices=["plain", "base-relative"])
+    parser.add_argument("--out", type=Path, default=Path("results/bench_residual_reward"))
     args = parser.parse_args()
-    base = T._evaluate(T._RESIDUAL[args.features], SCENARIO, "none",
-                       T._training_env_kwargs(False, "cost"))
-    print(f"base ({args.features}): median {base['cost_after_100s']:.5f}, "
-          f"mean {base['cost_after_100s_mean']:.4g}", flush=True)
     for arm in args.arms:
         r = train_and_score(args.features, arm == "base-relative", args.timesteps, args.seed,
-                            args.log_std_init)
+                            args.log_std_init, args.out / arm)
+        base = r["base"]
+        print(f"base ({args.features}): median {base['cost_after_100s']:.5f}, "
+              f"mean {base['cost_after_100s_mean']:.4g}", flush=True)
         print(f"{arm:14s} median {r['median']:.5f} ({r['median'] / base['cost_after_100s']:.2f}x "
               f"base), mean {r['mean']:.4g} ({r['mean'] / base['cost_after_100s_mean']:.2f}x), "
               f"log std {args.log_std_init:g} -> {r['log_std_end']:.2f}, "
               f"{r['minutes']:.1f} min", flush=True)
-        print(json.dumps({"arm": arm, **r}), flush=True)
+        print(json.dumps({"arm": arm, **{k: v for k, v in r.items() if k != "base"}}),
+              flush=True)
 
 
 if __name__ == "__main__":

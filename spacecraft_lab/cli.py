@@ -434,6 +434,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "per step alive), 'log' (the same on a log scale of the cost, "
                             "which resolves precision near the target) or 'cost' (negative "
                             "stage cost and a termination penalty)")
+    train.add_argument("--relative-to-base", action="store_true",
+                       help="residual-* settings: train on the reward minus what the base "
+                            "alone earns on a twin of the same episode (same plant draw and "
+                            "sensor noise; controllers.BaseRelativeReward)")
     train.add_argument("--eval-every", type=_integer(1), default=20_000,
                        help="env steps between evaluations")
     train.add_argument("--eval-episodes", type=_integer(1), default=len(EVAL_SEEDS),
@@ -587,9 +591,10 @@ def _train(args: argparse.Namespace) -> int:
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
                      workers=args.workers, envs=args.envs, log_std_init=args.log_std,
-                     cache=args.cache)
+                     relative_to_base=args.relative_to_base, cache=args.cache)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
-                               "repeat", "reward", "envs", "final_cost_after_100s",
+                               "repeat", "reward", "relative_to_base", "envs",
+                               "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",
                                "final_return")}
     for key in ("oracle_lqg", "adaptive_lqg", "fixed_lqg"):

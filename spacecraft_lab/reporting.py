@@ -222,6 +222,8 @@ def training_metrics_problem(m: Any) -> str | None:
             return f"{key!r} missing or not a string"
     if not isinstance(m.get("timesteps"), int) or isinstance(m.get("timesteps"), bool):
         return "'timesteps' missing or not an integer"
+    if not isinstance(m.get("relative_to_base", False), bool):
+        return "'relative_to_base' is not a boolean"
     # the threshold of "steps to 2x the adaptive LQG": on the cost from 100 s (files
     # written before it was, on the whole-episode attitude RMS)
     if not (_is_number(m.get("target_cost_after_100s"), optional=False)
@@ -278,15 +280,15 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     """The ``metrics.json`` of ``spacecraft train`` directories, one per setting.
 
     Directories with equal algorithm, features, task, env steps, decision
-    period and reward are one setting: their seeds' runs are pooled (seeds
-    trained in separate processes with ``--first-seed``). Order of first
-    appearance.
+    period and reward (its form, and whether the base's was subtracted) are one
+    setting: their seeds' runs are pooled (seeds trained in separate processes
+    with ``--first-seed``). Order of first appearance.
     """
     settings: dict[tuple, dict[str, Any]] = {}
     for directory in directories:
         m = load_training_metrics(directory)
         key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), m["timesteps"],
-               m.get("repeat", 1), m.get("reward", "cost"))
+               m.get("repeat", 1), m.get("reward", "cost"), m.get("relative_to_base", False))
         if key in settings:
             settings[key]["runs"] = settings[key]["runs"] + m["runs"]
         else:
@@ -344,6 +346,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
                  for f in finals if "worst_episode_seed" in f]
         task = "randomized " + m["scenario"] if m.get("randomize") else m["scenario"]
         task += f", {m.get('reward', 'cost')} reward"
+        if m.get("relative_to_base"):
+            task += " minus the base's"
         rows.append(
             f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
             f"| {len(finals)} | {spread([f.get(median) for f in finals], '.4f')} "

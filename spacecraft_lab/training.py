@@ -65,6 +65,7 @@ from tqdm import tqdm
 
 from controllers import (
     AdaptiveLQG,
+    BaseRelativeReward,
     Controller,
     FixedLQG,
     IdentifiedModelFeatures,
@@ -215,12 +216,17 @@ def _training_env_kwargs(randomize: bool, reward: str) -> dict[str, Any]:
 
 
 def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
-                   repeat: int) -> gym.Env:
-    """One training env: the setting's env, its action held ``repeat`` steps, Monitor-wrapped
-    (module level, so a ``SubprocVecEnv`` can build it in its worker)."""
+                   repeat: int, relative_to_base: bool = False) -> gym.Env:
+    """One training env: the setting's env (with ``relative_to_base``, its reward minus
+    the base's on a twin of the episode, :class:`controllers.BaseRelativeReward`), its
+    action held ``repeat`` steps, Monitor-wrapped (module level, so a ``SubprocVecEnv``
+    can build it in its worker)."""
     from stable_baselines3.common.monitor import Monitor
 
-    return Monitor(ActionRepeat(_make_env(scenario, features, env_kwargs), repeat))
+    env = _make_env(scenario, features, env_kwargs)
+    if relative_to_base:
+        env = BaseRelativeReward(env)
+    return Monitor(ActionRepeat(env, repeat))
 
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
@@ -382,7 +388,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  reward: str = "bounded", first_seed: int = 0,
                  eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None,
                  envs: int = 1, log_std_init: float | None = None,
-                 cache: bool = True) -> dict:
+                 relative_to_base: bool = False, cache: bool = True) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -407,6 +413,14 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     normalized action units (default: :data:`HYPERPARAMETERS`' -1, or
     :data:`RESIDUAL_HYPERPARAMETERS`' -3 for the residual settings, whose action is
     scaled by :data:`RESIDUAL_SCALE`); PPO only.
+
+    ``relative_to_base``: train a residual agent (``features`` ``residual-*``) on its
+    reward minus the reward its base alone earns on a twin of the same episode (same
+    plant draw, same sensor noise; :class:`controllers.BaseRelativeReward`). The
+    base's term does not depend on the agent's actions, so the optimal policy is the
+    same; the return loses the variance the draw and the noise put in it. It costs a
+    second env and base per training env. The evaluations score the harness's cost,
+    as for every run; ``metrics.json`` records the choice.
 
     ``cache``: read the comparators' scores from, and store them in,
     :func:`spacecraft_lab.score_cache.default_cache` (they depend only on the scenario,
@@ -456,6 +470,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     if not eval_seeds or min(eval_seeds) < 0:
         raise ValueError(f"eval_seeds must be one or more seeds >= 0, got {eval_seeds}")
     residual = features in _RESIDUAL
+    if relative_to_base and not residual:
+        raise ValueError(f"relative_to_base needs a residual setting (features residual-*), "
+                         f"whose zero action flies a base; got features {features!r}")
     if repeat is None:
         repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
     hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
@@ -482,7 +499,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     with _one_torch_thread(torch):
         torch_threads = torch.get_num_threads()
         for seed in range(first_seed, first_seed + seeds):
-            factory = partial(_monitored_env, scenario, features, env_kwargs, repeat)
+            factory = partial(_monitored_env, scenario, features, env_kwargs, repeat,
+                              bool(relative_to_base))
             vec = (DummyVecEnv([factory]) if envs == 1
                    else SubprocVecEnv([factory] * envs, start_method="forkserver"))
             venv = VecNormalize(vec, norm_obs=True, norm_reward=True, clip_obs=10.0)
@@ -531,8 +549,12 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
-        "repeat": repeat, "reward": reward, "hyperparameters": hyper, "envs": envs,
+        "repeat": repeat, "reward": reward, "relative_to_base": bool(relative_to_base),
+        "hyperparameters": hyper, "envs": envs,
         "residual_scale": RESIDUAL_SCALE if residual else None,
+        # the comparator that is the residual's base (a fresh residual flies it exactly)
+        "base_comparator": next((key for key, make in COMPARATORS
+                                 if residual and make is _RESIDUAL[features]), None),
         # the residual base's integral settle time, so a loaded agent flies that base
         "base_integral_settle_s": INTEGRAL_SETTLE_S if residual else None,
         # the env steps every seed trained (whole rollouts), and what was asked
@@ -566,14 +588,17 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             super().__init__()
             self.bar = tqdm(total=timesteps, desc=name, disable=not progress)
             self.next_eval = eval_every
-            self.last_eval: int | None = None
+            self.last_eval: tuple[int, int | None] | None = None
             self.best: dict[str, Any] | None = None
 
         def evaluate_now(self) -> dict[str, Any]:
             """Evaluate the current policy, append it to the curve and dump it to the
             logger at the env-step count (TensorBoard's x-axis for ``eval/``)."""
             env_steps = int(self.num_timesteps * repeat)
-            if self.last_eval == env_steps:          # already the curve's last point
+            # the policy as it is now: the env-step count and the gradient updates so far
+            # (an evaluation inside the last rollout comes before that rollout's update)
+            now = (env_steps, getattr(model, "_n_updates", None))
+            if self.last_eval == now:                # already the curve's last point
                 return {k: v for k, v in curve[-1].items() if k != "timesteps"}
             training, venv.training = venv.training, False
             score = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario,
@@ -587,7 +612,7 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             # dumped now, at this env step: recorded values would otherwise wait for
             # the next rollout's dump (and only the last of several would survive)
             self.logger.dump(step=env_steps)
-            self.last_eval = env_steps
+            self.last_eval = now
             cost = score["cost_after_100s"]
             if out is not None and (self.best is None or cost < self.best["cost_after_100s"]):
                 # the best checkpoint by the evaluation cost (chosen on the evaluation
@@ -599,9 +624,11 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs * repeat)
-            if self.num_timesteps * repeat >= self.next_eval:
+            if timesteps > self.num_timesteps * repeat >= self.next_eval:
                 self.next_eval += eval_every
                 self.evaluate_now()
+            # at the end, nothing: the last rollout's update is still to come, and the
+            # final evaluation after ``learn`` scores the policy that is saved
             return True
 
         def _on_training_end(self) -> None:

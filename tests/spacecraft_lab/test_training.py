@@ -53,6 +53,16 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     run = m["runs"][0]
     assert run["final"] == {k: v for k, v in run["curve"][-1].items() if k != "timesteps"}
     assert m["eval_seeds"] == [1000, 1001]
+    # and it is the saved model's score: the evaluation due at the last rollout's end
+    # waits for that rollout's update (the curve has one point per evaluation step)
+    from spacecraft_lab.agents import load_agent
+    from spacecraft_lab.training import _evaluate
+
+    policy, settings = load_agent(tmp_path / "ppo-none-seed0.zip")
+    saved = _evaluate(policy, "docking", "none", settings["env_kwargs"], (1000, 1001))
+    assert saved["cost_after_100s_per_seed"] == run["final"]["cost_after_100s_per_seed"]
+    steps = [c["timesteps"] for c in run["curve"]]
+    assert steps == sorted(set(steps))
     # the comparators' scores are kept for the next run with these settings
     assert len(list(Path(os.environ["SPACECRAFT_CACHE_DIR"]).glob("*.json"))) == 5
     # the learning-speed threshold is on the score (the cost from 100 s), and every mean
@@ -398,3 +408,72 @@ def test_every_training_setting_builds_an_env_whose_observations_fit_its_space(f
     obs, *_ = env.step(np.zeros(3, dtype=np.float32))
     assert env.observation_space.contains(obs), features
     env.close()
+
+
+def test_a_base_relative_training_env_pays_a_silent_residual_nothing():
+    """``relative_to_base``: the training env's reward is the residual's minus its base's
+    on a twin of the same episode, so a zero residual (the base exactly) earns exactly 0
+    at every step, on a family draw with sensor noise; the plain env's reward is not 0."""
+    pytest.importorskip("stable_baselines3")
+    from controllers import BaseRelativeReward
+    from spacecraft_lab.training import RESIDUAL_REPEAT, _monitored_env
+
+    kwargs = {"task": "slew", "randomize": False, "reward": "cost"}
+    relative = _monitored_env("family", "residual-fixed", kwargs, RESIDUAL_REPEAT, True)
+    plain = _monitored_env("family", "residual-fixed", kwargs, RESIDUAL_REPEAT)
+    layer, found = relative, False
+    while isinstance(layer, gym.Wrapper):
+        found |= isinstance(layer, BaseRelativeReward)
+        layer = layer.env
+    assert found
+    for env in (relative, plain):
+        env.reset(seed=4)
+    zero = np.zeros(3, dtype=np.float32)
+    rewards = [(relative.step(zero)[1], plain.step(zero)[1]) for _ in range(40)]
+    assert all(r == 0.0 for r, _ in rewards)
+    assert all(p < 0.0 for _, p in rewards)
+
+
+def test_training_relative_to_the_base_needs_a_residual_setting(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    with pytest.raises(ValueError, match="relative_to_base needs a residual setting"):
+        run_training("ppo", "oracle", 2048, 1, tmp_path, relative_to_base=True,
+                     progress=False)
+
+
+def test_rl_table_keeps_base_relative_runs_apart(tmp_path):
+    """Equal settings but for the base's reward subtracted are two rows, named so."""
+    from spacecraft_lab.reporting import pooled_training_runs, rl_table
+
+    scores = {k: {"attitude_rms_deg": 1.0, "vibration_rms_mm": 1.0, "return": 1.0,
+                  "cost_after_100s": cost}
+              for k, cost in (("oracle_lqg", 0.01), ("adaptive_lqg", 0.02),
+                              ("fixed_lqg", 0.04), ("zero_torque", 1.0))}
+    final = {"attitude_rms_deg": 1.0, "vibration_rms_mm": 1.0, "return": 2.0,
+             "cost_after_100s": 0.03}
+    for name, relative in (("plain", False), ("relative", True)):
+        (tmp_path / name).mkdir()
+        m = {"algo": "ppo", "features": "residual-fixed", "scenario": "family",
+             "randomize": False, "timesteps": 1000, "repeat": 2, "reward": "cost",
+             "relative_to_base": relative, "target_cost_after_100s": 0.04, **scores,
+             "runs": [{"seed": 0, "final": final, "curve": [], "steps_to_2x_adaptive": None}]}
+        (tmp_path / name / "metrics.json").write_text(json.dumps(m))
+    dirs = [tmp_path / "plain", tmp_path / "relative"]
+    assert len(pooled_training_runs(dirs)) == 2
+    table = rl_table(dirs)
+    assert "| residual-fixed | family, cost reward |" in table
+    assert "| residual-fixed | family, cost reward minus the base's |" in table
+
+
+@pytest.mark.slow        # ~40 s: a residual and its twin trained for one rollout
+def test_training_relative_to_the_base_records_it_and_the_base(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    m = run_training("ppo", "residual-fixed", 4096, 1, tmp_path, scenario="family",
+                     reward="cost", eval_every=10**9, progress=False, eval_seeds=(1000,),
+                     workers=1, relative_to_base=True)
+    assert m["relative_to_base"] is True and m["base_comparator"] == "fixed_lqg"
+    # one rollout, one update: the saved agent is scored, next to its base's score
+    run = m["runs"][0]
+    assert run["env_steps"] == 4096 and len(run["curve"]) == 1
+    assert np.isfinite(run["final"]["cost_after_100s"])
+    assert np.isfinite(m["fixed_lqg"]["cost_after_100s"])
