@@ -25,7 +25,7 @@
 
 from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
 from controllers.adaptation import AdaptationModule, EstimatedFeatures
-from controllers.adaptive import AdaptiveLQG, FallbackWarning
+from controllers.adaptive import AdaptiveLQG, FallbackWarning, ScheduleWarning
 from controllers.base import Controller, PolicyController
 from controllers.baselines import (
     PD,
@@ -96,6 +96,7 @@ __all__ = [
     "ResidualObservations",
     "RiccatiTracker",
     "RobustLQG",
+    "ScheduleWarning",
     "ScheduledLQG",
     "Trajectory",
     "TrueModelIdentifier",

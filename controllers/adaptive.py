@@ -82,7 +82,7 @@ from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
 
 __all__ = ["EXCITATION_WINDOW_S", "FALLBACK_CAUSES", "FALLBACK_WARNING_S", "AdaptiveLQG",
-           "FallbackWarning"]
+           "FallbackWarning", "ScheduleWarning"]
 
 log = logging.getLogger(__name__)
 
@@ -134,6 +134,13 @@ FALLBACK_CAUSES = (*REJECTION_REASONS, "failed design", "growing", "bridge", "dw
 class FallbackWarning(UserWarning):
     """The adaptive loop has flown only its fallback for a long time: the identified
     models were all rejected (the identifier may not suit the loop)."""
+
+
+class ScheduleWarning(UserWarning):
+    """The identifier is scheduled on the drive angle of turning appendages, and a step
+    came without the angle (``info["paddle_angle"]``): without ``info`` (e.g. through
+    SB3's ``predict``) the identifier keeps the last angle it was given (0 at first), as
+    if the drive did not turn."""
 
 
 @njit(cache=True, nogil=True)
@@ -334,6 +341,7 @@ class AdaptiveLQG(_LQGController):
         self._peak = 0.0
         self._hold_until = 0
         self._fallback_warned = False
+        self._schedule_warned = False
         self.last_excitation = np.zeros(3)
         self.stats: dict[str, Any] = {"steps": 0, "fallback_steps": 0, "redesigns": 0,
                                       "rejected": 0, "rejected_by": {}, "failed_designs": 0,
@@ -653,5 +661,18 @@ class AdaptiveLQG(_LQGController):
         # to the identifier once the applied torque is known, with the drive angle
         # of this sample for an identifier scheduled on it
         schedule = None if info is None else info.get(PADDLE_ANGLE)
+        if schedule is None and not self._schedule_warned and self._turning_schedule():
+            self._schedule_warned = True
+            warnings.warn(
+                f"AdaptiveLQG's identifier ({type(self.identifier).__name__}) is scheduled "
+                f"on the angle of the paddle drive, and this step carried none "
+                f"(info['{PADDLE_ANGLE}'] missing: act() without info, or SB3's predict()): "
+                f"it keeps the last angle it was given, as if the drive did not turn; "
+                f"pass the env's info to act()", ScheduleWarning, stacklevel=3)
         self._sample = (x, y, None if schedule is None else float(schedule))
         return action
+
+    def _turning_schedule(self) -> bool:
+        """Whether the identifier follows a drive angle that turns some appendage."""
+        return (hasattr(self.identifier, "set_schedule")
+                and any(getattr(self.identifier, "turning", (True,))))

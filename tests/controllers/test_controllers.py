@@ -706,6 +706,35 @@ def test_a_loop_that_never_flies_its_identified_design_says_so():
             assert said[0].filename.endswith("harness.py"), said[0].filename
 
 
+def test_a_scheduled_loop_without_the_drive_angle_says_so():
+    """The default identifier follows the paddle drive through info["paddle_angle"]; a
+    step without it (act without info, SB3's predict) leaves the model at its last
+    angle, so the loop warns once, attributed to its caller. With info, or with an
+    identifier that is not scheduled, nothing is said."""
+    from controllers import ScheduleWarning, fast_identifier
+
+    env = FlexibleSpacecraftEnv("paddle_rotation", task="slew")
+    for make, with_info, expected in (
+            (lambda: AdaptiveLQG(env), False, 1),
+            (lambda: AdaptiveLQG(env), True, 0),
+            (lambda: AdaptiveLQG(env, identifier=fast_identifier(env)), False, 0)):
+        ctrl = make()
+        obs, info = env.reset(seed=0)
+        ctrl.reset(0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(20):
+                action = ctrl.act(obs, info if with_info else None)
+                obs, _, _, _, info = env.step(action)
+        said = [w for w in caught if issubclass(w.category, ScheduleWarning)]
+        assert len(said) == expected, [str(w.message) for w in said]
+        if expected:
+            assert "paddle_angle" in str(said[0].message)
+            assert said[0].filename == __file__, said[0].filename
+            # the angle it keeps is the last one given: 0, where the drive has turned
+            assert ctrl.identifier.angle == 0.0 != info["paddle_angle"]
+
+
 def test_the_oracles_and_the_gain_error_know_the_familys_actuator_efficiency():
     """The task family draws an actuator efficiency a (torque received per torque
     commanded; info["torque"] is the commanded one): the plant's input matrix is a B.
