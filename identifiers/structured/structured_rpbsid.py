@@ -1,27 +1,24 @@
-"""The paper's improved RPBSID with the rigid body known: a structure-aware RPBSID.
+"""A structure-aware RPBSID: the rigid body known, a recursive PBSID on the rest.
 
 A black-box recursive PBSID must place the rigid body's three double
 integrators (a Jordan block at ``z = 1``) from noisy data, and the paper's
 test responses tolerate almost no error there (docs/results/paper.md).
 Physics fixes that block up to the inverse inertia ``G = J^-1``, so
 :class:`StructuredRPBSID` keeps it exact
-(:class:`~identifiers.structured.rigid_block.RigidBlock`) and gives the
-paper's algorithm only the flexible part:
+(:class:`~identifiers.structured.rigid_block.RigidBlock`):
 
 1. **One regression** (the paper's VARX, Eq. 20-24, extended):
    ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k`` on high-passed signals,
    ``rho`` the rigid regressors (``G`` is the rate rows' block of ``Theta_r``,
-   its covariance the gain's calibrated band). The past window holds the
-   torques, the tip deflections and the rates' first differences, never an
-   attitude or rate *level*: with one, the predictor builds an integrator of
-   its own and absorbs the gain's error (34-47 % on a noise-free constant
-   plant, 0.1 % without). A change test on the rate rows discounts the rigid
+   its covariance the gain's calibrated band); no attitude or rate *level*
+   in the past window. A change test on the rate rows discounts the rigid
    block at an alarm (a docking).
-2. **The flexible part**: the improved RPBSID's state step (Eq. 25-46) and
-   system regressions (Eq. 47-55) on the torques and the outputs with the
-   rigid response removed, ``w = y_f - Theta_r rho``; only its stable
-   resonances above the high-pass's corner, damped at most 0.3, are
-   exported (:func:`~identifiers.structured.resonant.resonant_part`).
+2. **The flexible part**: a recursive PBSID on ``w = y_f - Theta_r rho``, by
+   default a classical RPBSID on the tip deflections
+   (:class:`~identifiers.structured.flexible_part.FlexiblePart`), or the
+   paper's improved RPBSID (Eq. 25-55) on every row (``flexible="improved"``,
+   the paper preset); its stable resonances above the high-pass's corner,
+   damped at most 0.3, are exported (:func:`~identifiers.structured.resonant.resonant_part`).
 3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``,
    ``C = [C_r, C_f]``; a Kalman filter on it and the raw signals gives the
    state and ``K``.
@@ -35,11 +32,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.linalg import block_diag
 
 from identifiers.core.checks import positive_float
 from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
+from identifiers.structured.flexible_part import FLEXIBLE_METHODS, FlexiblePart
 from identifiers.structured.modal_basis import HighPass
 from identifiers.structured.resonant import resonant_part
 from identifiers.structured.rigid_block import (
@@ -65,7 +64,7 @@ _REFRESH = 10
 
 
 class StructuredRPBSID(ImprovedRPBSID):
-    """The improved RPBSID on the flexible part, with an exact rigid block.
+    """A recursive PBSID on the flexible part, with an exact rigid block.
 
     Parameters
     ----------
@@ -80,35 +79,33 @@ class StructuredRPBSID(ImprovedRPBSID):
     p : int
         Past window of the VARX, samples (default 15, the paper's).
     forgetting : float
-        Forgetting of every stage (default 0.9995, as the improved RPBSID's
-        default; the paper's 0.98 is far too short for this plant).
+        Forgetting of every stage (default 0.9995; the paper's 0.98 is far too short).
+    flexible : {"classical", "improved"}, optional
+        The flexible part's method. ``"classical"`` (the default where the
+        layout has tip deflections): a classical RPBSID of its own on them,
+        the rows of ``C_f`` for attitude and rate by RLS on its state.
+        ``"improved"`` (the default without deflections): the paper's improved
+        RPBSID on every row of ``w``, inside this regression; its sign step
+        cannot follow the modes (docs/design/identification.md).
     highpass : float
         Pole ``rho`` of the high-pass that removes the initial conditions'
         constants and ramps (default 0.97, the modal identifier's).
     process_torque : float
-        Standard deviation (N m per axis) of the unmodelled torque the
-        Kalman filter assumes (default 10: the filter follows the sensors
-        where the model and they disagree, as the modal identifier's).
+        Unmodelled torque (N m per axis, standard deviation) the Kalman filter
+        assumes (default 10: it follows the sensors where the model disagrees).
     detect_changes : bool
         Watch the rate rows' errors with a likelihood-ratio test
-        (:class:`~identifiers.structured.change_detection.RegressionGLR`, the
-        modal identifier's) and, at an alarm, discount what was learnt of the
-        rigid block (its covariance times ``discount``) and restart its
-        initial-condition terms: a docking changes the gain at once, which a
-        200 s memory alone follows only slowly.
+        (:class:`~identifiers.structured.change_detection.RegressionGLR`) and,
+        at an alarm (a docking), multiply the rigid block's covariance by
+        ``discount`` and restart its initial-condition terms.
     min_mode_hz : float, optional
         Lowest frequency (Hz) of a flexible mode the exported model keeps
         (default: the high-pass's corner ``(1 - highpass) / (2 pi dt)``, below
-        which the data carry no information); non-oscillatory, unstable and
-        heavily damped (above 0.3) poles of the flexible part are removed
-        too (:func:`~identifiers.structured.resonant.resonant_part`).
+        which the data carry no information).
     change_threshold, discount : float
         Alarm level (a multiple of the test's degrees of freedom) and the
-        covariance factor at an alarm (defaults 10 and 10). The modal
-        identifier's level 6 raised a false alarm on 3 of 5 constant-plant
-        records here (this regression's rate errors are coloured by its
-        window); 10 raised none and found both dockings of 5 of 5 records
-        within 7 s, and the first of each.
+        covariance factor at an alarm (defaults 10 and 10; the modal
+        identifier's 6 raised false alarms here: docs/design/identification.md).
     warmup : int, optional
         Samples before a model is given (default 500: 50 s at 0.1 s; None:
         ``max(4 p, p + 2 (n - 6))``, the paper's).
@@ -155,7 +152,8 @@ class StructuredRPBSID(ImprovedRPBSID):
         *ImprovedRPBSID._SIGNAL_STATE, "_rigid", "_hp_y", "_hp_u", "_kf", "_dwin", "_w_last")
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22, p: int = 15,
-                 forgetting: float = 0.9995, highpass: float = 0.97,
+                 forgetting: float = 0.9995, flexible: str | None = None,
+                 highpass: float = 0.97,
                  process_torque: float = 10.0, min_mode_hz: float | None = None,
                  detect_changes: bool = True,
                  change_threshold: float = 10.0, discount: float = 10.0,
@@ -172,6 +170,14 @@ class StructuredRPBSID(ImprovedRPBSID):
         if not isinstance(n, (int, np.integer)) or n <= RIGID_ORDER:
             raise ValueError(f"n must be an integer > {RIGID_ORDER} (6 rigid states plus the "
                              f"flexible part), got {n!r}")
+        if flexible is None:
+            flexible = "classical" if "deflection" in self.layout else "improved"
+        if flexible not in FLEXIBLE_METHODS:
+            raise ValueError(f"flexible must be one of {FLEXIBLE_METHODS}, got {flexible!r}")
+        if flexible == "classical" and "deflection" not in self.layout:
+            raise ValueError("flexible='classical' identifies the tip deflections; the layout "
+                             f"holds {self.layout.names}")
+        self.flexible = flexible
         if not 0 <= highpass < 1:
             raise ValueError(f"highpass must be in [0, 1), got {highpass}")
         self.highpass = float(highpass)
@@ -190,9 +196,10 @@ class StructuredRPBSID(ImprovedRPBSID):
     @classmethod
     def paper(cls, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
               **overrides: Any) -> StructuredRPBSID:
-        """The flexible part with the paper's constants (:attr:`PAPER_SETTINGS`: p = 15,
-        every forgetting 0.98, the sign step alone), the rigid block unchanged."""
-        return cls(layout, n=n, **{**cls.PAPER_SETTINGS, **overrides})
+        """The flexible part by the paper's improved RPBSID with its constants
+        (:attr:`PAPER_SETTINGS`: p = 15, every forgetting 0.98, the sign step alone),
+        the rigid block unchanged."""
+        return cls(layout, n=n, **{"flexible": "improved", **cls.PAPER_SETTINGS, **overrides})
 
     # ------------------------------------------------------------ lifecycle
     def reset(self) -> None:
@@ -217,11 +224,9 @@ class StructuredRPBSID(ImprovedRPBSID):
         # the VARX carries the rigid regressors in front of the past window
         floor = (self.regularization / (1.0 - self.varx_forgetting)
                  if self.regularization > 0 and self.varx_forgetting < 1.0 else None)
-        # the past window the regression uses: every torque, the outputs that see no
-        # rigid body, and the rates' first differences. An attitude or rate *level* there
-        # would let the predictor build an integrator of its own and absorb any error of
-        # the rigid gain (measured: 34-47 % gain error on a noise-free constant plant);
-        # the attitude's difference is a rate level, so the attitude stays out.
+        # the past window: every torque, the outputs that see no rigid body, the rates'
+        # first differences; an attitude or rate *level* there lets the predictor absorb
+        # the gain's error (docs/design/identification.md)
         rigid_rows = np.concatenate((self.layout.indices("attitude"),
                                      self.layout.indices("rate")))
         kept = np.ones(r + m, dtype=bool)
@@ -238,16 +243,16 @@ class StructuredRPBSID(ImprovedRPBSID):
         hold = np.arange(size) < N_RIGID_REGRESSORS
         self._varx = RecursiveLeastSquares(m, size, self.varx_forgetting, 1.0 / self.varx_init,
                                            regularization=floor, hold=hold)
-        # a vague prior on the initial-condition terms: they are informed only by their
-        # short transients, and a prior pulling them to 0 leaks into the gain (1 % on a
-        # noise-free rigid body spinning at 1e-4 rad/s); the gains keep the VARX's prior
-        # like every other coefficient (a vague one on them too measured no better:
-        # docking test error 5.8 / 8.3 % against 5.0 / 7.9 %, six seeds)
+        # a vague prior on the initial-condition terms only (a prior pulling them to 0
+        # leaks into the gain; measured choices: docs/design/identification.md)
         initial_conditions = np.arange(size) >= N_RIGID_REGRESSORS - 2
         self._varx.set_covariance(self._varx.P + np.diag(
             np.where(initial_conditions, RIGID_PRIOR, 0.0)))
         s = self._user_scales[1]
         self._rigid = RigidBlock(self.layout, self.dt, self.highpass, s)
+        self._flex = None if self.flexible == "improved" else FlexiblePart(
+            self.flexible, self.n, self.p, self.forgetting, self.layout.indices("deflection"),
+            rigid_rows, m, self.warmup, self.dt)
         self._new_signals(m)
 
     def _new_signals(self, m: int) -> None:
@@ -286,13 +291,13 @@ class StructuredRPBSID(ImprovedRPBSID):
         w = y_f.copy()
         rows = self._rigid_rows
         w[rows] -= self._varx.theta[rows, :N_RIGID_REGRESSORS] @ rho
-        self._state_step(u_f, w, learn)
-        d = self._dwin
-        nr = self._rate_rows.size
-        d[nr:] = d[:-nr]
-        w_rate = w[self._rate_rows]
-        d[:nr] = w_rate - self._w_last
-        self._w_last = w_rate
+        if self._flex is None:
+            self._state_step(u_f, w, learn)
+        else:
+            self._flex.update(u_f, w, learn)
+            self._push(u_f, w)                  # this regression's own past window
+        d, nr, w_rate = self._dwin, self._rate_rows.size, w[self._rate_rows]
+        d[nr:], d[:nr], self._w_last = d[:-nr], w_rate - self._w_last, w_rate
         self._rigid.step(u)
         if self._k >= self.warmup:
             if self._combined is None or self._k % _REFRESH == 0:
@@ -333,21 +338,17 @@ class StructuredRPBSID(ImprovedRPBSID):
 
     def _assemble(self) -> tuple[np.ndarray, ...] | None:
         """The combined model ``(A, B, C, D, K)`` (normalized), without ``K``'s update."""
-        flex = ImprovedRPBSID._matrices(self)
+        flex = ImprovedRPBSID._matrices(self) if self._flex is None else self._flex.matrices()
         if flex is None:
             return None
-        a_f, b_f, c_f, d_f, _ = flex
-        a_f, b_f, c_f = resonant_part(a_f, b_f, c_f, self.dt, self.min_mode_hz)
+        a_f, b_f, c_f = resonant_part(*flex[:3], self.dt, self.min_mode_hz)
         g = self._rigid.gain(self._varx.theta[:, :N_RIGID_REGRESSORS])
         a_r, b_r, c_r = self._rigid.matrices(g, self.n_outputs)
-        nr, nf = RIGID_ORDER, self.n
-        a = np.zeros((nr + nf, nr + nf))
-        a[:nr, :nr] = a_r
-        a[nr:, nr:] = a_f
-        mats = (a, np.vstack((b_r, b_f)), np.hstack((c_r, c_f)), d_f)
+        mats = (block_diag(a_r, a_f), np.vstack((b_r, b_f)), np.hstack((c_r, c_f)),
+                np.zeros((self.n_outputs, self.n_inputs)))
         if not all(np.all(np.isfinite(mat)) for mat in mats):
             return None
-        return (*mats, np.zeros((nr + nf, self.n_outputs)))
+        return (*mats, np.zeros((self.order, self.n_outputs)))
 
     def _matrices(self) -> tuple[np.ndarray, ...] | None:
         if self._k < self.warmup or self._combined is None:
@@ -390,6 +391,8 @@ class StructuredRPBSID(ImprovedRPBSID):
         if self._varx is None:
             return
         self._rigid.restart()
+        if self._flex is not None:
+            self._flex.restart()
         self._new_signals(self.n_outputs)
         for signal in (self._phi, self._future, self._tau, self._dwin, self._w_last):
             signal[:] = 0.0

@@ -1,5 +1,5 @@
-"""The paper's improved RPBSID with an exact rigid block: exact where physics is
-exact, a calibrated gain on the spacecraft, the streaming API."""
+"""A recursive PBSID with an exact rigid block: exact where physics is exact, a
+calibrated gain on the spacecraft, a flexible part that predicts, the streaming API."""
 
 from __future__ import annotations
 
@@ -81,6 +81,25 @@ def test_the_model_predicts_attitude_and_rates_10_s_ahead_better_than_persistenc
         assert np.median(model[rows]) > np.median(persistence[rows]) + 10, group
 
 
+def test_the_flexible_part_predicts_the_deflections_where_the_sign_step_cannot():
+    """The default flexible part, a classical RPBSID on the tip deflections, predicts
+    them 10 s ahead on a constant plant at 40 dB (96.6 %, against the noise-free
+    outputs); the paper's improved RPBSID inside the regression exports no resonance
+    there (0 %); persistence -29.5 %."""
+    truth = FlexibleSpacecraftModel(scenario="constant")
+    record = identification_records(truth, 0, 2500)
+    rows = truth.output_layout.slice("deflection")
+    vaf = {}
+    for flexible in ("classical", "improved"):
+        ident = StructuredRPBSID(truth.output_layout, flexible=flexible)
+        seq = ident.fit(record.u, record.y)
+        scores = prediction_vaf(record.y_clean, h_step_predictions(seq, record.u, (100,)), 2000)
+        vaf[flexible] = np.median(scores[100][rows])
+    assert StructuredRPBSID(truth.output_layout).flexible == "classical"
+    assert StructuredRPBSID(RIGID, n=8).flexible == "improved"     # no deflections
+    assert vaf["classical"] > 90.0 and vaf["improved"] < 50.0, vaf
+
+
 def test_restart_keeps_what_was_learnt():
     truth, u, y = _spacecraft("constant", n_samples=800)
     ident = StructuredRPBSID(truth.output_layout)
@@ -112,6 +131,8 @@ def test_pickle_mid_run_continues_identically_and_runs_are_deterministic():
     (dict(n=6), ValueError),
     (dict(highpass=1.0), ValueError),
     (dict(process_torque=0.0), ValueError),
+    (dict(flexible="sign"), ValueError),
+    (dict(layout=RIGID, flexible="classical"), ValueError),
 ])
 def test_bad_constructor_arguments(kwargs, error):
     with pytest.raises(error):
