@@ -184,6 +184,29 @@ def test_resonant_part_keeps_exactly_the_modes_above_the_corner():
         np.testing.assert_allclose(got, want, atol=1e-9)
 
 
+def test_a_mode_just_outside_the_circle_is_reflected_inside():
+    """A 0.088 Hz pair at |lambda| = 1.0003 (damping -0.005) is a lightly damped mode
+    placed on the wrong side: kept at 1 / 1.0003, same frequency, its residues
+    unchanged; a pair at 1.01 (damping -0.053 at 0.3 Hz) is not a mode and goes."""
+    from identifiers.structured.resonant import REFLECTED_DAMPING, resonant_part
+    light, wild = 1.0003 * _resonator(0.088, 0.0), 1.01 * _resonator(0.3, 0.0)
+    a = np.zeros((4, 4))
+    a[:2, :2], a[2:, 2:] = light, wild
+    rng = np.random.default_rng(1)
+    t = rng.normal(size=(4, 4))
+    a_t = t @ a @ np.linalg.inv(t)
+    b, c = t @ rng.normal(size=(4, 2)), rng.normal(size=(3, 4)) @ np.linalg.inv(t)
+    a_k, b_k, c_k = resonant_part(a_t, b, c, dt=0.1, min_hz=0.05)
+    lam = np.linalg.eigvals(a_k)
+    kept = lam[np.abs(lam) > 1e-9]
+    np.testing.assert_allclose(np.abs(kept), 1 / 1.0003, rtol=1e-12)
+    np.testing.assert_allclose(np.abs(np.angle(kept)), 2 * np.pi * 0.088 * 0.1, rtol=1e-12)
+    # the reflected pair keeps the mode's input and output directions: C P B as before
+    tinv = np.linalg.inv(t)
+    np.testing.assert_allclose(c_k @ b_k, (c @ t)[:, :2] @ (tinv @ b)[:2], atol=1e-9)
+    assert 0.005 < REFLECTED_DAMPING < 0.053
+
+
 def test_bad_samples_are_skipped_and_a_quiet_spell_leaves_everything_finite():
     """NaN, inf and a wild outlier are skipped and counted; 5000 samples of sensor
     noise without torque (a loop holding still) leave the covariances bounded and
