@@ -364,7 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fitted to its warm-up and held, adaptive-lqg-scheduled, the same "
                           "loop as adaptive-lqg (whose default identifier is that fit, "
                           "scheduled on the paddle angle), and adaptive-lqg-structured-rpbsid, "
-                          "on the paper's improved RPBSID with an exact rigid block; "
+                          "on a recursive PBSID with an exact rigid block (StructuredRPBSID); "
                           "adaptive-lqg-fast flies the structured recursive identifier)")
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "

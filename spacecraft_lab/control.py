@@ -142,8 +142,9 @@ SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
 #: (:func:`controllers.fast_identifier`): the adaptive LQG's default until
 #: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.
 FAST = "adaptive LQG, fast identifier"
-#: The adaptive law on the paper's improved RPBSID with an exact rigid block
-#: (:class:`identifiers.StructuredRPBSID`): the source paper's algorithm in the loop.
+#: The adaptive law on a recursive PBSID with an exact rigid block
+#: (:class:`identifiers.StructuredRPBSID`): the source paper's family of algorithms in
+#: the loop (its flexible part the classical RPBSID on the deflections by default).
 STRUCTURED_RPBSID = "adaptive LQG, structured RPBSID"
 
 

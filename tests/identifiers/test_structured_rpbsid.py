@@ -100,6 +100,22 @@ def test_the_flexible_part_predicts_the_deflections_where_the_sign_step_cannot()
     assert vaf["classical"] > 90.0 and vaf["improved"] < 50.0, vaf
 
 
+def test_the_deflection_prediction_does_not_fall_as_the_noise_falls():
+    """Paddle rotation, seed 0: 10 s deflection VAF 66.7 % at 40 dB and 85.0 %
+    noise-free (the modal identifier's falls from 38.6 to -9.8 % over ten and four
+    seeds, docs/results/identification.md). A result that gets worse as the data get
+    cleaner encodes a tuning to the noise."""
+    truth = FlexibleSpacecraftModel(scenario="paddle_rotation")
+    rows = truth.output_layout.slice("deflection")
+    vaf = {}
+    for snr_db in (40.0, None):
+        record = identification_records(truth, 0, 2500, snr_db)
+        seq = StructuredRPBSID(truth.output_layout).fit(record.u, record.y)
+        scores = prediction_vaf(record.y_clean, h_step_predictions(seq, record.u, (100,)), 1500)
+        vaf[snr_db] = np.mean(scores[100][rows])          # the results tables' reading
+    assert vaf[None] >= vaf[40.0] > 50.0, vaf
+
+
 def test_restart_keeps_what_was_learnt():
     truth, u, y = _spacecraft("constant", n_samples=800)
     ident = StructuredRPBSID(truth.output_layout)
