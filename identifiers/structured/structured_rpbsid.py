@@ -196,9 +196,8 @@ class StructuredRPBSID(ImprovedRPBSID):
     @classmethod
     def paper(cls, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
               **overrides: Any) -> StructuredRPBSID:
-        """The flexible part by the paper's improved RPBSID with its constants
-        (:attr:`PAPER_SETTINGS`: p = 15, every forgetting 0.98, the sign step alone),
-        the rigid block unchanged."""
+        """The flexible part by the paper's improved RPBSID with its constants (p = 15,
+        every forgetting 0.98, the sign step alone), the rigid block unchanged."""
         return cls(layout, n=n, **{"flexible": "improved", **cls.PAPER_SETTINGS, **overrides})
 
     # ------------------------------------------------------------ lifecycle
@@ -329,8 +328,7 @@ class StructuredRPBSID(ImprovedRPBSID):
     # ------------------------------------------------------------ the model
     def _noise(self) -> np.ndarray:
         """Measurement noise variances (normalized): the regression's a-priori errors."""
-        return np.maximum(self._errvar if self._errvar is not None
-                          else np.ones(self.n_outputs), 1e-12)
+        return np.maximum(np.ones(self.n_outputs) if self._errvar is None else self._errvar, 1e-12)
 
     def _process_noise(self, b: np.ndarray) -> np.ndarray:
         """Unmodelled torque of ``process_torque`` N m per axis through ``B``."""
