@@ -595,6 +595,8 @@ def test_fixed_lqg_is_judged_unstable_past_96_deg_and_the_oracle_stable():
     assert oracle["verdict"] == "stable"
 
 
+# through predict the default identifier gets no drive angle and says so (its own test)
+@pytest.mark.filterwarnings("ignore::controllers.adaptive.ScheduleWarning")
 @pytest.mark.parametrize("make", [PD, FixedLQG, RobustLQG, AdaptiveLQG])
 def test_predict_reads_an_observed_reference_as_act_reads_info(make):
     """SB3's evaluate_policy calls predict(obs): with the reference observed it must
