@@ -122,6 +122,17 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, reward, terminated, truncated, info
 
 
+def _residual_layer(env: gym.Env, missing: Exception) -> ResidualControl:
+    """The :class:`ResidualControl` in ``env``'s wrapper stack; ``missing`` is raised
+    when there is none."""
+    layer: Any = env
+    while not isinstance(layer, ResidualControl):
+        if not isinstance(layer, gym.Wrapper):
+            raise missing
+        layer = layer.env
+    return layer
+
+
 class BaseRelativeReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """The residual's reward minus what its base alone earns on the same episode.
 
@@ -155,12 +166,8 @@ class BaseRelativeReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         super().__init__(env)
-        layer: Any = env
-        while not isinstance(layer, ResidualControl):
-            if not isinstance(layer, gym.Wrapper):
-                raise ValueError("BaseRelativeReward needs a ResidualControl in the env's "
-                                 "wrapper stack: a zero action must fly the base")
-            layer = layer.env
+        _residual_layer(env, ValueError("BaseRelativeReward needs a ResidualControl in the "
+                                        "env's wrapper stack: a zero action must fly the base"))
         self._twin: gym.Env | None = None
         self._twin_done = True
         self._zero = np.zeros(self.action_space.shape, dtype=self.action_space.dtype)
@@ -211,13 +218,8 @@ class ResidualObservations(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
-        inner = env
-        while not isinstance(inner, ResidualControl):
-            if not hasattr(inner, "env"):
-                raise TypeError("ResidualObservations needs a ResidualControl in the "
-                                "wrapped chain")
-            inner = inner.env
-        self.residual = inner
+        self.residual = _residual_layer(env, TypeError(
+            "ResidualObservations needs a ResidualControl in the wrapped chain"))
         base = env.unwrapped
         self._att = base.observation_layout.indices("attitude")
         self._max_torque = float(base.max_torque)

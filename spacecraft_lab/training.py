@@ -588,18 +588,12 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             super().__init__()
             self.bar = tqdm(total=timesteps, desc=name, disable=not progress)
             self.next_eval = eval_every
-            self.last_eval: tuple[int, int | None] | None = None
             self.best: dict[str, Any] | None = None
 
         def evaluate_now(self) -> dict[str, Any]:
             """Evaluate the current policy, append it to the curve and dump it to the
             logger at the env-step count (TensorBoard's x-axis for ``eval/``)."""
             env_steps = int(self.num_timesteps * repeat)
-            # the policy as it is now: the env-step count and the gradient updates so far
-            # (an evaluation inside the last rollout comes before that rollout's update)
-            now = (env_steps, getattr(model, "_n_updates", None))
-            if self.last_eval == now:                # already the curve's last point
-                return {k: v for k, v in curve[-1].items() if k != "timesteps"}
             training, venv.training = venv.training, False
             score = _evaluate(NormalizedPolicy(model, venv, name, repeat), scenario,
                               features, env_kwargs, eval_seeds)
@@ -612,7 +606,6 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             # dumped now, at this env step: recorded values would otherwise wait for
             # the next rollout's dump (and only the last of several would survive)
             self.logger.dump(step=env_steps)
-            self.last_eval = now
             cost = score["cost_after_100s"]
             if out is not None and (self.best is None or cost < self.best["cost_after_100s"]):
                 # the best checkpoint by the evaluation cost (chosen on the evaluation
@@ -627,8 +620,8 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             if timesteps > self.num_timesteps * repeat >= self.next_eval:
                 self.next_eval += eval_every
                 self.evaluate_now()
-            # at the end, nothing: the last rollout's update is still to come, and the
-            # final evaluation after ``learn`` scores the policy that is saved
+            # none at the end (the last rollout's update is still to come): the final
+            # evaluation after ``learn`` scores the policy that is saved, once
             return True
 
         def _on_training_end(self) -> None:
