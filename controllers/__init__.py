@@ -58,6 +58,7 @@ from controllers.loop_identifiers import (
     closed_loop_identifier,
     fast_identifier,
     scheduled_identifier,
+    structured_identifier,
 )
 from controllers.lqg import (
     LQGLaw,
@@ -120,4 +121,5 @@ __all__ = [
     "set_integral_settle",
     "spectral_radius",
     "stage_costs",
+    "structured_identifier",
 ]

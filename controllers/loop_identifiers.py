@@ -18,6 +18,12 @@ appendages the paddle drive turns, which sensor sits on which appendage):
   :data:`identifiers.CLOSED_LOOP_SETTINGS`), about 0.5 s per 250 s episode,
   1.2-5.7x the oracle LQG on the same conditions.
 
+A third is the source paper's family of algorithms:
+:func:`structured_identifier`, the recursive PBSID with an exact rigid block
+(:class:`identifiers.StructuredRPBSID` with
+:data:`identifiers.STRUCTURED_CLOSED_LOOP_SETTINGS`); its loop costs more than
+the other two's (docs/results/control.md).
+
 :func:`closed_loop_identifier` picks the default for an environment.
 """
 
@@ -29,12 +35,15 @@ import gymnasium as gym
 
 from identifiers import (
     CLOSED_LOOP_SETTINGS,
+    STRUCTURED_CLOSED_LOOP_SETTINGS,
     OnlineIdentifier,
     ScheduledPhysicalIdentifier,
+    StructuredRPBSID,
     default_identifier,
 )
 
-__all__ = ["closed_loop_identifier", "fast_identifier", "scheduled_identifier"]
+__all__ = ["closed_loop_identifier", "fast_identifier", "scheduled_identifier",
+           "structured_identifier"]
 
 #: What a model must say of its appendages for the scheduled fit.
 _APPENDAGES = ("appendage_turns", "sensor_appendage", "drive_axis")
@@ -142,6 +151,44 @@ def fast_identifier(env: gym.Env, **options: Any) -> OnlineIdentifier:
     settings = {**CLOSED_LOOP_SETTINGS, **options}
     return default_identifier(base.observation_layout.sensors(), n=model.n, dt=model.dt,
                               **settings)
+
+
+def structured_identifier(env: gym.Env, **options: Any) -> StructuredRPBSID:
+    """The structure-aware recursive PBSID with the closed-loop settings, for ``env``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A flexible-spacecraft environment (wrappers allowed) observing the
+        attitude and rate (and, for the default flexible part, the tip
+        deflections).
+    **options
+        Overrides of :data:`identifiers.STRUCTURED_CLOSED_LOOP_SETTINGS` and the
+        other keywords of :class:`identifiers.StructuredRPBSID`.
+
+    Returns
+    -------
+    StructuredRPBSID
+        Of the model's order and sample time on the env's sensors.
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a flexible-spacecraft environment.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from controllers import structured_identifier
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
+    >>> ident = structured_identifier(env)
+    >>> type(ident).__name__, ident.n, ident.warmup, ident.flexible
+    ('StructuredRPBSID', 16, 300, 'classical')
+    """
+    base, model = _model(env)
+    settings = {**STRUCTURED_CLOSED_LOOP_SETTINGS, **options}
+    return StructuredRPBSID(base.observation_layout.sensors(), n=model.n, dt=model.dt,
+                            **settings)
 
 
 def closed_loop_identifier(env: gym.Env) -> OnlineIdentifier:

@@ -54,7 +54,12 @@ from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.defaults import CLOSED_LOOP_SETTINGS, DEFAULT_SETTINGS, default_identifier
+from identifiers.defaults import (
+    CLOSED_LOOP_SETTINGS,
+    DEFAULT_SETTINGS,
+    STRUCTURED_CLOSED_LOOP_SETTINGS,
+    default_identifier,
+)
 from identifiers.evaluation import (
     HORIZONS,
     h_step_predictions,
@@ -99,6 +104,7 @@ __all__ = [
     "CLOSED_LOOP_SETTINGS",
     "DEFAULT_SETTINGS",
     "HORIZONS",
+    "STRUCTURED_CLOSED_LOOP_SETTINGS",
     "ChangeEvent",
     "ClassicalRPBSID",
     "IdentifierHealth",

@@ -42,9 +42,10 @@ from controllers import (
     run_episode,
     scheduled_identifier,
     set_integral_settle,
+    structured_identifier,
 )
 from controllers.lqg import INTEGRAL_SETTLE_S, check_settle_time
-from identifiers import PhysicalFitIdentifier, StructuredRPBSID
+from identifiers import PhysicalFitIdentifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import (
     DEFAULT_SNR_DB,
@@ -116,8 +117,7 @@ def _construct(name: str, weights: LQRWeights, env: gym.Env) -> Any:
     if name == SCHEDULED_PHYSICAL:
         return AdaptiveLQG(env, weights=weights, identifier=scheduled_identifier(env))
     if name == STRUCTURED_RPBSID:
-        return AdaptiveLQG(env, weights=weights, identifier=StructuredRPBSID(
-            env.unwrapped.observation_layout.sensors(), dt=env.unwrapped.model.dt))
+        return AdaptiveLQG(env, weights=weights, identifier=structured_identifier(env))
     if name == SAME_LAW:
         return AdaptiveLQG(env, weights=weights, identifier=TrueModelIdentifier(env),
                            excitation=BinaryExcitation(0.0, 0.0))
@@ -143,7 +143,8 @@ SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
 #: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.
 FAST = "adaptive LQG, fast identifier"
 #: The adaptive law on a recursive PBSID with an exact rigid block
-#: (:class:`identifiers.StructuredRPBSID`): the source paper's family of algorithms in
+#: (:func:`controllers.structured_identifier`: :class:`identifiers.StructuredRPBSID` with
+#: its closed-loop settings since 2026-11-28): the source paper's family of algorithms in
 #: the loop (its flexible part the classical RPBSID on the deflections by default).
 STRUCTURED_RPBSID = "adaptive LQG, structured RPBSID"
 

@@ -11,11 +11,14 @@ from controllers import (
     closed_loop_identifier,
     fast_identifier,
     scheduled_identifier,
+    structured_identifier,
 )
 from identifiers import (
     CLOSED_LOOP_SETTINGS,
+    STRUCTURED_CLOSED_LOOP_SETTINGS,
     RigidFlexibleIdentifier,
     ScheduledPhysicalIdentifier,
+    StructuredRPBSID,
 )
 from spacecraft_env import ENV_IDS
 
@@ -66,8 +69,24 @@ def test_the_fast_identifier_has_the_closed_loop_settings_and_takes_overrides():
     assert held.accumulate is False
 
 
+def test_the_structured_identifier_has_its_closed_loop_settings_and_takes_overrides():
+    env = gym.make("spacecraft_env:FlexibleSpacecraftDocking-v2")
+    ident = structured_identifier(env)
+    assert isinstance(ident, StructuredRPBSID)
+    assert ident.warmup == STRUCTURED_CLOSED_LOOP_SETTINGS["warmup"] == 300
+    assert ident.process_torque == STRUCTURED_CLOSED_LOOP_SETTINGS["process_torque"]
+    assert ident.detect_changes is STRUCTURED_CLOSED_LOOP_SETTINGS["detect_changes"] is False
+    assert ident.flexible == "classical"          # the env observes the tip deflections
+    assert ident.dt == env.unwrapped.model.dt
+    # the open-loop constructor's defaults differ: the settings are what the loop gets
+    assert StructuredRPBSID().warmup != ident.warmup
+    assert structured_identifier(env, warmup=200, flexible="improved").flexible == "improved"
+    # the loop's warm-up excitation lasts the identifier's warm-up
+    assert AdaptiveLQG(env, identifier=ident).excitation.warmup_steps == 300
+
+
 @pytest.mark.parametrize("build", [closed_loop_identifier, fast_identifier,
-                                   scheduled_identifier])
+                                   scheduled_identifier, structured_identifier])
 def test_an_env_that_is_not_the_spacecraft_is_refused(build):
     with pytest.raises(TypeError, match="flexible-spacecraft environment"):
         build(gym.make("Pendulum-v1"))
