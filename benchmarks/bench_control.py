@@ -20,7 +20,9 @@ out by the guard (less certain than the held fit), skipped by the screen
 (``controllers.fast_identifier``, the default before), every step timed.
 
 On paddle rotation (the default) the identified model moves with the paddles
-every few samples, so every step iterates the Riccati equation; on a plant
+(re-discretized per 0.5 deg of drive travel, every 14 samples), so most steps
+iterate the Riccati equation on an unchanged model whose design has not yet
+converged; on a plant
 that holds still between changes (``--scenario docking`` or ``constant``) the
 design converges and is handed back while the model is unchanged (printed:
 the designs handed back). Step times on a shared two-core machine drift by up
