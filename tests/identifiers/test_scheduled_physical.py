@@ -17,6 +17,7 @@ from identifiers import (
     fit_scheduled_model,
 )
 from identifiers.structured.scheduled_fit import noise_floor
+from identifiers.structured.scheduled_identifier import EXPORT_RESOLUTION
 from identifiers.structured.scheduled_model import _cross, drive_rotation, plane_basis
 from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
@@ -409,6 +410,21 @@ def test_the_identifier_follows_the_drive_after_its_fit():
     copy = pickle.loads(pickle.dumps(ident))
     np.testing.assert_array_equal(copy.state, ident.state)
     assert ident.health.healthy
+    # the exported model holds until the drive has moved EXPORT_RESOLUTION; the gain's
+    # estimate follows it between exports: the fit's J(a)^-1 at the latest angle, with
+    # the covariance at the exported model's
+    far = angle[-1] + 2 * EXPORT_RESOLUTION
+    ident.set_schedule(far)
+    ident.update(u[259], y[259])
+    exported = ident.model.A
+    near = far + 0.5 * EXPORT_RESOLUTION
+    ident.set_schedule(near)
+    ident.update(u[259], y[259])
+    np.testing.assert_array_equal(ident.model.A, exported)
+    np.testing.assert_array_equal(ident.rigid_gain.gain, ident.fit.model.gain(near))
+    np.testing.assert_allclose(ident.rigid_gain.covariance, ident.fit.gain_covariance(far),
+                               rtol=1e-9, atol=0)
+    assert not np.array_equal(ident.fit.model.gain(near), ident.fit.model.gain(far))
 
 
 def test_the_identifier_refuses_what_it_cannot_identify():
