@@ -43,7 +43,7 @@ __all__ = ["EXPORT_RESOLUTION", "SCREEN_MARGIN", "ScheduledPhysicalIdentifier"]
 #: solar rotation and the task family, each seed within 0.955-1.012), and each
 #: export re-opens the controller's per-model work (the Riccati iteration's
 #: target, the acceptance test's and the law's kept matrices): its median step
-#: is 0.83x that at 0.1 deg (docs/benchmarks.md).
+#: is 0.84-0.86x that at 0.1 deg, measured by its ratio to a DARE (docs/benchmarks.md).
 EXPORT_RESOLUTION = np.deg2rad(0.5)
 
 #: An accumulating refit is skipped (``screen_refits``) only where the predicted
