@@ -59,6 +59,15 @@ def _model(env: gym.Env) -> tuple[Any, Any]:
     return base, model
 
 
+def _on_env_sensors(build: Any, settings: Any, env: gym.Env,
+                    options: dict[str, Any]) -> Any:
+    """``build(sensors, n=, dt=, **settings)`` on ``env``'s observed sensors, its model's
+    order and sample time, ``options`` overriding ``settings``."""
+    base, model = _model(env)
+    return build(base.observation_layout.sensors(), n=model.n, dt=model.dt,
+                 **{**settings, **options})
+
+
 def _not_schedulable(base: Any, model: Any) -> list[str]:
     """What the scheduled fit needs and ``base`` lacks: the model's description of its
     appendages, and the tip deflections among the observed sensors (empty: nothing)."""
@@ -147,10 +156,7 @@ def fast_identifier(env: gym.Env, **options: Any) -> OnlineIdentifier:
     >>> type(ident).__name__, ident.n, ident.warmup
     ('RigidFlexibleIdentifier', 22, 300)
     """
-    base, model = _model(env)
-    settings = {**CLOSED_LOOP_SETTINGS, **options}
-    return default_identifier(base.observation_layout.sensors(), n=model.n, dt=model.dt,
-                              **settings)
+    return _on_env_sensors(default_identifier, CLOSED_LOOP_SETTINGS, env, options)
 
 
 def structured_identifier(env: gym.Env, **options: Any) -> StructuredRPBSID:
@@ -185,10 +191,7 @@ def structured_identifier(env: gym.Env, **options: Any) -> StructuredRPBSID:
     >>> type(ident).__name__, ident.n, ident.warmup, ident.flexible
     ('StructuredRPBSID', 16, 300, 'classical')
     """
-    base, model = _model(env)
-    settings = {**STRUCTURED_CLOSED_LOOP_SETTINGS, **options}
-    return StructuredRPBSID(base.observation_layout.sensors(), n=model.n, dt=model.dt,
-                            **settings)
+    return _on_env_sensors(StructuredRPBSID, STRUCTURED_CLOSED_LOOP_SETTINGS, env, options)
 
 
 def closed_loop_identifier(env: gym.Env) -> OnlineIdentifier:
