@@ -1,10 +1,10 @@
 """One adaptive control step: identifier update + re-design + act.
 
 Runs the adaptive LQG in closed loop (paddle rotation by default, seed 0) and
-times each ``act`` call (which feeds the identifier, re-designs the gain by
-the warm-started Riccati iteration, judges it and computes the torque); every
-fifth step it also times a from-scratch ``scipy.linalg.solve_discrete_are`` on
-that step's identified model, so that both are measured under the same load.
+times each ``act`` call (which feeds the identifier, designs the gain on its
+model, judges it and computes the torque); every fifth step it also times a
+from-scratch ``scipy.linalg.solve_discrete_are`` on that step's identified
+model, so that both are measured under the same load.
 
 Printed: the adaptive step's median and 90th percentile beside the
 from-scratch Riccati solve, and their ratio.
@@ -20,17 +20,16 @@ out by the guard (less certain than the held fit), skipped by the screen
 (``controllers.fast_identifier``, the default before), every step timed.
 
 On paddle rotation (the default) the identified model moves with the paddles
-(re-discretized per 0.5 deg of drive travel, every 14 samples), so most steps
-iterate the Riccati equation on an unchanged model whose design has not yet
-converged; on a plant
-that holds still between changes (``--scenario docking`` or ``constant``) the
-design converges and is handed back while the model is unchanged (printed:
-the designs handed back). Step times on a shared two-core machine drift by up
-to 1.7x between runs; the ratio to the from-scratch DARE, measured in the
-same run, does not.
+(re-discretized per 0.5 deg of drive travel, every 14 samples): each new model
+is solved exactly once (structure-preserving doubling), and the steps in
+between get that design and its verdict back (printed: the designs handed back
+and solved). ``--iterations 4`` flies the former design instead, four
+warm-started Riccati iterations every step. Step times on a shared two-core
+machine drift by up to 1.7x between runs; the ratio to the from-scratch DARE,
+measured in the same run, does not.
 
 Usage: ``python benchmarks/bench_control.py [--steps 1500] [--identifier scheduled|fast]
-[--scenario paddle_rotation|docking|constant|solar_rotation]``
+[--scenario paddle_rotation|docking|constant|solar_rotation] [--iterations N]``
 """
 
 from __future__ import annotations
@@ -60,10 +59,13 @@ def main() -> None:
     parser.add_argument("--identifier", choices=("scheduled", "fast"), default="scheduled")
     parser.add_argument("--scenario", choices=("paddle_rotation", "docking", "constant",
                                                "solar_rotation"), default="paddle_rotation")
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="warm-started Riccati iterations per step (default: each new "
+                             "model solved exactly)")
     args = parser.parse_args()
     env = gym.make(env_id(args.scenario))
     make = scheduled_identifier if args.identifier == "scheduled" else fast_identifier
-    ctrl = AdaptiveLQG(env.unwrapped, identifier=make(env))
+    ctrl = AdaptiveLQG(env.unwrapped, identifier=make(env), iterations=args.iterations)
     obs, info = env.reset(seed=0)
     ctrl.reset(0)
     step_times, dare, order = [], [], env.unwrapped.model.n
@@ -100,17 +102,19 @@ def main() -> None:
         adaptive = np.delete(after, fits)
     dare = np.array(dare)
     med = np.median(adaptive) * 1e3
-    print(f"adaptive LQG step (identifier + warm-started re-design + act), {args.identifier} "
+    design = ("exact design per model" if args.iterations is None
+              else f"{args.iterations} warm-started Riccati iterations")
+    print(f"adaptive LQG step (identifier + {design} + act), {args.identifier} "
           f"identifier, model order {order}: median {med:.3f} ms, p90 "
           f"{np.percentile(adaptive, 90) * 1e3:.3f} ms -> {100 / med:.0f}x faster than real "
           f"time at dt = 0.1 s")
     print(f"scipy solve_discrete_are from scratch on the same models, every {DARE_EVERY}th "
           f"step: median {np.median(dare) * 1e3:.3f} ms (DARE alone, without the identifier)")
-    print(f"warm-started step / from-scratch DARE: {med / (np.median(dare) * 1e3):.2f}")
+    print(f"adaptive step / from-scratch DARE: {med / (np.median(dare) * 1e3):.2f}")
     tracker = ctrl.law.tracker
     print(f"mean step {np.mean(adaptive) * 1e3:.3f} ms; designs: {tracker.n_reused} handed "
-          f"back for an unchanged model (converged), {tracker.n_exact} solved from scratch, "
-          f"the rest warm-started iterations")
+          f"back for an unchanged model, {tracker.n_exact} solved exactly"
+          + ("" if args.iterations is None else ", the rest warm-started iterations"))
     if fits.size:
         dt = env.unwrapped.model.dt
         print("the fits, each one step: " + ", ".join(

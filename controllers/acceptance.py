@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from controllers.kept import KeptWhileEqual
 from controllers.lqg import augment_integral, equilibrium_map
 from controllers.riccati import spectral_radius
+from spacecraft_conventions.kept import KeptWhileEqual
 
 __all__ = ["REJECTION_REASONS", "GainAcceptance", "effective_gains", "input_disk_margin",
            "margin_frequencies", "unit_states"]

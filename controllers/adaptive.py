@@ -13,9 +13,10 @@ Every control step k (docs/design/control.md):
    often; reading attitude and rate from the sensors (``"measured"``, the
    former default) pushes the gyro noise through the rate gain (0.05-0.07
    N m of white torque per axis). Measurements: docs/design/control.md;
-2. the gain re-designed on the current identified ``(A, B, C)`` by the
-   warm-started Riccati iteration, with integral action on the attitude
-   error (:class:`~controllers.lqg.LQGLaw`);
+2. the gain designed on the current identified ``(A, B, C)``, with integral
+   action on the attitude error (:class:`~controllers.lqg.LQGLaw`): each
+   model the identifier exports is solved exactly once and kept while the
+   identifier holds it;
 3. the gain's acceptance test (:class:`~controllers.acceptance.GainAcceptance`:
    effective stiffness and damping on every axis against the robust fixed
    design's, stability with the integral, the model's recent prediction
@@ -75,11 +76,11 @@ from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
-from controllers.kept import KeptWhileEqual
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
 from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
+from spacecraft_conventions.kept import KeptWhileEqual
 
 __all__ = ["EXCITATION_WINDOW_S", "FALLBACK_CAUSES", "FALLBACK_WARNING_S", "AdaptiveLQG",
            "FallbackWarning", "ScheduleWarning"]
@@ -214,8 +215,12 @@ class AdaptiveLQG(_LQGController):
         the fallback) keeps flying. Without it a loop near the acceptance
         threshold switched every few samples and its two integrators left a
         limit cycle.
-    iterations : int
-        Riccati iterations per re-design.
+    iterations : int or None
+        None (default): each new identified model's Riccati equation is
+        solved exactly, once (a model the identifier holds keeps its design
+        and its verdict); an integer: that many warm-started Riccati
+        iterations per step, the behaviour before 2026-11-29
+        (:class:`~controllers.riccati.RiccatiTracker`).
     rigid_state : {"kalman", "filter", "measured"}
         Where the state comes from (see step 1 above): "kalman" (default)
         this controller's own Kalman filter on the identified model, with
@@ -253,7 +258,7 @@ class AdaptiveLQG(_LQGController):
     def __init__(self, env: gym.Env, identifier: OnlineIdentifier | None = None,
                  weights: LQRWeights | None = None, excitation: BinaryExcitation | None = None,
                  acceptance: GainAcceptance | None = None, fallback: Controller | None = None,
-                 bridge_s: float = 0.0, iterations: int = 4,
+                 bridge_s: float = 0.0, iterations: int | None = None,
                  rigid_state: str = "kalman", uncertainty_tolerance: float = 0.1,
                  excitation_budget: float = 0.1,
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
@@ -291,7 +296,7 @@ class AdaptiveLQG(_LQGController):
         if not (np.isfinite(dwell_s) and dwell_s >= 0):
             raise ValueError(f"dwell_s must be >= 0, got {dwell_s}")
         self.dwell_steps = round(dwell_s / self.dt)
-        self.law.iterations = int(iterations)
+        self.law.iterations = None if iterations is None else int(iterations)
         layout = self.measured_layout
         self._att_rows = layout.indices("attitude")
         self._rate_rows = layout.indices("rate")

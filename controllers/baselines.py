@@ -513,7 +513,7 @@ class OracleLQR(_EnvController):
     """LQR re-designed every step on the true time-varying model, full true state.
 
     An upper bound no measured loop reaches: it reads ``info["state"]`` and
-    ``info["time"]``. Re-designs are warm-started
+    ``info["time"]``. Each step's model is solved exactly
     (:class:`~controllers.riccati.RiccatiTracker`).
 
     Parameters

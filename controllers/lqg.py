@@ -16,7 +16,7 @@ conditional integration, so a slew or an initial error of degrees does not
 wind it up (an integral charged by a 2 deg initial error took minutes to
 discharge: 25x the attitude error after 100 s).
 
-:class:`LQGLaw` holds the weights, the warm-started Riccati solution
+:class:`LQGLaw` holds the weights, the Riccati solution
 (:class:`~controllers.riccati.RiccatiTracker`) and the integral state, so
 the fixed, scheduled, oracle and adaptive designs differ only in the model
 and the state estimate they feed it.
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from controllers.kept import KeptWhileEqual
 from controllers.riccati import RiccatiTracker, check_weights
 from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
+from spacecraft_conventions.kept import KeptWhileEqual
 
 __all__ = ["INTEGRAL_BAND", "INTEGRAL_SETTLE_S", "LQGLaw", "LQRWeights", "augment_integral",
            "check_settle_time", "equilibrium_map", "equilibrium_state", "output_weight",
@@ -186,8 +186,10 @@ class LQGLaw:
         Sample time, s.
     integral : bool
         Augment with the attitude-error integral (default True).
-    iterations : int
-        Warm-started Riccati iterations per re-design.
+    iterations : int or None
+        None (default): each new model's Riccati equation solved exactly; an
+        integer: that many warm-started iterations per re-design
+        (:class:`~controllers.riccati.RiccatiTracker`).
     band : float
         The integral runs only while every attitude error is within this, rad.
     settle_s : float
@@ -198,7 +200,7 @@ class LQGLaw:
     """
 
     def __init__(self, qy: np.ndarray, weights: LQRWeights, dt: float, *,
-                 integral: bool = True, iterations: int = 4,
+                 integral: bool = True, iterations: int | None = None,
                  band: float = INTEGRAL_BAND, settle_s: float = INTEGRAL_SETTLE_S) -> None:
         self.qy = np.asarray(qy, dtype=float)
         self.weights = weights
@@ -206,7 +208,7 @@ class LQGLaw:
         check_weights(self.qy, self.r)
         self.dt = float(dt)
         self.integral = bool(integral)
-        self.iterations = int(iterations)
+        self.iterations = None if iterations is None else int(iterations)
         if not (np.isfinite(band) and band > 0):
             raise ValueError(f"band must be a positive angle in rad, got {band}")
         self.band = float(band)
@@ -234,7 +236,7 @@ class LQGLaw:
         self._settle_steps = math.ceil(self._settle_s / self.dt - 1e-9)
 
     def reset(self) -> None:
-        """Zero the integral (start of an episode); keep the Riccati warm start."""
+        """Zero the integral (start of an episode); keep the Riccati design."""
         self.z = np.zeros(3)
         self._in_band_steps = 0
 
@@ -251,7 +253,7 @@ class LQGLaw:
 
     def design(self, a: np.ndarray, b: np.ndarray, c: np.ndarray,
                c_att: np.ndarray) -> np.ndarray:
-        """Gain ``[G_x, G_z]`` for the model, warm-started from the last design.
+        """Gain ``[G_x, G_z]`` for the model (:class:`~controllers.riccati.RiccatiTracker`).
 
         Raises
         ------

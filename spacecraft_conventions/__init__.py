@@ -15,10 +15,14 @@ on each other.
   rows of an output or observation vector by name.
 * :mod:`spacecraft_conventions.processes`: pool workers that end with their
   driver, SIGTERM handled as Ctrl-C, and a driver's exit that joins nothing.
+* :mod:`spacecraft_conventions.kept`: a value kept while the arrays it was
+  computed from keep their bits (:class:`KeptWhileEqual`), for the per-model
+  work of the identifiers' exports and the controllers' designs.
 """
 
 from spacecraft_conventions.blas import single_threaded_blas
 from spacecraft_conventions.cost import COST_WEIGHTS, CostWeights, output_cost_weights
+from spacecraft_conventions.kept import KeptWhileEqual
 from spacecraft_conventions.outputs import (
     AXES,
     LABEL_PREFIX,
@@ -49,6 +53,7 @@ __all__ = [
     "STANDARD_OUTPUTS",
     "TASK_GROUPS",
     "CostWeights",
+    "KeptWhileEqual",
     "OutputLayout",
     "__version__",
     "exit_now",

@@ -22,9 +22,14 @@ from numba import njit
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
-from spacecraft_conventions import single_threaded_blas
+from spacecraft_conventions import KeptWhileEqual, single_threaded_blas
 
-__all__ = ["KalmanPredictor", "steady_state_gain"]
+__all__ = ["STEADY_TOLERANCE", "KalmanPredictor", "steady_state_gain"]
+
+#: Largest change of the prior covariance between two steps on the same model,
+#: relative to its largest entry, at which :class:`KalmanPredictor` holds its
+#: covariance and gain (the Riccati recursion has converged to rounding).
+STEADY_TOLERANCE = 1e-10
 
 
 @single_threaded_blas
@@ -137,6 +142,34 @@ def _within(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.nd
     return inside
 
 
+#: Stands for "no transition matrix given" in :class:`_Steady`'s keys.
+_NO_MATRIX = np.zeros((0, 0))
+
+
+class _Steady:
+    """A converged filter: its model's bits and the held covariances and gains."""
+
+    def __init__(self) -> None:
+        self.prediction: KeptWhileEqual[bool] = KeptWhileEqual()   # (A, B, Q)
+        self.correction: KeptWhileEqual[bool] = KeptWhileEqual()   # (C, R, A or none)
+
+    @classmethod
+    def hold(cls, prior: np.ndarray, a: np.ndarray, b: np.ndarray, q: np.ndarray,
+             c: np.ndarray, r: np.ndarray, a_gain: np.ndarray) -> _Steady:
+        """The steady filter of the model, from its converged prior covariance."""
+        st = cls()
+        st.prediction.keep((a, b, q), True)
+        st.correction.keep((c, r, a_gain), True)
+        st.a, st.b, st.c = _f64(a).copy(), _f64(b).copy(), _f64(c).copy()
+        st.prior = prior
+        _, st.post, st.filter_gain, _, st.s, _ = _correct_all(
+            np.zeros(prior.shape[0]), prior, st.c, _f64(r), np.zeros(st.c.shape[0]))
+        st.gain = st.filter_gain if a_gain.size == 0 else a_gain @ st.filter_gain
+        for held in (st.prior, st.post, st.filter_gain, st.s, st.gain):
+            held.flags.writeable = False        # handed out every step: nobody may change them
+        return st
+
+
 class KalmanPredictor:
     """Time-varying Kalman filter in one-step predictor form.
 
@@ -157,6 +190,16 @@ class KalmanPredictor:
         The last predictor gain ``K_k``.
     innovation, innovation_covariance : ndarray or None
         The last ``e_k = y_k - C x_{k|k-1}`` and ``S_k = C P C^T + R``.
+
+    Notes
+    -----
+    :meth:`correct` then :meth:`predict` on a model that holds still become a
+    steady-state filter (:attr:`steady`): once two consecutive steps on the
+    same model (``A, B, Q, C, R`` with the same bits, every output seen)
+    left the prior covariance changed by at most :data:`STEADY_TOLERANCE` of
+    its largest entry, the covariance and the gain are held and a step costs
+    two matrix-vector products. A step on another model, a missing output,
+    :meth:`inflate` or :meth:`transform` returns to the full recursion.
     """
 
     def __init__(self, n: int, initial_covariance: float = 1.0) -> None:
@@ -171,6 +214,17 @@ class KalmanPredictor:
         self.gain: np.ndarray | None = None
         self.innovation: np.ndarray | None = None
         self.innovation_covariance: np.ndarray | None = None
+        self._steady: _Steady | None = None
+        #: (C, R, A) of the last correction that saw every output, until the next prediction
+        self._corrected: tuple[np.ndarray, ...] | None = None
+        #: the model of the last full step and the prior covariance it left
+        self._last_step: KeptWhileEqual[np.ndarray] = KeptWhileEqual()
+
+    @property
+    def steady(self) -> bool:
+        """Whether the covariance is held at its converged value (see Notes)."""
+        st = self._steady
+        return st is not None and (self.P is st.prior or self.P is st.post)
 
     def update(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, q: np.ndarray,
                r: np.ndarray, u: np.ndarray, y: np.ndarray | None) -> np.ndarray:
@@ -200,6 +254,7 @@ class KalmanPredictor:
             if ok:
                 self.x, self.P, self.gain = x, p, gain
                 self.innovation, self.innovation_covariance = e, s
+                self._corrected = None
                 return self.x
         self.correct(c, r, y, a=a)
         return self.predict(a, b, q, u)
@@ -228,11 +283,23 @@ class KalmanPredictor:
         ``a`` (the step's transition matrix) only serves to record the
         predictor gain ``K_k = A L_k`` in :attr:`gain`.
         """
+        a_key = _NO_MATRIX if a is None else a
+        st = self._steady
+        if (st is not None and self.P is st.prior and y is not None
+                and st.correction.holds((c, r, a_key)) and np.isfinite(y).all()):
+            e = y - st.c @ self.x
+            self.x = self.x + st.filter_gain @ e
+            self.P = st.post
+            self.gain, self.innovation, self.innovation_covariance = st.gain, e, st.s
+            self._corrected = None
+            return self.x
         x, p, gain, innovation, s = self._correction(c, r, y)
+        self._corrected = None
         if gain is not None:
             seen = np.isfinite(y)
             if seen.all():
                 self.gain = gain if a is None else a @ gain
+                self._corrected = (c, r, a_key)
             else:
                 full = np.zeros((self.n, c.shape[0]))
                 full[:, seen] = gain if a is None else a @ gain
@@ -244,8 +311,24 @@ class KalmanPredictor:
 
     def predict(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Time update with the input applied: the filter now holds ``x_{k+1|k}``."""
-        self.x, self.P = _predict(self.x, self.P, _f64(a), _f64(b), _f64(q), _f64(u))
-        return self.x
+        st = self._steady
+        if st is not None and self.P is st.post and st.prediction.holds((a, b, q)):
+            self.x = st.a @ self.x + st.b @ u
+            self.P = st.prior
+            return self.x
+        corrected, self._corrected = self._corrected, None
+        x, p = _predict(self.x, self.P, _f64(a), _f64(b), _f64(q), _f64(u))
+        if corrected is not None:
+            step = (a, b, q, *corrected)
+            last = self._last_step.value
+            if (self._last_step.holds(step) and last is not None
+                    and np.abs(p - last).max() <= STEADY_TOLERANCE * np.abs(p).max()):
+                self._steady = _Steady.hold(p, a, b, q, *corrected)
+            self._last_step.keep(step, p)
+        else:
+            self._last_step.clear()
+        self.x, self.P = x, p
+        return x
 
     def _correction(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> tuple:
         """``(x_{k|k}, P_{k|k}, L, innovation, S)``; the last three None without data."""

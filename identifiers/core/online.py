@@ -31,7 +31,7 @@ from identifiers.core.health import degenerate
 from identifiers.core.model import ModelSequence, StateSpaceModel
 from identifiers.core.rollback import HealthGuard
 from identifiers.core.screening import SampleScreening
-from spacecraft_conventions import single_threaded_blas
+from spacecraft_conventions import KeptWhileEqual, single_threaded_blas
 
 __all__ = ["OnlineIdentifier"]
 
@@ -131,6 +131,8 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         self._monitor: DataMonitor | None = None
         self._range_skips = 0
+        #: the model last exported, kept while its matrices and scales keep their bits
+        self._exported: KeptWhileEqual[StateSpaceModel | None] = KeptWhileEqual()
         self._reset_health()
 
     def restart(self) -> None:
@@ -323,9 +325,14 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
         if not self.ready:
             return None
         mats = self._matrices()
-        if mats is None or degenerate(mats):
+        if mats is None:
             return None
-        return StateSpaceModel(*self._physical(mats), dt=self.dt)
+        # the same (read-only) model object while the matrices and scales keep their
+        # bits: an identifier that holds its model between exports is read every step
+        return self._exported.get(
+            (*mats, self._su, self._sy, self.dt),
+            lambda: None if degenerate(mats) else StateSpaceModel(*self._physical(mats),
+                                                                  dt=self.dt))
 
     @property
     def state(self) -> np.ndarray | None:

@@ -93,6 +93,59 @@ def test_riccati_tracker_hands_back_a_converged_design_for_an_unchanged_model():
     assert tracker.design(a + 1e-3, b) is not latest
 
 
+def test_doubling_solves_the_dare_as_scipy_does_and_certifies_stability():
+    from scipy.linalg import solve_discrete_are
+
+    from controllers.riccati import doubling_dare
+
+    rng = np.random.default_rng(3)
+    dt = 0.1
+    for trial in range(10):
+        # a double integrator per axis (two poles at 1) plus random lightly damped modes,
+        # integral-augmented as the adaptive law's model is: closed-loop poles near 1
+        n_modes = 2 + trial % 4
+        w = rng.uniform(0.3, 3.0, n_modes)
+        blocks = [np.array([[1.0, dt], [0.0, 1.0]])]
+        for wi in w:
+            c_, s_ = np.cos(wi * dt), np.sin(wi * dt)
+            blocks.append(0.998 * np.array([[c_, s_], [-s_, c_]]))
+        a = np.zeros((2 * len(blocks) + 1, 2 * len(blocks) + 1))
+        for i, blk in enumerate(blocks):
+            a[2 * i:2 * i + 2, 2 * i:2 * i + 2] = blk
+        a[-1, -1] = 1.0
+        a[-1, 0] = dt                                       # the integral of the angle
+        b = rng.normal(size=(a.shape[0], 2))
+        b[-1] = 0.0
+        q = np.diag(rng.uniform(0.0, 1.0, a.shape[0]))
+        q[0, 0] = q[-1, -1] = 1.0
+        r = np.diag(rng.uniform(0.1, 1.0, 2))
+        p = doubling_dare(a, b, q, r)
+        ref = solve_discrete_are(a, b, q, r)
+        np.testing.assert_allclose(p, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+        assert np.allclose(p, p.T, rtol=0, atol=1e-12 * np.abs(p).max())
+    # an unstable mode the input cannot reach: no stabilizing solution, None (not a guess)
+    a = np.diag([1.05, 0.5])
+    b = np.array([[0.0], [1.0]])
+    assert doubling_dare(a, b, np.eye(2), np.eye(1)) is None
+    tracker = RiccatiTracker(np.eye(2), np.eye(1))
+    with pytest.raises(ValueError, match="stabilizing"):
+        tracker.design(a, b)
+
+
+def test_riccati_tracker_solves_each_new_model_exactly_and_keeps_it():
+    a, b, q, r = _lqr_problem(np.random.default_rng(4))
+    tracker = RiccatiTracker(q, r)                  # default: exact for every new model
+    gain = tracker.design(a, b)
+    np.testing.assert_allclose(gain, dlqr(a, b, q, r)[0], rtol=1e-9, atol=1e-12)
+    assert tracker.design(a.copy(), b) is gain and tracker.n_reused == 1
+    moved = tracker.design(a + 1e-3, b)             # one step: the new model's exact gain
+    np.testing.assert_allclose(moved, dlqr(a + 1e-3, b, q, r)[0], rtol=1e-9, atol=1e-12)
+    assert tracker.n_exact == 2
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="iterations must be None"):
+            RiccatiTracker(q, r, iterations=bad)
+
+
 def test_spectral_radius_matches_numpy_and_refuses_non_finite_matrices():
     rng = np.random.default_rng(2)
     for n in (1, 2, 5, 17):
@@ -807,7 +860,7 @@ def test_a_scheduled_identifier_gets_each_samples_drive_angle():
 
 
 def test_a_kept_value_holds_while_its_inputs_are_equal_and_never_goes_stale():
-    from controllers.kept import KeptWhileEqual
+    from spacecraft_conventions import KeptWhileEqual
 
     kept: KeptWhileEqual = KeptWhileEqual()
     calls = []

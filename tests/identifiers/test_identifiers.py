@@ -246,6 +246,32 @@ def test_pickle_mid_run_continues_bit_identically():
     np.testing.assert_array_equal(ident.state, clone.state)
 
 
+def test_the_model_is_one_read_only_object_while_its_matrices_hold():
+    """Reading ``model`` twice without a sample gives the same object (the adaptive
+    loop reads it every step); a sample that moves the estimate gives a new one, and
+    the idle samples that leave it unchanged keep the object."""
+    _, u, y = _innovation_system(n_samples=300)
+    ident = MomentRefitRPBSID(4, 8, 0.99, warmup=100)
+    for k in range(200):
+        ident.update(u[k], y[k])
+    first = ident.model
+    assert ident.model is first and not first.A.flags.writeable
+    models = []
+    for k in range(200, 300):
+        ident.update(u[k], y[k])
+        models.append(ident.model)
+    for before, after in zip(models, models[1:], strict=False):
+        same_bits = all(np.array_equal(getattr(before, m), getattr(after, m)) for m in "ABCDK")
+        assert (after is before) == same_bits              # a new object exactly when moved
+    moved = models[-1]
+    assert moved is not first and not np.array_equal(moved.A, first.A)
+    for _ in range(5):
+        ident.update(np.zeros(2), y[299])                  # idle: nothing learnt
+    assert ident.model is moved
+    ident.reset()
+    assert ident.model is None
+
+
 def test_reset_forgets_sizes():
     ident = MomentRefitRPBSID(4, 8, 0.99)
     ident.update(np.zeros(2), np.zeros(3))

@@ -83,3 +83,36 @@ def test_split_updates_equal_the_textbook_filter_with_all_or_some_outputs():
         np.testing.assert_allclose(kf.predict(a, b, q, u), x, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(kf.P, p, rtol=1e-10, atol=1e-12)
         assert np.array_equal(kf.P, kf.P.T)              # kept exactly symmetric
+
+
+def test_a_filter_on_a_model_that_holds_still_becomes_the_steady_state_filter():
+    """correct + predict on one model: once the covariance has converged the filter
+    holds it (two products a step) and follows the textbook filter to rounding; a
+    missing output, another model or an inflation return to the full recursion."""
+    rng = np.random.default_rng(4)
+    a, b, c, q, r = _system()
+    kf = KalmanPredictor(2, initial_covariance=10.0)
+    x, p = np.zeros(2), 10.0 * np.eye(2)
+    steady = []
+    for k in range(400):
+        y, u = rng.normal(size=1), rng.normal(size=1)
+        if k == 300:
+            y = np.array([np.nan])                          # a dropped sample
+        if np.isfinite(y).all():
+            s = c @ p @ c.T + np.diag(r)
+            gain = p @ c.T @ np.linalg.inv(s)
+            x, p = x + gain @ (y - c @ x), p - gain @ c @ p
+        x, p = a @ x + b @ u, a @ p @ a.T + q
+        kf.correct(c, r, y, a=a)
+        kf.predict(a, b, q, u)
+        steady.append(kf.steady)
+        np.testing.assert_allclose(kf.x, x, rtol=0, atol=1e-8 * np.abs(x).max())
+        np.testing.assert_allclose(kf.P, p, rtol=1e-8)
+    first = steady.index(True)
+    assert 2 <= first < 300 and all(steady[first:300])     # held once converged ...
+    assert not steady[300]                                  # ... not across a dropped sample
+    assert steady[-1] and not kf.P.flags.writeable          # and held again, shared read-only
+    kf.predict(a + 1e-3, b, q, np.zeros(1))                 # another model: full recursion
+    assert not kf.steady
+    kf.reset()
+    assert not kf.steady

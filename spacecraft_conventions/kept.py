@@ -1,13 +1,13 @@
 """A value kept while the arrays it was computed from stay equal.
 
-The adaptive LQG is handed a new model object every step, but an identifier
+The adaptive LQG reads the identifier's model every step, but an identifier
 holds the same matrices over several steps (the scheduled fit re-discretizes
 only when the drive has turned by its resolution; a docking plant's model
 holds between refits). Everything that depends on the model alone (the
-law's weight and augmented model, its equilibrium map, the acceptance test's
-unit states, the filter's process noise, a converged Riccati design) is
-therefore kept, keyed on the bits of its inputs, and computed again only
-when one of them changes.
+exported model object itself, the law's weight and augmented model, its
+equilibrium map, the acceptance test's unit states, the filter's process
+noise, a converged Riccati design) is therefore kept, keyed on the bits of
+its inputs, and computed again only when one of them changes.
 """
 
 from __future__ import annotations
