@@ -69,7 +69,7 @@ from controllers.lqg import (
     set_integral_settle,
 )
 from controllers.residual import BaseRelativeReward, ResidualControl, ResidualObservations
-from controllers.riccati import RiccatiTracker, check_weights, dlqr, spectral_radius
+from controllers.riccati import RiccatiTracker, check_weights, dlqr, doubling_dare, spectral_radius
 from spacecraft_conventions import __version__
 
 __all__ = [
@@ -107,6 +107,7 @@ __all__ = [
     "compare",
     "controller_shares",
     "dlqr",
+    "doubling_dare",
     "effective_gains",
     "episode_metrics",
     "equilibrium_map",

@@ -214,13 +214,13 @@ class _LQGController(_EnvController):
         anything another controller added, such as an excitation); without it,
         with this controller's own last action.
         """
+        pending, self._pending = self._pending, (a, b, qn)
         if self.kf is None or self.kf.n != a.shape[0]:
             # initial attitudes of a few degrees: 1e-3 rad^2 of prior variance
             self.kf = KalmanPredictor(a.shape[0], initial_covariance=1e-3)
-        elif self._pending is not None:
-            pa, pb, pq = self._pending
-            self.kf.predict(pa, pb, pq, self._applied_torque(info))
-        self._pending = (a, b, qn)
+        elif pending is not None:
+            return self.kf.advance(*pending, self._applied_torque(info), c, noise_var, y,
+                                   a_now=a)
         return self.kf.correct(c, noise_var, y, a=a)
 
     def _applied_torque(self, info: dict[str, Any] | None) -> np.ndarray:

@@ -15,13 +15,18 @@ fixed model (the fixed LQG of the controllers).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
+from identifiers.core.kalman_kernels import (
+    _correct_all,
+    _f64,
+    _full_update,
+    _predict,
+    _predict_correct,
+    _within,
+)
 from spacecraft_conventions import KeptWhileEqual, single_threaded_blas
 
 __all__ = ["STEADY_TOLERANCE", "KalmanPredictor", "steady_state_gain"]
@@ -68,78 +73,6 @@ def steady_state_gain(a: ArrayLike, c: ArrayLike, q: ArrayLike,
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ValueError(f"no stabilizing filter Riccati solution: {exc}") from None
     return p @ c.T @ np.linalg.inv(c @ p @ c.T + r), p
-
-
-def _f64(m: ArrayLike) -> np.ndarray:
-    """``m`` as a C-contiguous float64 array (no copy when it is one): what the
-    compiled kernels take."""
-    return np.ascontiguousarray(m, dtype=np.float64)
-
-
-@njit(cache=True, nogil=True)
-def _correct_all(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Measurement update with every output of ``y``, compiled: ``x_{k|k}``, ``P_{k|k}``,
-    the filter gain ``L``, the innovation, its covariance and whether the latter
-    could be factored (if not: the prediction unchanged and a zero gain)."""
-    pct = p @ c.T
-    s = c @ pct
-    for i in range(s.shape[0]):
-        s[i, i] += r[i]
-    e = y - c @ x
-    try:
-        gain = np.linalg.solve(s, pct.T).T
-    except Exception:                  # numba raises a plain exception on a singular matrix
-        return x, p, np.zeros((x.shape[0], y.shape[0])), e, s, False
-    return x + gain @ e, p - gain @ pct.T, gain, e, s, True
-
-
-@njit(cache=True, nogil=True)
-def _predict(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, q: np.ndarray,
-             u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Time update, compiled: ``(A x + B u, sym(A P A^T + Q))``."""
-    pn = a @ p @ a.T + q
-    return a @ x + b @ u, 0.5 * (pn + pn.T)
-
-
-@njit(cache=True, nogil=True)
-def _full_update(x: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
-                 q: np.ndarray, r: np.ndarray, u: np.ndarray, y: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Measurement update with every output of ``y`` and the time update, compiled.
-
-    Returns ``x_{k+1|k}``, ``P_{k+1|k}``, the predictor gain ``A L``, the innovation,
-    its covariance and whether the innovation covariance could be factored."""
-    xf, pf, gain, e, s, ok = _correct_all(x, p, c, r, y)
-    if not ok:
-        return x, p, gain, e, s, False
-    xn, pn = _predict(xf, pf, a, b, q, u)
-    return xn, pn, a @ gain, e, s, True
-
-
-@njit(cache=True, nogil=True)
-def _within(x: np.ndarray, p: np.ndarray, c: np.ndarray, r: np.ndarray, y: np.ndarray,
-            sigmas: float) -> np.ndarray:
-    """``|y - C x| <= sigmas sqrt(max(diag(C P C^T) + r, 1e-30))`` per output, compiled
-    (zero entries of ``C`` skipped; a non-finite prediction or spread is outside)."""
-    n, m = x.shape[0], c.shape[0]
-    inside = np.empty(m, dtype=np.bool_)
-    for j in range(m):
-        prediction = 0.0
-        variance = 0.0
-        for k in range(n):
-            cjk = c[j, k]
-            if cjk != 0.0:
-                prediction += cjk * x[k]
-                pc = 0.0
-                for i in range(n):
-                    pc += p[k, i] * c[j, i]
-                variance += cjk * pc
-        variance += r[j]
-        if variance < 1e-30:
-            variance = 1e-30
-        inside[j] = abs(y[j] - prediction) <= sigmas * math.sqrt(variance)
-    return inside
 
 
 #: Stands for "no transition matrix given" in :class:`_Steady`'s keys.
@@ -316,19 +249,60 @@ class KalmanPredictor:
             self.x = st.a @ self.x + st.b @ u
             self.P = st.prior
             return self.x
-        corrected, self._corrected = self._corrected, None
         x, p = _predict(self.x, self.P, _f64(a), _f64(b), _f64(q), _f64(u))
-        if corrected is not None:
-            step = (a, b, q, *corrected)
-            last = self._last_step.value
-            if (self._last_step.holds(step) and last is not None
-                    and np.abs(p - last).max() <= STEADY_TOLERANCE * np.abs(p).max()):
-                self._steady = _Steady.hold(p, a, b, q, *corrected)
-            self._last_step.keep(step, p)
-        else:
-            self._last_step.clear()
+        self._note_prior(a, b, q, p)
         self.x, self.P = x, p
         return x
+
+    def advance(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, u: np.ndarray,
+                c: np.ndarray, r: np.ndarray, y: np.ndarray | None,
+                a_now: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`predict` with the last step's model ``(a, b, q)`` and input ``u``, then
+        :meth:`correct` with this step's ``(c, r, y)`` (``a_now``: this step's transition
+        matrix, for :attr:`gain`): the same numbers, in one compiled call where every
+        output is seen. Returns ``x_{k|k}``.
+        """
+        st = self._steady
+        a_key = _NO_MATRIX if a_now is None else a_now
+        if (st is not None and self.P is st.post and y is not None and np.isfinite(y).all()
+                and st.prediction.holds((a, b, q)) and st.correction.holds((c, r, a_key))):
+            x = st.a @ self.x + st.b @ u
+            e = y - st.c @ x
+            self.x = x + st.filter_gain @ e
+            self.P = st.post
+            self.gain, self.innovation, self.innovation_covariance = st.gain, e, st.s
+            self._corrected = None
+            return self.x
+        if y is None or y.shape[0] != c.shape[0] or not np.isfinite(y).all():
+            self.predict(a, b, q, u)
+            return self.correct(c, r, y, a=a_now)
+        xf, pf, gain, e, s, prior, _ = _predict_correct(
+            self.x, self.P, _f64(a), _f64(b), _f64(q), _f64(u), _f64(c), _f64(r), _f64(y))
+        self._note_prior(a, b, q, prior)
+        st = self._steady
+        if st is not None and st.prior is prior:
+            pf = st.post                # held from this step on (the same numbers)
+        # as correct() with every output seen (a zero gain where S could not be factored)
+        self.x, self.P = xf, pf
+        self.gain = gain if a_now is None else a_now @ gain
+        self.innovation, self.innovation_covariance = e, s
+        self._corrected = (c, r, a_key)
+        return xf
+
+    def _note_prior(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, p: np.ndarray) -> None:
+        """After a full time update to the prior ``p``: hold the filter (:attr:`steady`)
+        when the last step had the same model and left a prior within
+        :data:`STEADY_TOLERANCE` of this one."""
+        corrected, self._corrected = self._corrected, None
+        if corrected is None:
+            self._last_step.clear()
+            return
+        step = (a, b, q, *corrected)
+        last = self._last_step.value
+        if (self._last_step.holds(step) and last is not None
+                and np.abs(p - last).max() <= STEADY_TOLERANCE * np.abs(p).max()):
+            self._steady = _Steady.hold(p, a, b, q, *corrected)
+        self._last_step.keep(step, p)
 
     def _correction(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> tuple:
         """``(x_{k|k}, P_{k|k}, L, innovation, S)``; the last three None without data."""

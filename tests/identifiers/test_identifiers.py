@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import pickle
 from pathlib import Path
 
@@ -260,7 +261,7 @@ def test_the_model_is_one_read_only_object_while_its_matrices_hold():
     for k in range(200, 300):
         ident.update(u[k], y[k])
         models.append(ident.model)
-    for before, after in zip(models, models[1:], strict=False):
+    for before, after in itertools.pairwise(models):
         same_bits = all(np.array_equal(getattr(before, m), getattr(after, m)) for m in "ABCDK")
         assert (after is before) == same_bits              # a new object exactly when moved
     moved = models[-1]

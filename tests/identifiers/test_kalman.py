@@ -116,3 +116,22 @@ def test_a_filter_on_a_model_that_holds_still_becomes_the_steady_state_filter():
     assert not kf.steady
     kf.reset()
     assert not kf.steady
+
+
+def test_advance_is_predict_then_correct_to_the_bit():
+    """The controllers' filter step in one compiled call: the same numbers as the two
+    calls, with every output, with a missing one, and on a model that holds still
+    (where both become the steady filter at the same step)."""
+    rng = np.random.default_rng(5)
+    a, b, c, q, r = _system()
+    one, two = KalmanPredictor(2, 10.0), KalmanPredictor(2, 10.0)
+    for k in range(300):
+        y, u = rng.normal(size=1), rng.normal(size=1)
+        if k in (100, 150):
+            y = np.array([np.nan])
+        x1 = one.advance(a, b, q, u, c, r, y, a_now=a)
+        two.predict(a, b, q, u)
+        x2 = two.correct(c, r, y, a=a)
+        assert np.array_equal(x1, x2) and np.array_equal(one.P, two.P)
+        assert np.array_equal(one.gain, two.gain) and one.steady == two.steady
+    assert one.steady
