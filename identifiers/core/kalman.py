@@ -126,8 +126,8 @@ class KalmanPredictor:
 
     Notes
     -----
-    :meth:`correct` then :meth:`predict` on a model that holds still become a
-    steady-state filter (:attr:`steady`): once two consecutive steps on the
+    :meth:`correct` then :meth:`predict` (or :meth:`advance`) on a model that
+    holds still become a steady-state filter (:attr:`steady`): once two consecutive steps on the
     same model (``A, B, Q, C, R`` with the same bits, every output seen)
     left the prior covariance changed by at most :data:`STEADY_TOLERANCE` of
     its largest entry, the covariance and the gain are held and a step costs
@@ -150,8 +150,10 @@ class KalmanPredictor:
         self._steady: _Steady | None = None
         #: (C, R, A) of the last correction that saw every output, until the next prediction
         self._corrected: tuple[np.ndarray, ...] | None = None
-        #: the model of the last full step and the prior covariance it left
-        self._last_step: KeptWhileEqual[np.ndarray] = KeptWhileEqual()
+        #: the prior covariance of the last full time update
+        self._last_prior: np.ndarray | None = None
+        #: the model of the last full step that left the prior settled
+        self._last_step: KeptWhileEqual[bool] = KeptWhileEqual()
 
     @property
     def steady(self) -> bool:
@@ -291,18 +293,19 @@ class KalmanPredictor:
 
     def _note_prior(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, p: np.ndarray) -> None:
         """After a full time update to the prior ``p``: hold the filter (:attr:`steady`)
-        when the last step had the same model and left a prior within
-        :data:`STEADY_TOLERANCE` of this one."""
+        when the last two steps moved the prior by at most :data:`STEADY_TOLERANCE` on
+        the same model (its bits are compared only once the prior has settled)."""
         corrected, self._corrected = self._corrected, None
-        if corrected is None:
+        last, self._last_prior = self._last_prior, p
+        if (corrected is None or last is None or last.shape != p.shape
+                or np.abs(p - last).max() > STEADY_TOLERANCE * np.abs(p).max()):
             self._last_step.clear()
             return
         step = (a, b, q, *corrected)
-        last = self._last_step.value
-        if (self._last_step.holds(step) and last is not None
-                and np.abs(p - last).max() <= STEADY_TOLERANCE * np.abs(p).max()):
+        if self._last_step.holds(step):
             self._steady = _Steady.hold(p, a, b, q, *corrected)
-        self._last_step.keep(step, p)
+        else:
+            self._last_step.keep(step, True)
 
     def _correction(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> tuple:
         """``(x_{k|k}, P_{k|k}, L, innovation, S)``; the last three None without data."""
