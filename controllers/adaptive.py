@@ -78,6 +78,7 @@ from controllers.excitation import BinaryExcitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
+from controllers.riccati import check_iterations
 from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_conventions.kept import KeptWhileEqual
@@ -296,7 +297,7 @@ class AdaptiveLQG(_LQGController):
         if not (np.isfinite(dwell_s) and dwell_s >= 0):
             raise ValueError(f"dwell_s must be >= 0, got {dwell_s}")
         self.dwell_steps = round(dwell_s / self.dt)
-        self.law.iterations = None if iterations is None else int(iterations)
+        self.law.iterations = check_iterations(iterations)
         layout = self.measured_layout
         self._att_rows = layout.indices("attitude")
         self._rate_rows = layout.indices("rate")

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.riccati import RiccatiTracker, check_weights
+from controllers.riccati import RiccatiTracker, check_iterations, check_weights
 from spacecraft_conventions import NOMINAL_SCALE, CostWeights, output_cost_weights
 from spacecraft_conventions.kept import KeptWhileEqual
 
@@ -208,7 +208,7 @@ class LQGLaw:
         check_weights(self.qy, self.r)
         self.dt = float(dt)
         self.integral = bool(integral)
-        self.iterations = None if iterations is None else int(iterations)
+        self.iterations = check_iterations(iterations)
         if not (np.isfinite(band) and band > 0):
             raise ValueError(f"band must be a positive angle in rad, got {band}")
         self.band = float(band)

@@ -8,16 +8,16 @@
 
 :func:`dlqr` solves it from scratch (``scipy.linalg.solve_discrete_are``).
 :func:`doubling_dare` solves it by structure-preserving doubling, compiled:
-the same solution at a tenth of the cost for the adaptive loop's 14-20
-states, with a certificate that the closed loop is stable.
+the same solution at a fourteenth of the cost on the adaptive loop's
+17-state model, with a check that the closed loop is stable.
 :class:`RiccatiTracker` re-designs every step for a model that changes: each
 new model is solved exactly (by default), and a model it has already solved
 (an identifier that holds its model between changes) gets that design back
 without solving. Its former mode, a few Riccati (value) iterations
 warm-started from the last solution, is an option: it lags a changed model
-by the iteration's slowest rate (for the adaptive loop's slowest
-closed-loop pole at 0.9994, about 20 s), so its gain changed every step and
-was judged anew every step.
+(value iteration contracts by about the square of the slowest closed-loop
+pole, 0.9994 in the adaptive loop), so its gain changed every step and was
+judged anew every step (docs/design/control.md, "Riccati solutions").
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from scipy.linalg.lapack import dgeev as _dgeev
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_conventions.kept import KeptWhileEqual
 
-__all__ = ["RiccatiTracker", "check_model", "check_weights", "dlqr", "doubling_dare",
-           "spectral_radius"]
+__all__ = ["RiccatiTracker", "check_iterations", "check_model", "check_weights", "dlqr",
+           "doubling_dare", "spectral_radius"]
 
 #: Doubling steps before :func:`doubling_dare` gives up: step k has summed the first
 #: 2^k terms of the Riccati series, so 40 covers a closed-loop pole within 1e-10 of
@@ -102,6 +102,24 @@ def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError("A and B must be finite")
     return a, b
+
+
+def check_iterations(iterations: int | None) -> int | None:
+    """Validate a Riccati design mode: None (each new model solved exactly) or a
+    number of warm-started iterations per re-design (an integer >= 1).
+
+    Raises
+    ------
+    ValueError
+        Naming the accepted values.
+    """
+    if iterations is None:
+        return None
+    if (isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer, float))
+            or iterations != int(iterations) or int(iterations) < 1):
+        raise ValueError(f"iterations must be None (exact) or an integer >= 1, "
+                         f"got {iterations!r}")
+    return int(iterations)
 
 
 def spectral_radius(a: np.ndarray) -> float:
@@ -245,7 +263,8 @@ def doubling_dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
     Int. J. Control 77 (2004); W.-W. Lin, S.-F. Xu, "Convergence analysis of
     structure-preserving doubling algorithms for Riccati-type matrix
     equations", SIAM J. Matrix Anal. Appl. 28 (2006): ``A_k = (I + G_k P)
-    (A - B G)^(2^k)`` and ``P - H_k`` of the order of ``A_k``'s square.
+    S^(2^k)`` with ``S = (I + G P)^-1 A = A - B G`` the closed loop, and
+    ``P - H_k`` of the order of ``S^(2^(k+1))``.
     """
     p, steps = _doubling(np.ascontiguousarray(a, dtype=float),
                          np.ascontiguousarray(b, dtype=float),
@@ -336,11 +355,7 @@ class RiccatiTracker:
     def __init__(self, q: np.ndarray, r: np.ndarray, iterations: int | None = None,
                  tol: float = 1e-6) -> None:
         self.q, self.r = check_weights(q, r)
-        if iterations is not None and (isinstance(iterations, bool) or int(iterations) < 1
-                                       or int(iterations) != iterations):
-            raise ValueError(f"iterations must be None (exact) or an integer >= 1, "
-                             f"got {iterations!r}")
-        self.iterations = None if iterations is None else int(iterations)
+        self.iterations = check_iterations(iterations)
         self.tol = float(tol)
         self.p: np.ndarray | None = None
         self.n_exact = 0

@@ -141,9 +141,15 @@ def test_riccati_tracker_solves_each_new_model_exactly_and_keeps_it():
     moved = tracker.design(a + 1e-3, b)             # one step: the new model's exact gain
     np.testing.assert_allclose(moved, dlqr(a + 1e-3, b, q, r)[0], rtol=1e-9, atol=1e-12)
     assert tracker.n_exact == 2
-    for bad in (0, -1, 2.5, True):
+    for bad in (0, -1, 2.5, True, "4"):
         with pytest.raises(ValueError, match="iterations must be None"):
             RiccatiTracker(q, r, iterations=bad)
+    # refused where it is given, not at the first design (which would count it as a
+    # failed design and fly the fallback without a word)
+    env = gym.make("spacecraft_env:FlexibleSpacecraft-v2")
+    with pytest.raises(ValueError, match="iterations must be None"):
+        AdaptiveLQG(env.unwrapped, iterations=0)
+    assert AdaptiveLQG(env.unwrapped, iterations=4).law.iterations == 4
 
 
 def test_spectral_radius_matches_numpy_and_refuses_non_finite_matrices():
