@@ -280,8 +280,8 @@ def dlqr(a: ArrayLike, b: ArrayLike, q: ArrayLike,
 
     The same gain as python-control's ``control.dlqr`` (tested); this one
     adds the named input checks and the test that the closed loop is
-    stable, and is the cold start of :class:`RiccatiTracker`, whose
-    warm-started per-step redesign is ours for speed.
+    stable; :class:`RiccatiTracker` calls it where :func:`doubling_dare`
+    does not converge, and for its name of the failure.
 
     Parameters
     ----------
@@ -335,8 +335,8 @@ class RiccatiTracker:
         converge). An integer: that many Riccati (value) iterations per
         re-design, warm-started from the last solution, O(n^3) each, with the
         exact solver when they diverge (the mode before 2026-11-29, kept for
-        reproduction; it lags a changed model by the iteration's slowest
-        rate, about 20 s in the adaptive loop).
+        reproduction; it lags a changed model: in the adaptive loop its gain
+        was still 1.3x the model's change off after 14 steps).
     tol : float
         Relative change of P below which the iteration (``iterations`` set)
         has converged.

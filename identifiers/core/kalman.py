@@ -127,9 +127,9 @@ class KalmanPredictor:
     Notes
     -----
     :meth:`correct` then :meth:`predict` (or :meth:`advance`) on a model that
-    holds still become a steady-state filter (:attr:`steady`): once two consecutive steps on the
-    same model (``A, B, Q, C, R`` with the same bits, every output seen)
-    left the prior covariance changed by at most :data:`STEADY_TOLERANCE` of
+    holds still become a steady-state filter (:attr:`steady`): once two
+    consecutive steps on the same model (``A, B, Q, C, R`` with the same bits,
+    every output seen) left the prior covariance changed by at most :data:`STEADY_TOLERANCE` of
     its largest entry, the covariance and the gain are held and a step costs
     two matrix-vector products. A step on another model, a missing output,
     :meth:`inflate` or :meth:`transform` returns to the full recursion.
@@ -265,17 +265,9 @@ class KalmanPredictor:
         output is seen. Returns ``x_{k|k}``.
         """
         st = self._steady
-        a_key = _NO_MATRIX if a_now is None else a_now
-        if (st is not None and self.P is st.post and y is not None and np.isfinite(y).all()
-                and st.prediction.holds((a, b, q)) and st.correction.holds((c, r, a_key))):
-            x = st.a @ self.x + st.b @ u
-            e = y - st.c @ x
-            self.x = x + st.filter_gain @ e
-            self.P = st.post
-            self.gain, self.innovation, self.innovation_covariance = st.gain, e, st.s
-            self._corrected = None
-            return self.x
-        if y is None or y.shape[0] != c.shape[0] or not np.isfinite(y).all():
+        if (st is not None and self.P is st.post) or y is None or y.shape[0] != c.shape[0] \
+                or not np.isfinite(y).all():
+            # a held filter (two products each) or a sample with outputs missing
             self.predict(a, b, q, u)
             return self.correct(c, r, y, a=a_now)
         xf, pf, gain, e, s, prior, _ = _predict_correct(
@@ -288,7 +280,7 @@ class KalmanPredictor:
         self.x, self.P = xf, pf
         self.gain = gain if a_now is None else a_now @ gain
         self.innovation, self.innovation_covariance = e, s
-        self._corrected = (c, r, a_key)
+        self._corrected = (c, r, _NO_MATRIX if a_now is None else a_now)
         return xf
 
     def _note_prior(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, p: np.ndarray) -> None:
