@@ -20,7 +20,9 @@
   plant); :class:`AdaptationModule` and :class:`EstimatedFeatures`: that vector
   estimated from the identifier's (RMA's adaptation module);
   :class:`ResidualControl`: an
-  agent's action added to a controller's (residual RL on the adaptive LQG).
+  agent's action added to a controller's (residual RL on the adaptive LQG);
+  :class:`ScoredWindowReward`: an agent's reward on the window the harness
+  scores (from 100 s, a crash whenever it comes).
 """
 
 from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
@@ -69,6 +71,7 @@ from controllers.lqg import (
     set_integral_settle,
 )
 from controllers.residual import BaseRelativeReward, ResidualControl, ResidualObservations
+from controllers.rewards import ScoredWindowReward
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, doubling_dare, spectral_radius
 from spacecraft_conventions import __version__
 
@@ -99,6 +102,7 @@ __all__ = [
     "RobustLQG",
     "ScheduleWarning",
     "ScheduledLQG",
+    "ScoredWindowReward",
     "Trajectory",
     "TrueModelIdentifier",
     "__version__",

@@ -43,7 +43,7 @@ from spacecraft_env.scenarios import (
     SolarRotationScenario,
     make_scenario,
 )
-from spacecraft_env.wrappers import ActionRepeat
+from spacecraft_env.wrappers import ActionRepeat, NominalUnits
 
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
@@ -65,6 +65,7 @@ __all__ = [
     "FlexibleSpacecraftEnv",
     "FlexibleSpacecraftModel",
     "Limit",
+    "NominalUnits",
     "PaddleRotationScenario",
     "PlantDraw",
     "RewardWeights",

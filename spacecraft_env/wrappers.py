@@ -7,6 +7,11 @@ samples every 0.1 s, so an agent acting every sample has to assign credit
 over hundreds of decisions; holding each action for 1 s brings that to tens.
 Put it outermost (outside a features wrapper) so that whatever runs per
 sample, such as an online identifier, still sees every sample.
+
+:class:`NominalUnits` gives an agent its observations in fixed units: each
+channel divided by its group's nominal level (1 deg, 0.1 deg/s, 1 cm), so a
+policy's weights keep their meaning while it learns, where a running
+normalization moves them.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["ActionRepeat"]
+__all__ = ["ActionRepeat", "NominalUnits"]
 
 
 class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -53,3 +58,54 @@ class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 break
         info["repeated_steps"] = steps
         return obs, total, terminated, truncated, info
+
+
+class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Observations in nominal units: each channel over its group's nominal level.
+
+    The levels are :data:`spacecraft_conventions.NOMINAL_SCALE`'s (attitude,
+    attitude error and reference 1 deg, rate 0.1 deg/s, deflection 1 cm) for the
+    groups the environment observes (``env.unwrapped.observation_layout``), so an
+    observation of 1 is one nominal level in every episode and every run. A linear
+    policy's gains are then in fixed physical units (normalized torque per degree,
+    per 0.1 deg/s), which a running normalization (SB3's ``VecNormalize``) would
+    rescale as its statistics move.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment (or a wrapper of one that keeps its observation).
+
+    Raises
+    ------
+    ValueError
+        If the observation's size is not the environment's layout's.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> import spacecraft_env
+    >>> env = spacecraft_env.NominalUnits(gym.make("FlexibleSpacecraft-v2",
+    ...                                            outputs=("attitude_error", "rate")))
+    >>> obs, _ = env.reset(seed=0)
+    >>> obs.shape, obs.dtype
+    ((6,), dtype('float32'))
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
+        scales = np.asarray(env.unwrapped.observation_layout.scales(), dtype=np.float64)
+        space = env.observation_space
+        if space.shape != scales.shape:
+            raise ValueError(f"NominalUnits needs the environment's own observation, of "
+                             f"shape {scales.shape}; got {space.shape}")
+        self.scales = scales
+        self.observation_space = gym.spaces.Box(
+            (space.low / scales).astype(np.float32), (space.high / scales).astype(np.float32),
+            dtype=np.float32)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """``observation`` over the nominal levels (float32)."""
+        return (np.asarray(observation, dtype=np.float64) / self.scales).astype(np.float32)

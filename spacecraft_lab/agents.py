@@ -41,6 +41,7 @@ from spacecraft_lab.training import (
     _one_torch_thread,
     _score_comparators,
     _training_env_kwargs,
+    algorithm_class,
 )
 
 __all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
@@ -137,7 +138,6 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
         raise ImportError("loading an agent needs the 'rl' extra (stable-baselines3): run "
                           "`make test`, or `pip install -c constraints.txt -e \".[rl]\"`")
     # optional dependency (the "rl" extra): imported where it is needed
-    from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     env_kwargs = _training_env_kwargs(settings["randomize"], settings["reward"])
@@ -145,8 +145,7 @@ def load_agent(agent: str | Path) -> tuple[NormalizedPolicy, dict[str, Any]]:
                                           env_kwargs, settings["base_integral_settle_s"])])
     normalization = VecNormalize.load(str(statistics), venv)
     normalization.training = False
-    model = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))[settings["algo"]].load(
-        str(path), device="cpu")
+    model = algorithm_class(settings["algo"]).load(str(path), device="cpu")
     if model.observation_space.shape != venv.observation_space.shape:
         raise ValueError(f"{path} expects observations of shape "
                          f"{model.observation_space.shape}, its environment gives "

@@ -244,7 +244,8 @@ class _HelpFormatter(argparse.HelpFormatter):
 
 #: Metavariables of the options whose values are not self-explaining (an option with
 #: at most :data:`_SPELLED_CHOICES` choices shows them instead, ``a|b|c``).
-_METAVARS = {"scenario": "S", "seeds": "N", "seed": "N", "steps": "N", "out": "DIR",
+_METAVARS = {"scenario": "S", "reward_from": "S", "seeds": "N", "seed": "N", "steps": "N",
+             "out": "DIR",
              "methods": "M", "controllers": "C", "preset": "P", "snr_db": "DB|none",
              "modes": "K", "samples": "N", "convergence": "S", "task": "T",
              "module_mass": "KG", "rotation_rate": "DEG_S", "paddle_angle": "DEG",
@@ -408,10 +409,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="processes running the seeds side by side; the numbers do not "
                           "depend on it (default: all cores)")
 
-    train = command("train", help="train SB3 agents (PPO/SAC)")
-    train.add_argument("--algo", choices=ALGORITHMS, default="ppo", help="SB3 algorithm")
+    train = command("train", help="train SB3 agents (PPO/SAC, ARS)")
+    train.add_argument("--algo", choices=ALGORITHMS, default="ppo",
+                       help="SB3 algorithm: ppo, sac, or ars (sb3-contrib's augmented random "
+                            "search on a linear policy, each antithetic pair on one episode)")
     train.add_argument("--features", choices=FEATURES, default="none",
-                       help="observation features appended for the agent, or (residual-*) "
+                       help="observation features appended for the agent, the attitude error "
+                       "and rate alone in nominal units (attitude-error), or (residual-*) "
                        "the controller whose action the agent corrects")
     train.add_argument("--timesteps", type=_integer(1), default=100_000,
                        help="training env steps per seed")
@@ -434,6 +438,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "per step alive), 'log' (the same on a log scale of the cost, "
                             "which resolves precision near the target) or 'cost' (negative "
                             "stage cost and a termination penalty)")
+    train.add_argument("--reward-from", type=float, default=0.0,
+                       help="train on the reward of the steps from this time on, s, and the "
+                            "termination penalty whenever it comes (100: the window the "
+                            "evaluations score; controllers.ScoredWindowReward); default 0")
     train.add_argument("--relative-to-base", action="store_true",
                        help="residual-* settings: train on the reward minus what the base "
                             "alone earns on a twin of the same episode (same plant draw and "
@@ -591,9 +599,10 @@ def _train(args: argparse.Namespace) -> int:
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
                      workers=args.workers, envs=args.envs, log_std_init=args.log_std,
-                     relative_to_base=args.relative_to_base, cache=args.cache)
+                     relative_to_base=args.relative_to_base,
+                     reward_from_s=args.reward_from, cache=args.cache)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",
-                               "repeat", "reward", "relative_to_base", "envs",
+                               "repeat", "reward", "relative_to_base", "reward_from_s", "envs",
                                "final_cost_after_100s",
                                "final_attitude_rms_deg", "final_vibration_rms_mm",
                                "final_return")}

@@ -224,6 +224,8 @@ def training_metrics_problem(m: Any) -> str | None:
         return "'timesteps' missing or not an integer"
     if not isinstance(m.get("relative_to_base", False), bool):
         return "'relative_to_base' is not a boolean"
+    if not _is_number(m.get("reward_from_s"), optional=True):
+        return "'reward_from_s' is not a number"
     # the threshold of "steps to 2x the adaptive LQG": on the cost from 100 s (files
     # written before it was, on the whole-episode attitude RMS)
     if not (_is_number(m.get("target_cost_after_100s"), optional=False)
@@ -280,7 +282,8 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     """The ``metrics.json`` of ``spacecraft train`` directories, one per setting.
 
     Directories with equal algorithm, features, task, env steps, decision
-    period and reward (its form, and whether the base's was subtracted) are one
+    period and reward (its form, whether the base's was subtracted, and from when it
+    counts) are one
     setting: their seeds' runs are pooled (seeds trained in separate processes
     with ``--first-seed``). Order of first appearance.
     """
@@ -288,7 +291,8 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     for directory in directories:
         m = load_training_metrics(directory)
         key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), m["timesteps"],
-               m.get("repeat", 1), m.get("reward", "cost"), m.get("relative_to_base", False))
+               m.get("repeat", 1), m.get("reward", "cost"), m.get("relative_to_base", False),
+               m.get("reward_from_s", 0.0))
         if key in settings:
             settings[key]["runs"] = settings[key]["runs"] + m["runs"]
         else:
@@ -348,6 +352,8 @@ def rl_table(directories: Sequence[str | Path]) -> str:
         task += f", {m.get('reward', 'cost')} reward"
         if m.get("relative_to_base"):
             task += " minus the base's"
+        if m.get("reward_from_s"):
+            task += f" from {m['reward_from_s']:g} s"
         rows.append(
             f"| {m['algo'].upper()} | {m['features']} | {task} | {m['timesteps']:,} "
             f"| {len(finals)} | {spread([f.get(median) for f in finals], '.4f')} "

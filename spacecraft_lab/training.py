@@ -9,7 +9,10 @@ matters; ``--randomize`` draws a scenario variant every episode, e.g.
 docking masses, times and offsets), Monitor-wrapped, with observations and
 rewards normalized by ``VecNormalize``.
 
-``F`` (:data:`FEATURES`) appends nothing (``none``); the identifier's
+``F`` (:data:`FEATURES`) appends nothing (``none``), or observes the attitude
+error and the rate alone, in nominal units (``attitude-error``: 1 deg, 0.1 deg/s;
+:class:`spacecraft_env.NominalUnits`), the observation of the linear policies ARS
+(``--algo ars``) trains; the identifier's
 physical estimates, :class:`controllers.PhysicalFeatures` (``physical``:
 rigid-body gain, dominant modes, their uncertainty and a change flag in a
 fixed normalized frame) or the same vector from the truth,
@@ -76,6 +79,7 @@ from controllers import (
     ResidualControl,
     ResidualObservations,
     ScheduledLQG,
+    ScoredWindowReward,
     episode_metrics,
     fast_identifier,
     run_episode,
@@ -83,23 +87,30 @@ from controllers import (
 )
 from controllers.lqg import INTEGRAL_SETTLE_S
 from spacecraft_conventions import single_threaded_blas
-from spacecraft_env import ActionRepeat, env_id
+from spacecraft_env import ActionRepeat, NominalUnits, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
+from spacecraft_lab.random_search import paired_ars
 from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
-           "HYPERPARAMETERS", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT", "RESIDUAL_SCALE",
-           "NormalizedPolicy", "ZeroTorque", "fast_adaptive_lqg", "run_training"]
+           "HYPERPARAMETERS", "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS",
+           "RESIDUAL_REPEAT", "RESIDUAL_SCALE", "NormalizedPolicy", "ZeroTorque",
+           "algorithm_class", "fast_adaptive_lqg", "run_training"]
 
 
-#: stable-baselines3 algorithms the job trains.
-ALGORITHMS = ("ppo", "sac")
+#: stable-baselines3 algorithms the job trains: PPO and SAC (MLP policies) and augmented
+#: random search on a linear policy (sb3-contrib's ARS with each antithetic pair flown on
+#: the same episode, :func:`spacecraft_lab.random_search.paired_ars`).
+ALGORITHMS = ("ppo", "sac", "ars")
+#: The SB3 policy each algorithm trains.
+POLICIES = {"ppo": "MlpPolicy", "sac": "MlpPolicy", "ars": "LinearPolicy"}
 #: What the agent gets on top of the env: observation features, or (residual-*) a
 #: controller whose action it corrects.
-FEATURES = ("none", "identified", "identified-kept", "identified-kept-no-state", "oracle",
-            "physical", "privileged", "residual-adaptive", "residual-fixed",
+FEATURES = ("none", "attitude-error", "identified", "identified-kept",
+            "identified-kept-no-state", "oracle", "physical", "privileged",
+            "residual-adaptive", "residual-fixed",
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
             "residual-scheduled-physical", "residual-scheduled-privileged",
             "residual-fixed-privileged")
@@ -162,6 +173,7 @@ ACTION_REPEAT = 10
 HYPERPARAMETERS: dict[str, dict[str, Any]] = {
     "ppo": {"policy_kwargs": {"log_std_init": -1.0}},
     "sac": {},
+    "ars": {},       # sb3-contrib's: 8 directions, all kept, delta_std 0.05, step 0.02
 }
 #: The residual settings' PPO: exploration exp(-3) = 5 % of the residual's authority
 #: (0.025 N m), so an untrained residual perturbs its base's cost by percents, not by
@@ -170,7 +182,42 @@ HYPERPARAMETERS: dict[str, dict[str, Any]] = {
 RESIDUAL_HYPERPARAMETERS: dict[str, dict[str, Any]] = {
     "ppo": {"policy_kwargs": {"log_std_init": -3.0}},
     "sac": {},
+    "ars": HYPERPARAMETERS["ars"],      # its policy starts at zero: the base alone
 }
+#: Settings whose observation is in fixed nominal units (:class:`spacecraft_env.NominalUnits`):
+#: ARS's linear policy acts on it as it is, where it acts on every other setting's
+#: observation through ``VecNormalize``'s running normalization. Its weights then keep
+#: their meaning while it learns (normalized torque per degree of attitude error, per
+#: 0.1 deg/s of rate).
+NOMINAL_UNITS_FEATURES = frozenset({"attitude-error"})
+
+
+def algorithm_class(algo: str) -> type:
+    """The class that trains and loads agents of one of :data:`ALGORITHMS`.
+
+    Parameters
+    ----------
+    algo : str
+        ``"ppo"``, ``"sac"`` or ``"ars"``.
+
+    Returns
+    -------
+    type
+        stable-baselines3's ``PPO`` or ``SAC``, or
+        :func:`spacecraft_lab.random_search.paired_ars`'s class (sb3-contrib's ARS).
+
+    Raises
+    ------
+    ValueError
+        For another name.
+    """
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo must be one of {ALGORITHMS}, got {algo!r}")
+    if algo == "ars":
+        return paired_ars()
+    from stable_baselines3 import PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC}[algo]
 
 
 class ZeroTorque(Controller):
@@ -216,16 +263,20 @@ def _training_env_kwargs(randomize: bool, reward: str) -> dict[str, Any]:
 
 
 def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
-                   repeat: int, relative_to_base: bool = False) -> gym.Env:
+                   repeat: int, relative_to_base: bool = False,
+                   reward_from_s: float = 0.0) -> gym.Env:
     """One training env: the setting's env (with ``relative_to_base``, its reward minus
-    the base's on a twin of the episode, :class:`controllers.BaseRelativeReward`), its
-    action held ``repeat`` steps, Monitor-wrapped (module level, so a ``SubprocVecEnv``
-    can build it in its worker)."""
+    the base's on a twin of the episode, :class:`controllers.BaseRelativeReward`; with
+    ``reward_from_s`` > 0, rewarded from that time on,
+    :class:`controllers.ScoredWindowReward`), its action held ``repeat`` steps,
+    Monitor-wrapped (module level, so a ``SubprocVecEnv`` can build it in its worker)."""
     from stable_baselines3.common.monitor import Monitor
 
     env = _make_env(scenario, features, env_kwargs)
     if relative_to_base:
         env = BaseRelativeReward(env)
+    if reward_from_s > 0:
+        env = ScoredWindowReward(env, reward_from_s)
     return Monitor(ActionRepeat(env, repeat))
 
 
@@ -234,6 +285,10 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
     trained on."""
+    if features == "attitude-error":
+        # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s)
+        return NominalUnits(gym.make(env_id(scenario), **env_kwargs,
+                                     outputs=("attitude_error", "rate")))
     env = gym.make(env_id(scenario), **env_kwargs)
     if features in _IDENTIFIED:
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
@@ -369,7 +424,7 @@ def _one_torch_thread(torch) -> Iterator[None]:
 def _start_at_the_base(model: Any) -> None:
     """Zero the last layer of a residual policy's action mean (PPO's ``action_net``,
     SAC's ``actor.mu``): the deterministic residual is then 0 and a fresh agent flies
-    exactly its base controller."""
+    exactly its base controller. (ARS's linear policy starts at zero already.)"""
     import torch
 
     layer = getattr(model.policy, "action_net", None)
@@ -388,7 +443,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                  reward: str = "bounded", first_seed: int = 0,
                  eval_seeds: tuple[int, ...] = EVAL_SEEDS, workers: int | None = None,
                  envs: int = 1, log_std_init: float | None = None,
-                 relative_to_base: bool = False, cache: bool = True) -> dict:
+                 relative_to_base: bool = False, reward_from_s: float = 0.0,
+                 cache: bool = True) -> dict:
     """Train, evaluate and save SB3 agents; see the module docstring.
 
     Seeds ``first_seed .. first_seed + seeds - 1`` are trained (so seeds can be
@@ -422,6 +478,12 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     second env and base per training env. The evaluations score the harness's cost,
     as for every run; ``metrics.json`` records the choice.
 
+    ``reward_from_s``: train on the reward of the steps from this time on (s) and the
+    termination penalty whenever it comes (:class:`controllers.ScoredWindowReward`;
+    100 is the window the evaluations score, the cost from 100 s); 0 (default): every
+    step. The evaluations score the harness's cost as for every run; ``metrics.json``
+    records it.
+
     ``cache``: read the comparators' scores from, and store them in,
     :func:`spacecraft_lab.score_cache.default_cache` (they depend only on the scenario,
     the env's arguments, the episodes and the code, so every run after the first with
@@ -449,14 +511,15 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                           "\"torch==2.13.0\" && pip install -c constraints.txt -e \".[rl]\"`")
     # optional dependency (the "rl" extra): imported where it is needed
     import torch
-    from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    algos = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
-    if algo not in algos:
+    if algo not in ALGORITHMS:
         raise ValueError(f"algo must be one of {ALGORITHMS}, got {algo!r}")
+    if algo == "ars" and importlib.util.find_spec("sb3_contrib") is None:
+        raise ImportError("--algo ars needs sb3-contrib (the 'rl' extra): `pip install -c "
+                          "constraints.txt -e \".[rl]\"`")
     if features not in FEATURES:
         raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
     if scenario not in SCENARIO_NAMES:
@@ -465,6 +528,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         raise ValueError("timesteps and seeds must be >= 1, first_seed >= 0")
     if not (isinstance(envs, int) and not isinstance(envs, bool) and 1 <= envs <= 64):
         raise ValueError(f"envs must be an integer in [1, 64], got {envs!r}")
+    if algo == "ars" and envs != 1:
+        raise ValueError("ARS flies its candidates one episode at a time in one env "
+                         f"(envs=1), got envs={envs}; run seeds as separate processes")
     check_workers(workers)
     eval_seeds = tuple(int(s) for s in eval_seeds)
     if not eval_seeds or min(eval_seeds) < 0:
@@ -473,6 +539,9 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     if relative_to_base and not residual:
         raise ValueError(f"relative_to_base needs a residual setting (features residual-*), "
                          f"whose zero action flies a base; got features {features!r}")
+    if isinstance(reward_from_s, bool) or not isinstance(reward_from_s, int | float) \
+            or not (np.isfinite(reward_from_s) and reward_from_s >= 0):
+        raise ValueError(f"reward_from_s must be a finite time >= 0 s, got {reward_from_s!r}")
     if repeat is None:
         repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
     hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
@@ -500,17 +569,21 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         torch_threads = torch.get_num_threads()
         for seed in range(first_seed, first_seed + seeds):
             factory = partial(_monitored_env, scenario, features, env_kwargs, repeat,
-                              bool(relative_to_base))
+                              bool(relative_to_base), float(reward_from_s))
             vec = (DummyVecEnv([factory]) if envs == 1
                    else SubprocVecEnv([factory] * envs, start_method="forkserver"))
-            venv = VecNormalize(vec, norm_obs=True, norm_reward=True, clip_obs=10.0)
+            # ARS compares whole returns within an iteration: no running reward scale;
+            # its linear policy acts on nominal units where the setting gives them
+            venv = VecNormalize(vec, norm_obs=not (algo == "ars"
+                                                   and features in NOMINAL_UNITS_FEATURES),
+                                norm_reward=algo != "ars", clip_obs=10.0)
             venv.seed(seed)
-            model = algos[algo]("MlpPolicy", venv, seed=seed, verbose=0,
-                                tensorboard_log=tensorboard, **hyper)
+            model = algorithm_class(algo)(POLICIES[algo], venv, seed=seed, verbose=0,
+                                          tensorboard_log=tensorboard, **hyper)
             if tensorboard is None:
                 # SB3's default logger makes an empty /tmp/SB3-<date> folder per model
                 model.set_logger(Logger(folder=None, output_formats=[]))
-            if residual:
+            if residual and algo != "ars":
                 _start_at_the_base(model)
             curve: list[dict[str, float]] = []
             name = f"{algo}-{features}-seed{seed}"
@@ -519,7 +592,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
             # PPO collects whole rollouts: it runs to the next multiple of n_steps
             rollout = getattr(model, "n_steps", 1) * venv.num_envs
             total = -(-decisions // rollout) * rollout * repeat
-            if total != timesteps and progress and seed == first_seed:
+            if algo == "ars" and progress and seed == first_seed:
+                tqdm.write(f"ARS trains whole iterations of {model.pop_size} episodes: "
+                           "it stops at the end of the first past the env steps asked "
+                           "(metrics.json's 'timesteps' are those trained).")
+            elif total != timesteps and progress and seed == first_seed:
                 tqdm.write(f"{algo.upper()} trains whole rollouts of {rollout} decisions x "
                            f"{repeat} env steps: {timesteps:,} env steps asked, {total:,} "
                            "trained (metrics.json's 'timesteps'; the request is "
@@ -550,6 +627,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "relative_to_base": bool(relative_to_base),
+        "reward_from_s": float(reward_from_s),
         "hyperparameters": hyper, "envs": envs,
         "residual_scale": RESIDUAL_SCALE if residual else None,
         # the comparator that is the residual's base (a fresh residual flies it exactly)

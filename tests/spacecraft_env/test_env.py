@@ -14,7 +14,14 @@ from gymnasium.utils.env_checker import check_env
 
 import spacecraft_env
 from controllers import OracleLQG, run_episode
-from spacecraft_env import ENV_IDS, REWARDS, ActionRepeat, FlexibleSpacecraftEnv, RewardWeights
+from spacecraft_env import (
+    ENV_IDS,
+    REWARDS,
+    ActionRepeat,
+    FlexibleSpacecraftEnv,
+    NominalUnits,
+    RewardWeights,
+)
 
 IDS = sorted(ENV_IDS)
 
@@ -441,3 +448,29 @@ def test_action_repeat_is_recorded_in_the_spec():
 def test_action_repeat_rejects_bad_repeat(repeat):
     with pytest.raises(ValueError, match="repeat must be an integer >= 1"):
         ActionRepeat(gym.make("FlexibleSpacecraftDocking-v2"), repeat)
+
+
+def test_nominal_units_divide_each_channel_by_its_groups_level():
+    """1 in the wrapped observation is 1 deg of attitude error, 0.1 deg/s of rate."""
+    outputs = ("attitude_error", "rate")
+    raw = gym.make("FlexibleSpacecraftFamily-v2", task="slew", outputs=outputs)
+    env = NominalUnits(gym.make("FlexibleSpacecraftFamily-v2", task="slew", outputs=outputs))
+    obs_raw, _ = raw.reset(seed=3)
+    obs, _ = env.reset(seed=3)
+    level = np.array([np.deg2rad(1.0)] * 3 + [np.deg2rad(0.1)] * 3)
+    np.testing.assert_allclose(obs, obs_raw / level, rtol=1e-6)
+    assert obs.dtype == np.float32 and env.observation_space.contains(obs)
+    # the space's bounds in the same units: +-2 pi rad of error is +-360 nominal degrees
+    np.testing.assert_allclose(env.observation_space.high[:3], 360.0, rtol=1e-6)
+    action = np.array([0.2, -0.1, 0.05], dtype=np.float32)
+    step_raw, step = raw.step(action), env.step(action)
+    np.testing.assert_allclose(step[0], step_raw[0] / level, rtol=1e-6)
+    assert step[1] == step_raw[1]                              # the reward is untouched
+    assert pickle.loads(pickle.dumps(env)).scales.tolist() == env.scales.tolist()
+
+
+def test_nominal_units_refuse_an_observation_that_is_not_the_envs_own():
+    from controllers import PhysicalFeatures
+
+    with pytest.raises(ValueError, match="NominalUnits needs the environment's own"):
+        NominalUnits(PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2")))

@@ -477,3 +477,111 @@ def test_training_relative_to_the_base_records_it_and_the_base(tmp_path):
     assert run["env_steps"] == 4096 and len(run["curve"]) == 1
     assert np.isfinite(run["final"]["cost_after_100s"])
     assert np.isfinite(m["fixed_lqg"]["cost_after_100s"])
+
+
+def _short_paired_ars(seeds_seen: list | None = None, seed: int = 0):
+    """A paired ARS on 30-step docking episodes (attitude error and rate in nominal units),
+    its env recording the seed of every reset."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from spacecraft_env import NominalUnits
+    from spacecraft_lab.random_search import paired_ars
+
+    class Recording(gym.Wrapper):
+        def reset(self, *, seed=None, options=None):
+            if seeds_seen is not None:
+                seeds_seen.append(seed)
+            return self.env.reset(seed=seed, options=options)
+
+    def make():
+        return Recording(NominalUnits(gym.make(
+            env_id("docking"), task="slew", reward="cost", max_episode_steps=30,
+            outputs=("attitude_error", "rate"))))
+
+    venv = VecNormalize(DummyVecEnv([make]), norm_obs=False, norm_reward=False)
+    return paired_ars()("LinearPolicy", venv, n_delta=4, n_top=2, seed=seed)
+
+
+def test_paired_ars_flies_both_candidates_of_a_direction_on_the_same_episode():
+    th = pytest.importorskip("torch")
+    pytest.importorskip("sb3_contrib")
+    seeds: list = []
+    model = _short_paired_ars(seeds)
+    model.learn(1)                                  # one iteration: 2 x 4 candidates
+    # the first reset is learn's own (the model's seed); auto-resets at episode ends
+    # pass None
+    drawn = [s for s in seeds[1:] if s is not None]
+    assert len(drawn) == 8 and drawn[:4] == drawn[4:] and len(set(drawn[:4])) == 4
+    # identical + and - candidates on the same episode return the same: with each
+    # pair's mean removed, nothing is left
+    callback = model._init_callback(None)
+    same = th.stack([model.weights] * 8)
+    assert th.equal(model.evaluate_candidates(same, callback, None), th.zeros(8))
+    # distinct candidates: each pair's two returns are opposite
+    other = th.cat([same[:4] + 0.1, same[4:] - 0.1])
+    returns = model.evaluate_candidates(other, callback, None)
+    assert th.allclose(returns[:4], -returns[4:]) and returns.abs().max() > 0
+    with pytest.raises(ValueError, match="async_eval"):
+        model.learn(1, async_eval=object())
+
+
+def test_paired_ars_is_seeded_and_saves_its_linear_policy(tmp_path):
+    th = pytest.importorskip("torch")
+    pytest.importorskip("sb3_contrib")
+    from spacecraft_lab.training import algorithm_class
+
+    # (each built right before it learns: SB3 seeds torch's global generator, from
+    # which ARS draws its directions, when a model is built)
+    first = _short_paired_ars(seed=3).learn(1)
+    second = _short_paired_ars(seed=3).learn(1)
+    assert th.equal(first.weights, second.weights) and first.weights.abs().max() > 0
+    first.save(tmp_path / "ars.zip")
+    loaded = algorithm_class("ars").load(tmp_path / "ars.zip", device="cpu")
+    obs = np.array([[1.0, -2.0, 0.5, 3.0, 0.0, -1.0]], dtype=np.float32)
+    assert np.array_equal(loaded.predict(obs)[0], first.predict(obs)[0])
+    with pytest.raises(ValueError, match="algo must be one of"):
+        algorithm_class("dqn")
+
+
+def test_training_refuses_ars_on_several_envs(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    with pytest.raises(ValueError, match="ARS flies its candidates"):
+        run_training("ars", "attitude-error", 100, 1, tmp_path, envs=2, progress=False)
+
+
+@pytest.mark.slow        # ~15 s: one ARS iteration of 16 whole episodes
+def test_an_ars_agent_trains_saves_and_scores_as_recorded(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    from spacecraft_lab.agents import load_agent
+    from spacecraft_lab.training import _evaluate
+
+    m = run_training("ars", "attitude-error", 1, 1, tmp_path, scenario="docking",
+                     eval_every=10**9, progress=False, eval_seeds=(1000, 1001),
+                     reward="cost")
+    run = m["runs"][0]
+    # one whole iteration (16 episodes, some cut short by leaving the attitude bound)
+    # however few env steps are asked, and metrics.json says what was trained
+    assert 16 * 10 <= run["env_steps"] <= 16 * 2500
+    assert run["env_steps"] == m["timesteps"] and m["timesteps_requested"] == 1
+    assert m["hyperparameters"] == {}                     # sb3-contrib's defaults
+    policy, settings = load_agent(tmp_path / "ars-attitude-error-seed0.zip")
+    saved = _evaluate(policy, "docking", "attitude-error", settings["env_kwargs"], (1000, 1001))
+    assert saved["cost_after_100s_per_seed"] == run["final"]["cost_after_100s_per_seed"]
+
+
+def test_training_on_the_scored_window_wraps_the_env_and_refuses_a_bad_start(tmp_path):
+    from controllers import ScoredWindowReward
+    from spacecraft_lab.training import _monitored_env
+
+    env = _monitored_env("family", "attitude-error", {"task": "slew", "reward": "cost"}, 10,
+                         reward_from_s=100.0)
+    layer, found = env, None
+    while found is None and hasattr(layer, "env"):
+        found = layer if isinstance(layer, ScoredWindowReward) else None
+        layer = layer.env
+    assert found is not None and found.start_s == 100.0
+    plain = _monitored_env("family", "attitude-error", {"task": "slew", "reward": "cost"}, 10)
+    assert "ScoredWindowReward" not in repr(plain)
+    for bad in (-1.0, float("nan"), True):
+        with pytest.raises(ValueError, match="reward_from_s"):
+            run_training("ppo", "none", 100, 1, tmp_path, reward_from_s=bad, progress=False)
