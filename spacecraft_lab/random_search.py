@@ -21,9 +21,9 @@ the weights makes. :func:`paired_ars` returns ARS with common random numbers:
   is then that of the differences, not that of the episodes.
 
 Measured on the family with the attitude error and rate observed in nominal units,
-one decision a second (``docs/results/rl.md``): the paired search reached 3.5x the
-oracle LQG's median cost after 1.6M env steps where sb3-contrib's ARS with the same
-settings was at 9x.
+one decision a second (``python benchmarks/bench_ars.py``, ``docs/results/rl.md``): the
+paired search was at 3.8x the oracle LQG's median cost after 1.6M env steps where
+sb3-contrib's ARS with the same settings was at 12.6x.
 
 sb3-contrib is an optional dependency (the ``rl`` extra): it is imported when
 :func:`paired_ars` is called.

@@ -281,7 +281,7 @@ def load_training_metrics(directory: str | Path) -> dict[str, Any]:
 def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, Any]]:
     """The ``metrics.json`` of ``spacecraft train`` directories, one per setting.
 
-    Directories with equal algorithm, features, task, env steps, decision
+    Directories with equal algorithm, features, task, env steps asked, decision
     period and reward (its form, whether the base's was subtracted, and from when it
     counts) are one
     setting: their seeds' runs are pooled (seeds trained in separate processes
@@ -290,7 +290,10 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     settings: dict[tuple, dict[str, Any]] = {}
     for directory in directories:
         m = load_training_metrics(directory)
-        key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), m["timesteps"],
+        # the env steps asked: ARS trains whole iterations of episodes whose lengths
+        # differ, so seeds of one setting train slightly different numbers of steps
+        asked = m.get("timesteps_requested", m["timesteps"])
+        key = (m["algo"], m["features"], m["scenario"], m.get("randomize"), asked,
                m.get("repeat", 1), m.get("reward", "cost"), m.get("relative_to_base", False),
                m.get("reward_from_s", 0.0))
         if key in settings:

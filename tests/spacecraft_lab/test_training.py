@@ -213,6 +213,17 @@ def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
     assert ("| PPO | oracle | randomized docking, bounded reward | 1,000 | 1 | 0.0300 | 3.00 "
             "| 0.75 | 3.00 |") in table
     assert "| oracle LQG | - | - | - | - | 0.0100 | 1.00 | 0.25 |" in table
+    # ARS trains whole iterations of episodes of different lengths: seeds asked for the
+    # same env steps train slightly different numbers and are still one setting; a
+    # reward counted from another time is another setting
+    for name, trained, start in (("d", 1040, 100.0), ("e", 1070, 100.0), ("f", 1040, 0.0)):
+        (tmp_path / name).mkdir()
+        m = {**base, "algo": "ars", "timesteps": trained, "timesteps_requested": 1000,
+             "reward_from_s": start, "runs": [run(0, 3.0)]}
+        (tmp_path / name / "metrics.json").write_text(json.dumps(m))
+    pooled = pooled_training_runs([tmp_path / n for n in "def"])
+    assert [(m.get("reward_from_s"), len(m["runs"])) for m in pooled] == [(100.0, 2), (0.0, 1)]
+    assert "bounded reward from 100 s |" in rl_table([tmp_path / n for n in "def"])
 
 
 def test_evaluation_with_the_identifier_kept_starts_every_episode_with_a_model():
