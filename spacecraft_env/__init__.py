@@ -43,7 +43,7 @@ from spacecraft_env.scenarios import (
     SolarRotationScenario,
     make_scenario,
 )
-from spacecraft_env.wrappers import ActionRepeat, NominalUnits
+from spacecraft_env.wrappers import ActionRepeat, NominalUnits, ObservationAverage
 
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
@@ -66,6 +66,7 @@ __all__ = [
     "FlexibleSpacecraftModel",
     "Limit",
     "NominalUnits",
+    "ObservationAverage",
     "PaddleRotationScenario",
     "PlantDraw",
     "RewardWeights",

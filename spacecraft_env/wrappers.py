@@ -11,17 +11,21 @@ sample, such as an online identifier, still sees every sample.
 :class:`NominalUnits` gives an agent its observations in fixed units: each
 channel divided by its group's nominal level (1 deg, 0.1 deg/s, 1 cm), so a
 policy's weights keep their meaning while it learns, where a running
-normalization moves them.
+normalization moves them. :class:`ObservationAverage` gives it the mean of the
+last samples instead of the last one: an agent that decides once a second sees the
+second's measurements with their noise averaged down (the anti-aliasing filter of a
+sampled-data controller), not one noisy sample of them.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["ActionRepeat", "NominalUnits"]
+__all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage"]
 
 
 class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -109,3 +113,56 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def observation(self, observation: np.ndarray) -> np.ndarray:
         """``observation`` over the nominal levels (float32)."""
         return (np.asarray(observation, dtype=np.float64) / self.scales).astype(np.float32)
+
+
+class ObservationAverage(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Each observation the mean of the last ``window`` observations (a boxcar filter).
+
+    Averaging ``window`` samples divides the sensor noise's standard deviation by
+    ``sqrt(window)`` and delays the signal by ``(window - 1) / 2`` samples. Under
+    :class:`ActionRepeat` with ``repeat == window`` (put this wrapper inside it) an
+    agent sees, at each decision, the mean of the samples since its last one, as a
+    sampled-data controller sees its sensors through an anti-aliasing filter. The
+    average restarts at every reset (the first observations average the samples
+    since the reset).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An environment with a ``Box`` observation space.
+    window : int
+        Samples averaged, >= 1 (1: the observation unchanged).
+
+    Raises
+    ------
+    ValueError
+        If ``window`` is not an integer >= 1.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import spacecraft_env
+    >>> env = spacecraft_env.ObservationAverage(gym.make("FlexibleSpacecraft-v2"), 10)
+    >>> obs, _ = env.reset(seed=0)
+    >>> obs.shape, obs.dtype
+    ((10,), dtype('float32'))
+    """
+
+    def __init__(self, env: gym.Env, window: int = 10) -> None:
+        if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
+            raise ValueError(f"window must be an integer >= 1, got {window!r}")
+        gym.utils.RecordConstructorArgs.__init__(self, window=window)
+        gym.ObservationWrapper.__init__(self, env)
+        self.window = int(window)
+        self._recent: deque[np.ndarray] = deque(maxlen=self.window)
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        self._recent.clear()
+        return super().reset(seed=seed, options=options)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """The mean of this observation and the ``window - 1`` before it since the reset."""
+        self._recent.append(np.asarray(observation, dtype=np.float64))
+        mean = np.mean(self._recent, axis=0)
+        return mean.astype(self.observation_space.dtype)

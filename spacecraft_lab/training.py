@@ -87,7 +87,7 @@ from controllers import (
 )
 from controllers.lqg import INTEGRAL_SETTLE_S
 from spacecraft_conventions import single_threaded_blas
-from spacecraft_env import ActionRepeat, NominalUnits, env_id
+from spacecraft_env import ActionRepeat, NominalUnits, ObservationAverage, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 from spacecraft_lab.random_search import paired_ars
@@ -108,7 +108,7 @@ ALGORITHMS = ("ppo", "sac", "ars")
 POLICIES = {"ppo": "MlpPolicy", "sac": "MlpPolicy", "ars": "LinearPolicy"}
 #: What the agent gets on top of the env: observation features, or (residual-*) a
 #: controller whose action it corrects.
-FEATURES = ("none", "attitude-error", "identified", "identified-kept",
+FEATURES = ("none", "attitude-error", "attitude-error-averaged", "identified", "identified-kept",
             "identified-kept-no-state", "oracle", "physical", "privileged",
             "residual-adaptive", "residual-fixed",
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
@@ -189,7 +189,7 @@ RESIDUAL_HYPERPARAMETERS: dict[str, dict[str, Any]] = {
 #: observation through ``VecNormalize``'s running normalization. Its weights then keep
 #: their meaning while it learns (normalized torque per degree of attitude error, per
 #: 0.1 deg/s of rate).
-NOMINAL_UNITS_FEATURES = frozenset({"attitude-error"})
+NOMINAL_UNITS_FEATURES = frozenset({"attitude-error", "attitude-error-averaged"})
 
 
 def algorithm_class(algo: str) -> type:
@@ -285,10 +285,13 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
     trained on."""
-    if features == "attitude-error":
-        # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s)
-        return NominalUnits(gym.make(env_id(scenario), **env_kwargs,
-                                     outputs=("attitude_error", "rate")))
+    if features in ("attitude-error", "attitude-error-averaged"):
+        # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s);
+        # -averaged: each the mean of the last second's samples
+        env = gym.make(env_id(scenario), **env_kwargs, outputs=("attitude_error", "rate"))
+        if features == "attitude-error-averaged":
+            env = ObservationAverage(env, ACTION_REPEAT)
+        return NominalUnits(env)
     env = gym.make(env_id(scenario), **env_kwargs)
     if features in _IDENTIFIED:
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])

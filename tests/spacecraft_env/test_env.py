@@ -20,6 +20,7 @@ from spacecraft_env import (
     ActionRepeat,
     FlexibleSpacecraftEnv,
     NominalUnits,
+    ObservationAverage,
     RewardWeights,
 )
 
@@ -474,3 +475,32 @@ def test_nominal_units_refuse_an_observation_that_is_not_the_envs_own():
 
     with pytest.raises(ValueError, match="NominalUnits needs the environment's own"):
         NominalUnits(PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2")))
+
+
+def test_observation_average_is_the_mean_of_the_last_window_samples():
+    raw = gym.make("FlexibleSpacecraftDocking-v2", task="slew")
+    env = ObservationAverage(gym.make("FlexibleSpacecraftDocking-v2", task="slew"), 4)
+    for episode in range(2):                     # the average restarts at each reset
+        seen = [raw.reset(seed=episode)[0]]
+        obs, _ = env.reset(seed=episode)
+        np.testing.assert_allclose(obs, seen[0], rtol=1e-6)
+        action = np.array([0.1, -0.2, 0.05], dtype=np.float32)
+        for _ in range(6):
+            seen.append(raw.step(action)[0])
+            obs = env.step(action)[0]
+            np.testing.assert_allclose(obs, np.mean(seen[-4:], axis=0), rtol=1e-5, atol=1e-9)
+            assert obs.dtype == np.float32 and env.observation_space.contains(obs)
+    # the sensor noise's spread falls as sqrt(window): rate channels of a quiet plant
+    quiet = [ObservationAverage(gym.make("FlexibleSpacecraft-v2"), w) for w in (1, 16)]
+    spread = []
+    for env_w in quiet:
+        env_w.reset(seed=0)
+        rates = [env_w.step(np.zeros(3, dtype=np.float32))[0][3:6] for _ in range(400)]
+        spread.append(np.std(np.diff(np.array(rates[50:]), axis=0)))
+    assert spread[1] < spread[0] / 3
+
+
+@pytest.mark.parametrize("window", [0, -1, 1.5, True, "10"])
+def test_observation_average_rejects_a_bad_window(window):
+    with pytest.raises(ValueError, match="window must be an integer >= 1"):
+        ObservationAverage(gym.make("FlexibleSpacecraftDocking-v2"), window)
