@@ -20,7 +20,33 @@ import gymnasium as gym
 
 from controllers.harness import SCORED_FROM_S
 
-__all__ = ["ScoredWindowReward"]
+__all__ = ["ScoredWindowReward", "check_window_start"]
+
+
+def check_window_start(start_s: float, name: str = "start_s") -> float:
+    """Validate the start of a rewarded window: a finite time >= 0 s.
+
+    Parameters
+    ----------
+    start_s : float
+        Start of the window, s.
+    name : str
+        The argument's name in the error message.
+
+    Returns
+    -------
+    float
+        ``start_s`` as a float.
+
+    Raises
+    ------
+    ValueError
+        If ``start_s`` is not a finite number >= 0 (a bool is not a number here).
+    """
+    if isinstance(start_s, bool) or not isinstance(start_s, int | float) \
+            or not math.isfinite(start_s) or start_s < 0:
+        raise ValueError(f"{name} must be a finite time >= 0 s, got {start_s!r}")
+    return float(start_s)
 
 
 class ScoredWindowReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -60,12 +86,9 @@ class ScoredWindowReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, start_s: float = SCORED_FROM_S) -> None:
-        if isinstance(start_s, bool) or not isinstance(start_s, int | float) \
-                or not math.isfinite(start_s) or start_s < 0:
-            raise ValueError(f"start_s must be a finite time >= 0 s, got {start_s!r}")
+        self.start_s = check_window_start(start_s)
         gym.utils.RecordConstructorArgs.__init__(self, start_s=start_s)
         gym.Wrapper.__init__(self, env)
-        self.start_s = float(start_s)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """One env step; its reward if it ends in the window or leaves the bound, else 0."""

@@ -28,6 +28,13 @@ import numpy as np
 __all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage"]
 
 
+def _count(name: str, value: Any) -> int:
+    """``value`` as an int, if it is an integer >= 1 (not a bool); else ValueError."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
 class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Apply each action for ``repeat`` consecutive env steps.
 
@@ -46,11 +53,9 @@ class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, repeat: int = 10) -> None:
-        if isinstance(repeat, bool) or not isinstance(repeat, int | np.integer) or repeat < 1:
-            raise ValueError(f"repeat must be an integer >= 1, got {repeat!r}")
+        self.repeat = _count("repeat", repeat)
         gym.utils.RecordConstructorArgs.__init__(self, repeat=repeat)
         gym.Wrapper.__init__(self, env)
-        self.repeat = int(repeat)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         total, steps = 0.0, 0
@@ -149,11 +154,9 @@ class ObservationAverage(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
     """
 
     def __init__(self, env: gym.Env, window: int = 10) -> None:
-        if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
-            raise ValueError(f"window must be an integer >= 1, got {window!r}")
+        self.window = _count("window", window)
         gym.utils.RecordConstructorArgs.__init__(self, window=window)
         gym.ObservationWrapper.__init__(self, env)
-        self.window = int(window)
         self._recent: deque[np.ndarray] = deque(maxlen=self.window)
 
     def reset(self, *, seed: int | None = None,

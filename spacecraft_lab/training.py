@@ -86,6 +86,7 @@ from controllers import (
     set_integral_settle,
 )
 from controllers.lqg import INTEGRAL_SETTLE_S
+from controllers.rewards import check_window_start
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import ActionRepeat, NominalUnits, ObservationAverage, env_id
 from spacecraft_lab.control import SCENARIO_NAMES
@@ -285,7 +286,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
     trained on."""
-    if features in ("attitude-error", "attitude-error-averaged"):
+    if features in NOMINAL_UNITS_FEATURES:
         # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s);
         # -averaged: each the mean of the last second's samples
         env = gym.make(env_id(scenario), **env_kwargs, outputs=("attitude_error", "rate"))
@@ -518,11 +519,10 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    if algo not in ALGORITHMS:
-        raise ValueError(f"algo must be one of {ALGORITHMS}, got {algo!r}")
     if algo == "ars" and importlib.util.find_spec("sb3_contrib") is None:
         raise ImportError("--algo ars needs sb3-contrib (the 'rl' extra): `pip install -c "
                           "constraints.txt -e \".[rl]\"`")
+    algorithm = algorithm_class(algo)          # refuses an unknown name
     if features not in FEATURES:
         raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
     if scenario not in SCENARIO_NAMES:
@@ -542,9 +542,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     if relative_to_base and not residual:
         raise ValueError(f"relative_to_base needs a residual setting (features residual-*), "
                          f"whose zero action flies a base; got features {features!r}")
-    if isinstance(reward_from_s, bool) or not isinstance(reward_from_s, int | float) \
-            or not (np.isfinite(reward_from_s) and reward_from_s >= 0):
-        raise ValueError(f"reward_from_s must be a finite time >= 0 s, got {reward_from_s!r}")
+    reward_from_s = check_window_start(reward_from_s, "reward_from_s")
     if repeat is None:
         repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
     hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
@@ -572,7 +570,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         torch_threads = torch.get_num_threads()
         for seed in range(first_seed, first_seed + seeds):
             factory = partial(_monitored_env, scenario, features, env_kwargs, repeat,
-                              bool(relative_to_base), float(reward_from_s))
+                              bool(relative_to_base), reward_from_s)
             vec = (DummyVecEnv([factory]) if envs == 1
                    else SubprocVecEnv([factory] * envs, start_method="forkserver"))
             # ARS compares whole returns within an iteration: no running reward scale;
@@ -581,8 +579,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                                                    and features in NOMINAL_UNITS_FEATURES),
                                 norm_reward=algo != "ars", clip_obs=10.0)
             venv.seed(seed)
-            model = algorithm_class(algo)(POLICIES[algo], venv, seed=seed, verbose=0,
-                                          tensorboard_log=tensorboard, **hyper)
+            model = algorithm(POLICIES[algo], venv, seed=seed, verbose=0,
+                              tensorboard_log=tensorboard, **hyper)
             if tensorboard is None:
                 # SB3's default logger makes an empty /tmp/SB3-<date> folder per model
                 model.set_logger(Logger(folder=None, output_formats=[]))
@@ -630,7 +628,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     metrics = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "relative_to_base": bool(relative_to_base),
-        "reward_from_s": float(reward_from_s),
+        "reward_from_s": reward_from_s,
         "hyperparameters": hyper, "envs": envs,
         "residual_scale": RESIDUAL_SCALE if residual else None,
         # the comparator that is the residual's base (a fresh residual flies it exactly)
