@@ -215,6 +215,22 @@ def test_d3_a_non_finite_state_is_rolled_back_at_once(multisine, name):
     assert np.all(np.isfinite(ident.state)) and np.all(np.isfinite(ident.model.A))
 
 
+def test_d3_a_rollback_restores_the_last_good_copy_each_time(multisine):
+    u, y, _ = multisine
+    ident = _warm(IDENTIFIERS["default"], multisine)          # checked and copied at 700
+    gains = [rls.theta.copy() for _, _, rls in ident._fits]
+    first_sample = ident._history[0]
+    for k in (700, 701):                               # twice to the same copy
+        ident._kf.x[:] = np.nan
+        ident.update(u[k], y[k])
+        assert [np.array_equal(rls.theta, g) for (_, _, rls), g in
+                zip(ident._fits, gains, strict=True)] == [True] * len(gains)
+    assert ident.health.rollbacks == 2 and ident.health.last_good_sample == 700
+    # the kept record is a new container of the same (never changed) samples
+    assert ident._history[0] is first_sample and ident._history is not ident._good[1][1]["_history"]
+    assert np.all(np.isfinite(ident.state))
+
+
 @pytest.mark.parametrize("name", ["classical", "moment-refit", "predictor"])
 def test_d3_a_non_finite_estimate_is_rolled_back(multisine, name):
     u, y, _ = multisine

@@ -92,6 +92,8 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
     _SIGNAL_STATE: ClassVar[tuple[str, ...]] = ("_phi",)
     #: Attributes whose items are never changed in place (lists of sample
     #: tuples): the rollback copy shares their items instead of copying them.
+    #: Each must be referenced only from its own attribute (see
+    #: :meth:`~identifiers.core.rollback.HealthGuard._snapshot`).
     _SHARED_ITEMS: ClassVar[tuple[str, ...]] = ("_pending",)
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,

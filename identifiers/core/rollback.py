@@ -12,6 +12,7 @@ faults repeat; its report is :attr:`HealthGuard.health`
 from __future__ import annotations
 
 import copy
+import pickle
 from collections import deque
 from typing import Any
 
@@ -51,7 +52,8 @@ class HealthGuard:
         self._warned_faults: set[tuple[str, int | None]] = set()
         self._last_fault: str | None = None
         self._fault_samples: deque[int] = deque(maxlen=MAX_ROLLBACKS + 1)
-        self._good: tuple[int, dict] | None = None     # (n_samples, copy of the state)
+        # (n_samples, the state's copy from _snapshot)
+        self._good: tuple[int, tuple[bytes, dict[str, Any]]] | None = None
         self._healthy = True
         self._warned = False
 
@@ -67,15 +69,29 @@ class HealthGuard:
         state = self._current_state() if mats is not None else None
         return state_problem(self, mats, state)
 
-    def _snapshot(self) -> dict:
-        """A deep copy of the estimator state (items of :attr:`_SHARED_ITEMS` shared)."""
-        state = {k: v for k, v in vars(self).items() if k not in KEPT_ON_ROLLBACK}
-        memo: dict[int, Any] = {}
-        for key in self._SHARED_ITEMS:
-            value = state.get(key)
-            if value is not None:
-                memo[id(value)] = copy.copy(value)
-        return copy.deepcopy(state, memo)
+    def _snapshot(self) -> tuple[bytes, dict[str, Any]]:
+        """A copy of the estimator state: every attribute but :data:`KEPT_ON_ROLLBACK`,
+        pickled, and the containers of :attr:`_SHARED_ITEMS` copied shallowly (their
+        items are never changed in place, so the copy shares them).
+
+        Pickling the state costs about a quarter of a deep copy of it (0.5 against
+        2 ms for the default identifier), and the snapshot is taken every
+        :data:`~identifiers.core.health.HEALTH_EVERY` samples while it is read only at
+        a rollback. The shared containers must be top-level attributes referenced
+        nowhere else in the state (a reference elsewhere would be restored as a
+        copy of its own)."""
+        state = {k: v for k, v in vars(self).items()
+                 if k not in KEPT_ON_ROLLBACK and k not in self._SHARED_ITEMS}
+        shared = {k: copy.copy(v) for k, v in vars(self).items() if k in self._SHARED_ITEMS}
+        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), shared
+
+    def _restored(self) -> dict[str, Any]:
+        """The state of the last good snapshot, as new objects (the snapshot stays
+        as it was, for a later rollback to the same point)."""
+        blob, shared = self._good[1]
+        state = pickle.loads(blob)
+        state.update({k: copy.copy(v) for k, v in shared.items()})
+        return state
 
     def _check_health(self) -> None:
         """Check the internal state; keep a copy if it is good, roll back if it is not.
@@ -100,10 +116,7 @@ class HealthGuard:
             kept = {k: v for k, v in vars(self).items()
                     if k in KEPT_ON_ROLLBACK or (k in self._SIGNAL_STATE and (
                         not isinstance(v, np.ndarray) or np.all(np.isfinite(v))))}
-            restored = copy.deepcopy(self._good[1], {id(v): copy.copy(v) for k, v in
-                                                     self._good[1].items()
-                                                     if k in self._SHARED_ITEMS})
-            vars(self).update(restored)
+            vars(self).update(self._restored())
             vars(self).update(kept)
             self.n_rollbacks += 1
             self._quiet = max(self._quiet, self.p + 1)

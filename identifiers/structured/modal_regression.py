@@ -6,8 +6,9 @@ end of the warm-up and again with a back-off
 (:func:`~identifiers.structured.modal_discovery.discover_resonators`),
 rebuilds the estimator on them (filter bank, one RLS per sensor group over
 the regressors that group may see, the modal tracker) and replays the
-record, and refines the modes between searches by one variable-projection
-step of the :class:`~identifiers.structured.modal_tracker.ModalTracker`.
+record (:class:`~identifiers.structured.record_replay.RecordReplay`), and
+refines the modes between searches by one variable-projection step of the
+:class:`~identifiers.structured.modal_tracker.ModalTracker`.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
 from identifiers.structured.modal_basis import Resonator
 from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
 from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
+from identifiers.structured.record_replay import RecordReplay
 from spacecraft_conventions import MEASURES
 
 __all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE", "REPLAY",
@@ -78,7 +80,7 @@ def _same_modes(a: Sequence[Resonator], b: Sequence[Resonator],
                for x, y in zip(a, b, strict=True))
 
 
-class ModalRegression:
+class ModalRegression(RecordReplay):
     """Mixin of :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
     the modes (search, rebuild, tracking), the sensor groups' regressions and
     their reaction to a detected change."""
@@ -190,34 +192,10 @@ class ModalRegression:
             dphis = self._hp_dq.run(raw_dq).reshape(-1, n_res, 2, 3, 2) / flex
             dfrees = self._hp_dfree.run(raw_dfree).reshape(-1, n_res, 2, 2) / free
         flags = np.array([learn and real for _, _, learn, real in samples], dtype=bool)
+        sensitivities = None if dphis is None else (dphis, dfrees)
         self._replay_learning(phis[:tail], y_fs[:tail], flags[:tail],
                               None if dphis is None else (dphis[:tail], dfrees[:tail]))
-        for j in range(tail, len(samples)):
-            uk, yk, learn, real = samples[j]
-            sensitivity = None if dphis is None else (dphis[j], dfrees[j])
-            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=True,
-                         signals=(phis[j], y_fs[j], sensitivity))
-
-    def _replay_learning(self, phis: np.ndarray, y_fs: np.ndarray, use: np.ndarray,
-                         sensitivities: tuple[np.ndarray, np.ndarray] | None) -> None:
-        """What :meth:`_sample` does with replayed samples before the filter's tail (the
-        gains' regressions, the error and signal levels, the modal tracker's moments),
-        in batch: each group's RLS runs its rows in one compiled loop, a row reaching a
-        group only if every group before it accepted it, as in :meth:`_learn`; the
-        results are those of the sample-by-sample replay, bit for bit (test)."""
-        ok = use.copy()
-        errs = np.empty((len(use), self.n_outputs))
-        for rows, cols, rls in self._fits:
-            errs[:, rows], accepted = rls.update_many(phis[:, cols], y_fs[:, rows], use=ok)
-            ok &= accepted
-        for j in np.flatnonzero(ok):
-            self._track_levels(errs[j], y_fs[j])
-        if ok.any() and self._last_innovation is None:          # before the filter runs
-            self._r = np.maximum(self._resvar / self._noise_gain, 1e-12)
-        if self._tracker is not None and sensitivities is not None:
-            for j in np.flatnonzero(use):
-                self._tracker.update(phis[j], sensitivities[0][j], sensitivities[1][j],
-                                     y_fs[j])
+        self._replay_tail(samples, tail, start_k, phis, y_fs, flags, sensitivities)
 
     def _track_levels(self, err: np.ndarray, y_f: np.ndarray) -> None:
         """One sample's step of the running mean squares of the gains' a-priori errors

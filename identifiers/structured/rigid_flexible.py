@@ -335,13 +335,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         else:
             phi, y_f, sensitivity = signals
         if filtering and self._mats is not None:
-            a, b, c, _, _ = self._mats
-            # the outputs that were measured (all of them, or those a skipped sample kept)
-            y_kf = y if real else (None if seen is None else np.where(seen, y, np.nan))
-            self._kf.update(a, b, c, self._process_noise(), self._r, u, y_kf)
-            innovation = self._kf.innovation
-            if real and innovation is not None and np.isfinite(innovation).all():
-                self._measurement_noise(innovation)
+            self._filter_step(u, y, real, seen)
         if learn and real:
             err = self._learn(phi, y_f)
             if (err is not None and self.detect_changes and replay_k is None

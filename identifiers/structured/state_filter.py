@@ -119,6 +119,18 @@ class StateFilter(ModelFilter):
         self._real = True           # learned from after all: the filter uses it too
         self._seen = np.ones(self.n_outputs, dtype=bool)
 
+    def _filter_step(self, u: np.ndarray, y: np.ndarray, real: bool,
+                     seen: np.ndarray | None) -> None:
+        """One step of the Kalman filter on the current model, and the sensor noise
+        from its innovation. A sample that is not ``real`` gives the filter the outputs
+        ``seen`` marks (none if ``seen`` is None): the others are stand-ins."""
+        a, b, c, _, _ = self._mats
+        y_kf = y if real else (None if seen is None else np.where(seen, y, np.nan))
+        self._kf.update(a, b, c, self._process_noise(), self._r, u, y_kf)
+        innovation = self._kf.innovation
+        if real and innovation is not None and np.isfinite(innovation).all():
+            self._measurement_noise(innovation)
+
     def _measurement_noise(self, innovation: np.ndarray) -> None:
         """Sensor noise variance from the filter's innovations: white noise shows in
         their first difference (``E[(e_k - e_{k-1})^2] / 2 = R`` for white ``e``),

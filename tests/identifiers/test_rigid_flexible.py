@@ -73,7 +73,8 @@ def test_fit_equals_the_update_loop_and_pickles_mid_run(constant_record):
 
 def test_the_batch_replay_equals_the_sample_by_sample_replay(constant_record, monkeypatch):
     # a rebuild replays its record's head in batch (each group's RLS in one compiled
-    # loop); through _sample, one sample at a time, every number is the same
+    # loop) and its tail in stretches between exports (the filter, then the learning
+    # in batch); through _sample, one sample at a time, every number is the same
     _, u, _, y = constant_record
     u, y = u[:700], y[:700]                 # the warm-up's rebuild and 200 live samples
     batch = default_identifier()
@@ -85,7 +86,16 @@ def test_the_batch_replay_equals_the_sample_by_sample_replay(constant_record, mo
             self._sample(None, None, bool(use[j]), True, replay_k=0, filtering=False,
                          signals=(phis[j], y_fs[j], sens))
 
+    def tail_one_by_one(self, samples, first, start_k, phis, y_fs, use, sensitivities):
+        for j in range(first, len(samples)):
+            uk, yk, learn, real = samples[j]
+            sens = None if sensitivities is None else (sensitivities[0][j],
+                                                       sensitivities[1][j])
+            self._sample(uk, yk, learn, real, replay_k=start_k + j, filtering=True,
+                         signals=(phis[j], y_fs[j], sens))
+
     monkeypatch.setattr(RigidFlexibleIdentifier, "_replay_learning", one_by_one)
+    monkeypatch.setattr(RigidFlexibleIdentifier, "_replay_tail", tail_one_by_one)
     loop = default_identifier()
     loop_seq = loop.fit(u, y)
     np.testing.assert_array_equal(batch_seq.A[-1], loop_seq.A[-1])
