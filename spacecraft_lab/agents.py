@@ -56,6 +56,8 @@ AGENT_DIRECTORY = Path(__file__).resolve().parent.parent / "agents"
 SHIPPED_AGENTS = {
     "residual-scheduled-family":
         AGENT_DIRECTORY / "residual-scheduled-family" / "ppo-residual-scheduled-seed0.zip",
+    "ars-averaged-family":
+        AGENT_DIRECTORY / "ars-averaged-family" / "ars-attitude-error-averaged-seed1.zip",
 }
 #: Training settings an agent's ``metrics.json`` must hold.
 _SETTINGS = ("algo", "features", "scenario", "randomize", "reward", "repeat")
