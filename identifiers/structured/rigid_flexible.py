@@ -110,7 +110,10 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         noise variance (unit-RMS regressors): how fast each may change (see
         :class:`~identifiers.core.rls.RecursiveLeastSquares`, ``drift``). The rigid
         gains change at once at a docking and through the paddles' geometry;
-        the couplings change slowly with the mode shapes.
+        the couplings turn with the paddles. Default couplings' drift 1e-4
+        (1e-7 until 2026-11-29, which held them fixed while the paddles turned:
+        on paddle rotation the 10 s deflection VAF fell as the data got cleaner;
+        ``docs/results/identification.md``).
     warmup : int
         Samples collected before the modes are found and a model is given
         (default 500: 50 s at dt = 0.1 s).
@@ -180,7 +183,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
     _SHARED_ITEMS = ("_pending", "_buffer", "_history")
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
-                 dt: float = 0.1, rigid_drift: float = 3e-5, coupling_drift: float = 1e-7,
+                 dt: float = 0.1, rigid_drift: float = 3e-5, coupling_drift: float = 1e-4,
                  initial_drift: float = 1e-5, warmup: int = 500,
                  prior: Sequence[Resonator] | None = None, highpass: float = 0.97,
                  detect_changes: bool = True, change_threshold: float = 6.0,
