@@ -17,9 +17,11 @@ condition, printed side by side, median [worst] over seeds:
   share of samples whose truth lies in the identifier's reported 2-sigma (95.45 %) confidence
   region, pooled over seeds (mean of the seeds' shares).
 
-Usage: ``python benchmarks/bench_tracking.py [--seeds 3] [--scenarios ...]
-[--conditions 40:1 none:1 ...] [--json out.json]`` (a condition is
-``SNR:RMS``, SNR in dB of the env's nominal levels or ``none``, RMS in N m).
+Usage: ``python benchmarks/bench_tracking.py [--seeds 3] [--first-seed 0]
+[--scenarios ...] [--conditions 40:1 none:1 ...] [--coupling-drift D] [--json out.json]``
+(a condition is ``SNR:RMS``, SNR in dB of the env's nominal levels or ``none``, RMS in
+N m; ``--coupling-drift`` overrides the default identifier's modal couplings' random
+walk, for the ablation in docs/results/identification.md).
 """
 
 from __future__ import annotations
@@ -93,16 +95,18 @@ def _vaf(pred: np.ndarray, y_clean: np.ndarray, start: int) -> list[float]:
     return [float(np.mean(v[STANDARD_OUTPUTS.indices(g)])) for g in GROUPS]
 
 
-def score(scenario: str, seed: int, snr_db: float | None, rms: float) -> dict:
+def score(scenario: str, seed: int, snr_db: float | None, rms: float,
+          **options) -> dict:
+    """One record's figures; ``options`` go to :func:`identifiers.default_identifier`."""
     u, y, y_clean, model = env_record(scenario, seed, snr_db, rms)
     dt = model.dt
     start = round(150.0 / dt)
-    ident = default_identifier()
+    ident = default_identifier(**options)
     tic = time.perf_counter()
     seq = ident.fit(u, y)
     seconds = time.perf_counter() - tic
     # the identifier's rigid gain and band every 1 s (fit() keeps models, not bands)
-    replay = default_identifier()
+    replay = default_identifier(**options)
     bands = {}
     for k in range(len(u)):
         replay.update(u[k], y[k])
@@ -146,15 +150,20 @@ def _cell(values: list[float], worst: str) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--coupling-drift", type=float, default=None)
     parser.add_argument("--scenarios", nargs="+", default=list(TRACKED))
     parser.add_argument("--conditions", nargs="+",
                         default=["20:1", "40:1", "60:1", "none:1", "40:0.1"])
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
+    options = {} if args.coupling_drift is None else {"coupling_drift": args.coupling_drift}
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
     out = {}
     print("10 s-ahead VAF (%) attitude / rate / deflection from 150 s, median [worst] over "
-          f"{args.seeds} seeds; mode and gain errors (%) over the tracking windows")
-    header = (f"{'scenario':<16}{'SNR dB':>7}{'N m':>5}  {'persistence':<20}"
+          f"{args.seeds} seeds ({seeds.start}-{seeds.stop - 1}); mode and gain errors (%) over "
+          f"the tracking windows{'; identifier options ' + str(options) if options else ''}")
+    header = (f"{'scenario':<16}{'SNR dB':>7}{'N m':>5}  {'persistence':<22}"
               f"{'frozen before change':<22}{'identifier':<22}{'mode err':>15}"
               f"{'frozen':>8}{'gain err':>15}{'2-sigma':>8}{'s/run':>7}")
     print(header)
@@ -163,14 +172,14 @@ def main() -> None:
             for cond in args.conditions:
                 snr_text, rms_text = cond.split(":")
                 snr = None if snr_text == "none" else float(snr_text)
-                runs = [score(scenario, seed, snr, float(rms_text))
-                        for seed in range(args.seeds)]
+                runs = [score(scenario, seed, snr, float(rms_text), **options)
+                        for seed in seeds]
                 out[f"{scenario} {cond}"] = runs
                 vaf = {row: " / ".join(f"{np.median([r['vaf'][row][g] for r in runs]):.1f}"
                                        for g in range(3))
                        for row in ("persistence", "frozen", "identifier")}
-                print(f"{scenario:<16}{snr_text:>7}{rms_text:>5}  {vaf['persistence']:<20}"
-                      f"{vaf['frozen']:<22}{vaf['identifier']:<22}"
+                print(f"{scenario:<16}{snr_text:>7}{rms_text:>5}  {vaf['persistence']:<21} "
+                      f"{vaf['frozen']:<21} {vaf['identifier']:<22}"
                       f"{_cell([r['mode_error_pct'] for r in runs], 'max'):>15}"
                       f"{np.median([r['frozen_mode_error_pct'] for r in runs]):>8.2f}"
                       f"{_cell([r['gain_error_pct'] for r in runs], 'max'):>15}"
