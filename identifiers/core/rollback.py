@@ -85,10 +85,11 @@ class HealthGuard:
         shared = {k: copy.copy(v) for k, v in vars(self).items() if k in self._SHARED_ITEMS}
         return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL), shared
 
-    def _restored(self) -> dict[str, Any]:
-        """The state of the last good snapshot, as new objects (the snapshot stays
-        as it was, for a later rollback to the same point)."""
-        blob, shared = self._good[1]
+    def _restored(self, snapshot: tuple[bytes, dict[str, Any]] | None = None
+                  ) -> dict[str, Any]:
+        """The state of ``snapshot`` (default: the last good one), as new objects (the
+        snapshot stays as it was, for a later rollback to the same point)."""
+        blob, shared = self._good[1] if snapshot is None else snapshot
         state = pickle.loads(blob)
         state.update({k: copy.copy(v) for k, v in shared.items()})
         return state

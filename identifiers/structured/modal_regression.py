@@ -246,8 +246,10 @@ class ModalRegression(RecordReplay):
         found = self._find_resonators()
         if _same_modes(found, self.resonators, REBUILD_TOLERANCE):
             return
-        self.n_rediscoveries += 1
-        self._rebuild(found, min(len(self._history), REPLAY))
+        if self._try_modes(found, min(len(self._history), REPLAY)):
+            self.n_rediscoveries += 1
+        else:
+            self.n_searches_rejected += 1
 
     @property
     def _modal_scales(self) -> tuple[np.ndarray, np.ndarray]:

@@ -174,7 +174,10 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
     events : list of ChangeEvent
         Changes detected so far.
     n_rediscoveries : int
-        Times a search found other modes and the estimator was rebuilt.
+        Times a search found other modes and the estimator was rebuilt on them.
+    n_searches_rejected : int
+        Times a search found other modes whose model predicted the last 50 s
+        10 s ahead worse than the model in use (the rebuild on them was undone).
     """
 
     # the filter bank and high-passes run on the signals (kept current by a rollback);
@@ -253,6 +256,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         self._search_interval = self.rediscover or 0
         self._tracker: ModalTracker | None = None
         self.n_rediscoveries = 0
+        self.n_searches_rejected = 0
         self._mats = None
         self._torque_noise: tuple = (None, None, None)
         self._phases: dict[tuple[int, int], np.ndarray] = {}

@@ -20,6 +20,7 @@ from identifiers import (
     rigid_body_gain,
     unstable_share,
 )
+from identifiers.structured.record_replay import horizon_error
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_env import FlexibleSpacecraftModel
 from spacecraft_lab.identification import identification_records
@@ -276,6 +277,60 @@ def test_a_prior_off_by_five_to_ten_percent_still_predicts_well(error):
     vaf = prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
     assert vaf[STANDARD_OUTPUTS.slice("attitude")].mean() > 99.0
     assert vaf[RATE].mean() > 99.0
+
+
+def test_horizon_error_is_zero_for_the_true_model_and_grows_with_a_wrong_one():
+    """The search's judge: noise-free data of an oscillator are predicted 10 steps
+    ahead exactly by its own model, and not by one 5 % off in frequency."""
+    def oscillator(f_hz):
+        w = 2 * np.pi * f_hz * 0.1
+        a = 0.999 * np.array([[np.cos(w), np.sin(w)], [-np.sin(w), np.cos(w)]])
+        return a, np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), np.array([[1.0, 0.0]])
+
+    a, b, c = oscillator(0.2)
+    u = np.random.default_rng(0).standard_normal((600, 3))
+    x, y = np.zeros(2), np.empty((600, 1))
+    for k in range(600):
+        y[k] = c @ x
+        x = a @ x + b @ u[k]
+    q, r = 1e-6 * np.eye(2), np.full(1, 1e-8)
+    mats = (a, b, c, np.zeros((1, 3)))
+    assert horizon_error(mats, q, r, u, y, first=300, horizon=10) < 1e-10
+    wrong = oscillator(0.21)
+    error = horizon_error((*wrong, np.zeros((1, 3))), q, r, u, y, first=300, horizon=10)
+    assert error > 1e-2
+    assert horizon_error(mats, q, r, u, y, first=600) == np.inf        # no starting point
+
+
+def test_a_search_that_predicts_worse_is_undone_exactly():
+    """Modes a search proposes replace the tracked ones only if they predict the
+    last 50 s better; a rejected rebuild leaves no trace: the identifier goes on
+    exactly as one whose search found nothing new."""
+    _, u, _, y = _spacecraft("constant", 0, n_samples=1300)
+    found = []
+
+    def proposing(wrong):
+        def find(self):
+            if self._bank is None:                           # the warm-up's search
+                return original(self)
+            found.append(wrong)
+            return [Resonator(0.5, 0.01)] if wrong else list(self.resonators)
+        return find
+
+    original = RigidFlexibleIdentifier._find_resonators
+    idents = {}
+    for wrong in (False, True):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(RigidFlexibleIdentifier, "_find_resonators", proposing(wrong))
+            ident = default_identifier()
+            idents[wrong] = (ident, ident.fit(u, y))
+    (kept, kept_seq), (undone, undone_seq) = idents[False], idents[True]
+    assert found == [False, True]                     # one search each, at sample 1000
+    assert (undone.n_searches_rejected, undone.n_rediscoveries) == (1, 0)
+    assert kept.n_searches_rejected == 0
+    assert undone.resonators == kept.resonators
+    np.testing.assert_array_equal(undone_seq.A, kept_seq.A)
+    np.testing.assert_array_equal(undone_seq.states, kept_seq.states)
 
 
 def test_modes_are_searched_again_and_move_toward_the_truth():
