@@ -11,20 +11,19 @@ model exports. The results are those of feeding every sample through
 in turn, bit for bit (tests).
 
 A search's modes are a candidate, not a verdict (:meth:`RecordReplay._try_modes`):
-the rebuild on them is kept only if its model predicts the last
-:data:`SEARCH_WINDOW` samples :data:`SEARCH_HORIZON` ahead better than the
-model in use. A search over a record in which the modes moved (turning
-paddles) can find fewer or averaged modes, which the tracker has already
-left behind.
+the rebuild on them is undone if its model predicts the last
+:data:`SEARCH_WINDOW` samples :data:`SEARCH_HORIZON` ahead clearly worse than
+the model in use (beyond the spread of the difference: the search has seen
+more data than the window, so the benefit of the doubt is its). A search
+over a record in which the modes moved (turning paddles) can find fewer or
+averaged modes, which the tracker has already left behind.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from identifiers.core.kalman import KalmanPredictor
-
-__all__ = ["SEARCH_HORIZON", "SEARCH_WINDOW", "RecordReplay"]
+__all__ = ["SEARCH_HORIZON", "SEARCH_WINDOW", "RecordReplay", "clearly_worse", "horizon_errors"]
 
 #: Samples at the end of the record (50 s at dt = 0.1 s) on which a search's
 #: modes and the modes in use are compared.
@@ -33,57 +32,82 @@ SEARCH_WINDOW = 500
 #: spacing of its starting points.
 SEARCH_HORIZON = 100
 _SEARCH_SPACING = 10
-#: Samples the comparison's Kalman filter runs before the window, to settle.
+#: Samples the comparison's predictors run before the window, to settle.
 _SEARCH_SETTLE = 300
 
 
-def horizon_error(mats: tuple[np.ndarray, ...], process_noise: np.ndarray,
-                  noise: np.ndarray, u: np.ndarray, y: np.ndarray, first: int,
-                  horizon: int = SEARCH_HORIZON, spacing: int = _SEARCH_SPACING) -> float:
-    """Mean squared ``horizon``-step prediction error of a model on a record.
+def horizon_errors(mats: tuple[np.ndarray, ...], u: np.ndarray, y: np.ndarray, first: int,
+                   horizon: int = SEARCH_HORIZON, spacing: int = _SEARCH_SPACING) -> np.ndarray:
+    """Squared ``horizon``-step prediction errors of a model in innovation form.
 
-    A Kalman filter on the model (``A, B, C, D``; process and sensor noise
-    covariances ``process_noise`` and ``diag(noise)``) runs over ``u, y`` from
-    zero; from every ``spacing``-th sample from ``first`` on, its state is
-    propagated ``horizon`` steps on the inputs alone and compared with ``y``.
-    Each output's squared error is divided by its variance over the predicted
-    samples (the sum is ``m (1 - VAF)`` for a model that is as good on every
-    output).
+    The model's predictor (``x_{k+1} = A x_k + B u_k + K (y_k - C x_k - D u_k)``
+    from ``x_0 = 0``) runs over ``u, y``; from every ``spacing``-th sample from
+    ``first`` on, its state is propagated ``horizon`` steps on the inputs alone
+    and compared with ``y``. Each output's squared error is divided by that
+    output's variance over the predicted samples and summed over the outputs
+    (``m (1 - VAF)`` on average for a model that is as good on every output).
 
     Parameters
     ----------
-    u : (N, 3) ndarray
+    mats : tuple of ndarray
+        ``(A, B, C, D, K)``: ``(n, n)``, ``(n, r)``, ``(m, n)``, ``(m, r)``, ``(n, m)``.
+    u : (N, r) ndarray
     y : (N, m) ndarray
     first : int
         First starting point; starting points stop ``horizon`` before the end.
+    horizon, spacing : int
+        Prediction horizon and spacing of the starting points, samples.
 
     Returns
     -------
-    float
-        The mean over starting points of the weighted squared error (inf if the
-        predictions are not finite or there is no starting point).
+    (S,) ndarray
+        The weighted squared error from each starting point (inf where the
+        prediction is not finite; empty if there is no starting point).
     """
-    a, b, c, d = mats[:4]
-    kf = KalmanPredictor(a.shape[0], initial_covariance=1.0)
-    starts, states = [], []
-    for k in range(len(u) - horizon):
-        if k >= first and (k - first) % spacing == 0:
-            starts.append(k)
-            states.append(kf.x.copy())
-        kf.update(a, b, c, process_noise, noise, u[k], y[k])
-    if not starts:
-        return np.inf
-    x = np.array(states).T                              # (n, starts)
-    starts = np.array(starts)
-    for h in range(horizon):
-        x = a @ x + b @ u[starts + h].T
-    predicted = c @ x + d @ u[starts + horizon].T
-    actual = y[starts + horizon].T
-    variance = np.var(actual, axis=1)
+    a, b, c, d, k_gain = mats
+    starts = np.arange(first, len(u) - horizon, spacing)
+    if starts.size == 0:
+        return np.zeros(0)
+    a_closed, drive = a - k_gain @ c, u @ (b - k_gain @ d).T + y @ k_gain.T
+    x, states = np.zeros(a.shape[0]), np.empty((starts[-1] + 1, a.shape[0]))
     with np.errstate(invalid="ignore", over="ignore"):
-        error = ((predicted - actual) ** 2).sum(axis=1) / np.where(variance > 0, variance, 1.0)
-    total = float(error.sum() / len(starts))
-    return total if np.isfinite(total) else np.inf
+        for k in range(starts[-1] + 1):
+            states[k] = x
+            x = a_closed @ x + drive[k]
+        x = states[starts].T                                # (n, starts)
+        for h in range(horizon):
+            x = a @ x + b @ u[starts + h].T
+        predicted = c @ x + d @ u[starts + horizon].T
+        actual = y[starts + horizon].T
+        variance = np.var(actual, axis=1)
+        error = ((predicted - actual) ** 2 / np.where(variance > 0, variance, 1.0)[:, None]
+                 ).sum(axis=0)
+    return np.where(np.isfinite(error), error, np.inf)
+
+
+def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
+                  block: int = SEARCH_HORIZON // _SEARCH_SPACING) -> bool:
+    """Whether the errors ``candidate`` exceed ``in_use`` (paired, per starting point)
+    beyond their spread.
+
+    The paired differences are averaged over consecutive blocks of ``block``
+    starting points (one horizon: predictions of different blocks do not
+    overlap); the candidate is worse if the mean of the block means exceeds
+    twice its standard error (with fewer than two blocks: if its mean is
+    larger). A candidate that is not finite where the model in use is, is
+    worse; none is worse than a model in use that is finite nowhere.
+    """
+    finite = np.isfinite(in_use)
+    if not finite.any():
+        return False
+    if not np.isfinite(candidate[finite]).all():
+        return True
+    diff = np.where(finite, candidate - np.where(finite, in_use, 0.0), 0.0)
+    n_blocks = len(diff) // block
+    if n_blocks < 2:
+        return bool(diff.mean() > 0.0)
+    means = diff[:n_blocks * block].reshape(n_blocks, block).mean(axis=1)
+    return bool(means.mean() > 2.0 * means.std(ddof=1) / np.sqrt(n_blocks))
 
 
 class RecordReplay:
@@ -94,24 +118,24 @@ class RecordReplay:
     group), ``_tracker``, ``_track_levels``, ``_sample``, ``_filter_step``,
     ``_export``, ``_mats``, ``_last_innovation``, ``refresh`` and the noise
     levels ``_r``, ``_resvar`` and ``_noise_gain``; for :meth:`_try_modes` also
-    ``_history``, ``_rebuild``, ``_process_noise``, ``_snapshot`` and ``_restored``.
+    ``_history``, ``_rebuild``, ``_matrices``, ``_snapshot`` and ``_restored``.
     """
 
     def _try_modes(self, found: list, replay: int) -> bool:
-        """Rebuild on ``found`` and replay the last ``replay`` samples; keep the rebuild
-        if its model predicts the last :data:`SEARCH_WINDOW` samples
-        :data:`SEARCH_HORIZON` ahead better (:func:`horizon_error`) than the model in
-        use, else return to the state before the rebuild. Returns whether the
-        rebuild was kept."""
+        """Rebuild on ``found`` and replay the last ``replay`` samples; undo the rebuild
+        (return to the state before it) if its model predicts the last
+        :data:`SEARCH_WINDOW` samples :data:`SEARCH_HORIZON` ahead clearly worse
+        (:func:`horizon_errors`, :func:`clearly_worse`) than the model in use, each
+        model with its own predictor gain. Returns whether the rebuild was kept."""
         samples = list(self._history)[-(SEARCH_WINDOW + _SEARCH_SETTLE):]
         u = np.array([s[0] for s in samples])
         y = np.array([s[1] for s in samples])
         first = max(0, len(samples) - SEARCH_WINDOW)
         before = self._snapshot()
-        in_use = horizon_error(self._mats, self._process_noise(), self._r, u, y, first)
+        in_use = horizon_errors(self._matrices(), u, y, first)
         self._rebuild(found, replay)
-        if self._mats is not None and horizon_error(self._mats, self._process_noise(),
-                                                    self._r, u, y, first) < in_use:
+        if self._mats is not None and not clearly_worse(
+                horizon_errors(self._matrices(), u, y, first), in_use):
             return True
         vars(self).update(self._restored(before))
         return False

@@ -20,7 +20,7 @@ from identifiers import (
     rigid_body_gain,
     unstable_share,
 )
-from identifiers.structured.record_replay import horizon_error
+from identifiers.structured.record_replay import clearly_worse, horizon_errors
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_env import FlexibleSpacecraftModel
 from spacecraft_lab.identification import identification_records
@@ -267,6 +267,28 @@ def test_noise_free_data_are_no_harder_than_noisy_data():
     assert vaf[:6].min() > 99.9 and vaf[6:].mean() > 90.0
 
 
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "not met: on paddle rotation the 10 s deflection VAF falls as the noise falls, "
+    "median over seeds 0-4 67.8 % at 40 dB, 62.0 % at 60 dB, 46.3 % noise-free "
+    "(46.8 / 43.1 / 25.7 % before the searches were judged); the modal tracker "
+    "follows the model's own misfit on clean data (docs/results/identification.md)"))
+def test_deflection_prediction_does_not_fall_as_the_noise_falls():
+    """Cleaner data must not make the model worse: the 10 s-ahead deflection VAF on
+    paddle rotation noise-free is at least that at 40 dB (median over five seeds)."""
+    deflection = STANDARD_OUTPUTS.slice("deflection")
+    median = {}
+    for snr in (40.0, None):
+        vafs = []
+        for seed in range(5):
+            _, u, y0, y = _spacecraft("paddle_rotation", seed, snr_db=snr)
+            seq = default_identifier().fit(u, y)
+            vafs.append(prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
+                        [deflection].mean())
+        median[snr] = np.median(vafs)
+    assert median[None] >= median[40.0]
+
+
 @pytest.mark.parametrize("error", [-0.05, 0.10])
 def test_a_prior_off_by_five_to_ten_percent_still_predicts_well(error):
     """The user's nominal model may be off; the data correct it."""
@@ -279,7 +301,7 @@ def test_a_prior_off_by_five_to_ten_percent_still_predicts_well(error):
     assert vaf[RATE].mean() > 99.0
 
 
-def test_horizon_error_is_zero_for_the_true_model_and_grows_with_a_wrong_one():
+def test_horizon_errors_are_zero_for_the_true_model_and_grow_with_a_wrong_one():
     """The search's judge: noise-free data of an oscillator are predicted 10 steps
     ahead exactly by its own model, and not by one 5 % off in frequency."""
     def oscillator(f_hz):
@@ -293,13 +315,26 @@ def test_horizon_error_is_zero_for_the_true_model_and_grows_with_a_wrong_one():
     for k in range(600):
         y[k] = c @ x
         x = a @ x + b @ u[k]
-    q, r = 1e-6 * np.eye(2), np.full(1, 1e-8)
-    mats = (a, b, c, np.zeros((1, 3)))
-    assert horizon_error(mats, q, r, u, y, first=300, horizon=10) < 1e-10
-    wrong = oscillator(0.21)
-    error = horizon_error((*wrong, np.zeros((1, 3))), q, r, u, y, first=300, horizon=10)
-    assert error > 1e-2
-    assert horizon_error(mats, q, r, u, y, first=600) == np.inf        # no starting point
+    mats = (a, b, c, np.zeros((1, 3)), np.zeros((2, 1)))     # data from rest: K = 0
+    exact = horizon_errors(mats, u, y, first=300, horizon=10)
+    assert exact.shape == (29,) and exact.max() < 1e-20       # starts 300, 310, ..., 580
+    wrong = (*oscillator(0.21), np.zeros((1, 3)), np.zeros((2, 1)))
+    assert horizon_errors(wrong, u, y, first=300, horizon=10).mean() > 1e-2
+    observer = (*oscillator(0.21), np.zeros((1, 3)), np.array([[0.5], [0.0]]))
+    assert horizon_errors(observer, u, y, first=300, horizon=10).mean() > 1e-2
+    assert horizon_errors(mats, u, y, first=600).size == 0     # no starting point
+
+
+def test_a_candidate_is_clearly_worse_only_beyond_the_spread_of_the_difference():
+    rng = np.random.default_rng(1)
+    in_use = 1.0 + 0.1 * rng.standard_normal(40)
+    assert not clearly_worse(in_use + 0.01 * rng.standard_normal(40), in_use)
+    assert clearly_worse(in_use + 0.5, in_use)
+    assert not clearly_worse(in_use - 0.5, in_use)
+    noisy = in_use + 0.05 + rng.standard_normal(40)             # worse on average, by noise
+    assert not clearly_worse(noisy, in_use)
+    assert clearly_worse(np.where(np.arange(40) == 3, np.inf, in_use), in_use)
+    assert not clearly_worse(in_use, np.full(40, np.inf))
 
 
 def test_a_search_that_predicts_worse_is_undone_exactly():
