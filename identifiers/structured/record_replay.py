@@ -86,7 +86,8 @@ def horizon_errors(mats: tuple[np.ndarray, ...], u: np.ndarray, y: np.ndarray, f
 
 
 def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
-                  block: int = SEARCH_HORIZON // _SEARCH_SPACING) -> bool:
+                  block: int = SEARCH_HORIZON // _SEARCH_SPACING,
+                  no_skill: float = np.inf) -> bool:
     """Whether the errors ``candidate`` exceed ``in_use`` (paired, per starting point)
     beyond their spread.
 
@@ -95,10 +96,13 @@ def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
     overlap); the candidate is worse if the mean of the block means exceeds
     twice its standard error (with fewer than two blocks: if its mean is
     larger). A candidate that is not finite where the model in use is, is
-    worse; none is worse than a model in use that is finite nowhere.
+    worse; none is worse than a model in use that is finite nowhere or whose
+    mean error is at least ``no_skill`` (that of predicting each output by its
+    mean: the number of outputs for :func:`horizon_errors`): such a model has
+    no prediction to defend.
     """
     finite = np.isfinite(in_use)
-    if not finite.any():
+    if not finite.any() or np.mean(in_use[finite]) >= no_skill:
         return False
     if not np.isfinite(candidate[finite]).all():
         return True
@@ -135,7 +139,8 @@ class RecordReplay:
         in_use = horizon_errors(self._matrices(), u, y, first)
         self._rebuild(found, replay)
         if self._mats is not None and not clearly_worse(
-                horizon_errors(self._matrices(), u, y, first), in_use):
+                horizon_errors(self._matrices(), u, y, first), in_use,
+                no_skill=self.n_outputs):
             return True
         vars(self).update(self._restored(before))
         return False

@@ -335,6 +335,8 @@ def test_a_candidate_is_clearly_worse_only_beyond_the_spread_of_the_difference()
     assert not clearly_worse(noisy, in_use)
     assert clearly_worse(np.where(np.arange(40) == 3, np.inf, in_use), in_use)
     assert not clearly_worse(in_use, np.full(40, np.inf))
+    assert clearly_worse(in_use + 0.5, in_use, no_skill=2.0)
+    assert not clearly_worse(in_use + 0.5, in_use, no_skill=0.5)    # in use: no skill
 
 
 def test_a_search_that_predicts_worse_is_undone_exactly():
