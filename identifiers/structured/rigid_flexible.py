@@ -177,7 +177,8 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         Times a search found other modes and the estimator was rebuilt on them.
     n_searches_rejected : int
         Times a search found other modes whose model predicted the last 50 s
-        10 s ahead worse than the model in use (the rebuild on them was undone).
+        10 s ahead clearly worse than the model in use (the rebuild on them was
+        undone; :meth:`~identifiers.structured.record_replay.RecordReplay._try_modes`).
     """
 
     # the filter bank and high-passes run on the signals (kept current by a rollback);

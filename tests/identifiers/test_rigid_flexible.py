@@ -340,9 +340,9 @@ def test_a_candidate_is_clearly_worse_only_beyond_the_spread_of_the_difference()
 
 
 def test_a_search_that_predicts_worse_is_undone_exactly():
-    """Modes a search proposes replace the tracked ones only if they predict the
-    last 50 s better; a rejected rebuild leaves no trace: the identifier goes on
-    exactly as one whose search found nothing new."""
+    """Modes a search proposes do not replace the tracked ones if they predict the
+    last 50 s clearly worse; a rejected rebuild leaves no trace: the identifier goes
+    on exactly as one whose search found nothing new."""
     _, u, _, y = _spacecraft("constant", 0, n_samples=1300)
     found = []
 
