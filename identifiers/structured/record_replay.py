@@ -106,7 +106,7 @@ def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
         return False
     if not np.isfinite(candidate[finite]).all():
         return True
-    diff = np.where(finite, candidate - np.where(finite, in_use, 0.0), 0.0)
+    diff = np.where(finite, candidate, 0.0) - np.where(finite, in_use, 0.0)
     n_blocks = len(diff) // block
     if n_blocks < 2:
         return bool(diff.mean() > 0.0)

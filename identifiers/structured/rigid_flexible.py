@@ -155,8 +155,9 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         time. Close modes that 50 s cannot separate are resolved as data
         accumulate; when the number of modes found or their ranks differ, or
         a frequency by more than 2 % from the tracked one, the estimator is
-        rebuilt on them and the kept record is replayed. None keeps the
-        warm-up's modes.
+        rebuilt on them and the kept record is replayed; the rebuild is undone
+        if its model predicts the last 50 s 10 s ahead clearly worse than the
+        model in use (``n_searches_rejected``). None keeps the warm-up's modes.
     history : int
         Most recent samples kept for the searches (default 3000: 300 s).
     outlier_threshold : float, optional

@@ -345,6 +345,7 @@ def test_a_search_that_predicts_worse_is_undone_exactly():
     on exactly as one whose search found nothing new."""
     _, u, _, y = _spacecraft("constant", 0, n_samples=1300)
     found = []
+    original = RigidFlexibleIdentifier._find_resonators
 
     def proposing(wrong):
         def find(self):
@@ -354,7 +355,6 @@ def test_a_search_that_predicts_worse_is_undone_exactly():
             return [Resonator(0.5, 0.01)] if wrong else list(self.resonators)
         return find
 
-    original = RigidFlexibleIdentifier._find_resonators
     idents = {}
     for wrong in (False, True):
         with pytest.MonkeyPatch.context() as mp:
