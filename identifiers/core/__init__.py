@@ -9,7 +9,8 @@ the estimator's own state); the one RLS primitive
 (:mod:`~identifiers.core.model`); the Kalman predictor
 (:mod:`~identifiers.core.kalman`); the health report
 (:mod:`~identifiers.core.health`) and the data monitor
-(:mod:`~identifiers.core.data_monitor`); argument checks
+(:mod:`~identifiers.core.data_monitor`); running residual statistics
+(:mod:`~identifiers.core.residual_statistics`); argument checks
 (:mod:`~identifiers.core.checks`). Nothing here imports the method families.
 """
 
@@ -18,6 +19,7 @@ from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
 from identifiers.core.online import OnlineIdentifier
+from identifiers.core.residual_statistics import correlation_time
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.core.rollback import HealthGuard
 from identifiers.core.screening import OUTLIER_RUN, SampleScreening
@@ -35,6 +37,7 @@ __all__ = [
     "RecursiveLeastSquares",
     "SampleScreening",
     "StateSpaceModel",
+    "correlation_time",
     "observability_basis",
     "steady_state_gain",
 ]

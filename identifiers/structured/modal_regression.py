@@ -16,8 +16,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 
+from identifiers.core.residual_statistics import (
+    correlation_time,
+    lag_product_step,
+    mean_square_step,
+)
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
 from identifiers.structured.modal_basis import Resonator
@@ -44,14 +48,6 @@ REPLAY = 1500
 #: Samples at the end of a replay over which the Kalman filter runs (the gains
 #: learn from the whole replay): its state settles within a few hundred.
 FILTER_TAIL = 300
-
-
-@njit(cache=True, nogil=True)
-def _mean_square_step(level: np.ndarray, x: np.ndarray, keep: float, weight: float) -> None:
-    """``level <- keep * level + weight * x**2`` in place: one step of an exponentially
-    weighted mean square (the arithmetic of the NumPy expression)."""
-    for i in range(x.shape[0]):
-        level[i] = keep * level[i] + weight * (x[i] * x[i])
 
 
 def _spend_rank(resonators: list[Resonator], budget: int) -> list[Resonator]:
@@ -199,12 +195,19 @@ class ModalRegression(RecordReplay):
 
     def _track_levels(self, err: np.ndarray, y_f: np.ndarray) -> None:
         """One sample's step of the running mean squares of the gains' a-priori errors
-        and of the high-passed signals (the first sample sets them)."""
+        and of the high-passed signals, and of the errors' lag-1 products (the first
+        sample, or pair, sets them)."""
+        if self._last_err is not None:
+            if self._errlag is None:
+                self._errlag = err * self._last_err
+            else:
+                lag_product_step(self._errlag, err, self._last_err, 0.995, 0.005)
+        self._last_err = err.copy()
         if self._resvar is None:
             self._resvar, self._sigvar = err**2, y_f**2
         else:
-            _mean_square_step(self._resvar, err, 0.995, 0.005)
-            _mean_square_step(self._sigvar, y_f, 0.995, 0.005)
+            mean_square_step(self._resvar, err, 0.995, 0.005)
+            mean_square_step(self._sigvar, y_f, 0.995, 0.005)
 
     def _signals(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The current sample's high-passed regressor and, with tracking, its flexible
@@ -273,7 +276,10 @@ class ModalRegression(RecordReplay):
         tracker = self._tracker
         if tracker is None:
             return
-        delta = tracker.refine()
+        # the gains' a-priori errors stand for the window's residual: how correlated
+        # they are says how many independent samples the window holds
+        delta = tracker.refine(1.0 if self._errlag is None
+                               else correlation_time(self._errlag, self._resvar))
         if delta is None:
             return
         bank = self._bank

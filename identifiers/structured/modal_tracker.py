@@ -298,10 +298,14 @@ class ModalTracker:
         v = yy - float(np.sum(zf * theta))
         return v, theta, zd - sfd.T @ theta, chol
 
-    def refine(self) -> np.ndarray | None:
+    def refine(self, correlation_time: float = 1.0) -> np.ndarray | None:
         """One Gauss-Newton step on the window; the correction ``delta`` (M, 2) to apply
         to ``[log f, zeta]`` of each resonator, or None (window too short, or the step
-        did not lower the residual). Updates :attr:`covariance`."""
+        did not lower the residual). Updates :attr:`covariance`. ``correlation_time``
+        (>= 1): samples per independent one in the residual, which divides the
+        window's evidence (a correlated residual is the model's misfit, not noise)."""
+        if not correlation_time >= 1.0 or not np.isfinite(correlation_time):
+            raise ValueError(f"correlation_time must be finite and >= 1, got {correlation_time}")
         if self._count < self.min_samples or self.m == 0:
             return None
         npar = 2 * self.m
@@ -333,7 +337,7 @@ class ModalTracker:
         n_out = sum(g.rows.size for g in self.groups)
         # residual variance, floored at RESOLUTION^2 of the signal: below that the
         # residual is the model's own structural error, not evidence about rho
-        sigma2 = max(v0, RESOLUTION**2 * yy) / max(self._count * n_out, 1.0)
+        sigma2 = correlation_time * max(v0, RESOLUTION**2 * yy) / max(self._count * n_out, 1.0)
         # maximum a posteriori step: the window's evidence against a prior on how far
         # the resonators move in one refinement (random walk)
         prior = np.tile(np.array(self.step_std) ** -2, self.m)

@@ -264,6 +264,8 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         self._phases: dict[tuple[int, int], np.ndarray] = {}
         self._resvar: np.ndarray | None = None
         self._sigvar: np.ndarray | None = None
+        self._errlag: np.ndarray | None = None          # the errors' lag-1 products
+        self._last_err: np.ndarray | None = None
         self._noise_var: np.ndarray | None = None
         self._last_innovation: np.ndarray | None = None
         self._real = True
@@ -293,7 +295,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         self._discount_rigid()
         self._detector.restart()
         self._history.clear()
-        self._last_innovation = None
+        self._last_innovation = self._last_err = None
         self._next_discovery = self._k + (self.rediscover or 0)
         self._quiet = self.p
 

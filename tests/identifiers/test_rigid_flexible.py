@@ -14,6 +14,7 @@ from identifiers import (
     RigidFlexibleIdentifier,
     default_identifier,
     h_step_predictions,
+    identification_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
@@ -22,7 +23,7 @@ from identifiers import (
 )
 from identifiers.structured.record_replay import clearly_worse, horizon_errors
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
-from spacecraft_env import FlexibleSpacecraftModel
+from spacecraft_env import FlexibleSpacecraftEnv, FlexibleSpacecraftModel
 from spacecraft_lab.identification import identification_records
 
 RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
@@ -267,26 +268,42 @@ def test_noise_free_data_are_no_harder_than_noisy_data():
     assert vaf[:6].min() > 99.9 and vaf[6:].mean() > 90.0
 
 
+def _env_record(scenario: str, seed: int, snr_db: float | None):
+    """The tracking benchmark's record: the public env (its sensor noise in physical
+    units) driven open-loop by 1 N m RMS multisine torques for 250 s."""
+    env = FlexibleSpacecraftEnv(scenario, snr_db=snr_db, task="regulation")
+    obs, info = env.reset(seed=seed)
+    u = identification_inputs(2500, np.random.default_rng(1000 + seed))
+    ys, xs = [obs], [info["state"]]
+    for k in range(2499):
+        obs, _, _, _, info = env.step((u[k] / env.max_torque).astype(np.float32))
+        ys.append(obs)
+        xs.append(info["state"])
+    y = np.array(ys)[:, :STANDARD_OUTPUTS.size].astype(float)
+    return u, y, np.array(xs) @ env.unwrapped.model.C.T
+
+
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "not met: on paddle rotation the 10 s deflection VAF falls as the noise falls, "
-    "median over seeds 0-4 67.8 % at 40 dB, 62.0 % at 60 dB, 46.3 % noise-free "
-    "(46.8 / 43.1 / 25.7 % before the searches were judged); the modal tracker "
-    "follows the model's own misfit on clean data (docs/results/identification.md)"))
+    "not met: on paddle rotation the 10 s deflection VAF noise-free is below that at "
+    "40 dB, median over seeds 0-9 69.3 against 71.6 % (seeds 10-19: 37.8 against "
+    "79.7 %); single records swing by tens of points with which mode searches are "
+    "kept (docs/results/identification.md)"))
 def test_deflection_prediction_does_not_fall_as_the_noise_falls():
     """Cleaner data must not make the model worse: the 10 s-ahead deflection VAF on
-    paddle rotation noise-free is at least that at 40 dB (median over five seeds)."""
+    paddle rotation noise-free is at least that at 40 dB (median over ten seeds of
+    the tracking benchmark's env records)."""
     deflection = STANDARD_OUTPUTS.slice("deflection")
     median = {}
     for snr in (40.0, None):
         vafs = []
-        for seed in range(5):
-            _, u, y0, y = _spacecraft("paddle_rotation", seed, snr_db=snr)
+        for seed in range(10):
+            u, y, y0 = _env_record("paddle_rotation", seed, snr)
             seq = default_identifier().fit(u, y)
             vafs.append(prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
                         [deflection].mean())
         median[snr] = np.median(vafs)
-    assert median[None] >= median[40.0]
+    assert median[None] >= median[40.0], median
 
 
 @pytest.mark.parametrize("error", [-0.05, 0.10])

@@ -10,6 +10,12 @@ import numpy as np
 import pytest
 
 from identifiers import default_identifier
+from identifiers.core.residual_statistics import (
+    MAX_CORRELATION,
+    correlation_time,
+    lag_product_step,
+    mean_square_step,
+)
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.structured.modal_basis import ModalFilterBank, Resonator, mode_zoh
 from identifiers.structured.modal_kernels import oscillator_zoh, oscillator_zoh_derivatives
@@ -96,7 +102,7 @@ def _two_mode_record(noise: float, n: int = 4000, seed: int = 0):
     return u, y + noise * y.std(0) * rng.normal(size=y.shape)
 
 
-def _track(u, y, start):
+def _track(u, y, start, refine=True):
     bank = ModalFilterBank(start, DT, sensitivities=True)
     idx = np.arange(bank.size)
     cols = np.concatenate([idx[bank.slices["flexible"]].reshape(2, 3, 2)[:, :, 0].ravel(),
@@ -108,7 +114,7 @@ def _track(u, y, start):
         dq, dfree = bank.sensitivity()
         tracker.update(bank.regressor(), dq, dfree, y[k])
         bank.step(u[k])
-        if k % 10 == 9:
+        if refine and k % 10 == 9:
             delta = tracker.refine()
             if delta is not None:
                 bank.recenter(delta[:, 0], delta[:, 1])
@@ -243,3 +249,64 @@ def test_identifier_reports_its_rigid_gain_with_an_honest_band():
     assert freq.shape == zeta.shape and freq.size == len(ident.resonators)
     clone = pickle.loads(pickle.dumps(ident))
     np.testing.assert_array_equal(clone.rigid_gain.gain, est.gain)
+
+
+def _ar1(phi: float, n: int, rng: np.random.Generator) -> np.ndarray:
+    e = rng.normal(size=n)
+    out = np.empty(n)
+    out[0] = e[0] / np.sqrt(1 - phi**2)
+    for k in range(1, n):
+        out[k] = phi * out[k - 1] + e[k]
+    return out
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.6, 0.95])
+def test_correlation_time_of_a_first_order_autoregression(phi):
+    """(1 + phi) / (1 - phi) samples per independent one: 1, 4 and 39."""
+    e = _ar1(phi, 400_000, np.random.default_rng(1))
+    lag, square = np.mean(e[1:] * e[:-1]), np.mean(e**2)
+    expected = (1 + phi) / (1 - phi)
+    assert correlation_time(np.array([lag]), np.array([square])) == pytest.approx(
+        expected, rel=0.02 if phi < 0.9 else 0.1, abs=0.01)
+
+
+def test_correlation_time_pools_outputs_by_their_squares_and_is_clipped():
+    # a loud white output outweighs a faint correlated one
+    assert correlation_time(np.array([0.0, 0.99e-4]), np.array([1.0, 1e-4])) < 1.001
+    # anticorrelation credits no more than independence; a sine is near the clip
+    assert correlation_time(np.array([-0.5]), np.array([1.0])) == 1.0
+    t = np.arange(20_000)
+    s = np.sin(2 * np.pi * 0.009 * t)
+    slow = correlation_time(np.array([np.mean(s[1:] * s[:-1])]), np.array([np.mean(s**2)]))
+    assert 1000 < slow <= (1 + MAX_CORRELATION) / (1 - MAX_CORRELATION)
+    for bad in (np.zeros(2), np.full(2, np.nan)):
+        assert correlation_time(np.ones(2), bad) == 1.0
+
+
+def test_running_level_steps_are_the_numpy_expressions():
+    rng = np.random.default_rng(2)
+    level, x, prev = rng.random(5), rng.normal(size=5), rng.normal(size=5)
+    expected = 0.995 * level + 0.005 * x * x
+    mean_square_step(out := level.copy(), x, 0.995, 0.005)
+    np.testing.assert_allclose(out, expected, rtol=1e-15)
+    lag_product_step(out := level.copy(), x, prev, 0.995, 0.005)
+    np.testing.assert_allclose(out, 0.995 * level + 0.005 * x * prev, rtol=1e-15)
+
+
+def test_a_correlated_residual_holds_less_evidence_for_a_step():
+    """The same window: its step and the reported variance shrink and grow with the
+    residual's correlation time; a bad one raises."""
+    u, y = _two_mode_record(0.1, n=1000)
+    start = [Resonator(0.0874 * 1.01, 0.015), Resonator(0.2365 * 0.99, 0.005)]
+    _, tracker = _track(u, y, start, refine=False)
+    steps, variances = [], []
+    for c in (1.0, 30.0):
+        copy = pickle.loads(pickle.dumps(tracker))
+        delta = copy.refine(c)
+        steps.append(0.0 if delta is None else np.abs(delta[:, 0]).max())
+        variances.append(np.diag(copy.covariance)[0])
+    assert steps[0] > 0 and steps[1] < steps[0]
+    assert variances[1] > 2 * variances[0]
+    for bad in (0.5, np.nan, np.inf):
+        with pytest.raises(ValueError, match="correlation_time"):
+            tracker.refine(bad)
