@@ -10,6 +10,8 @@ independent one, that says how much evidence a window of such errors holds.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -60,9 +62,9 @@ def correlation_time(lag_products: np.ndarray, mean_squares: np.ndarray) -> floa
         In ``[1, (1 + MAX_CORRELATION) / (1 - MAX_CORRELATION)]``; 1 if the
         residual is zero or not finite.
     """
-    total = float(np.sum(mean_squares))
-    lag = float(np.sum(lag_products))
-    if not (total > 0.0 and np.isfinite(total) and np.isfinite(lag)):
+    total = float(np.add.reduce(mean_squares))
+    lag = float(np.add.reduce(lag_products))
+    if not (0.0 < total < math.inf and math.isfinite(lag)):
         return 1.0
     rho = min(max(lag / total, 0.0), MAX_CORRELATION)
     return (1.0 + rho) / (1.0 - rho)
