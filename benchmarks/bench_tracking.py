@@ -37,13 +37,12 @@ from identifiers import (
     ModelSequence,
     default_identifier,
     h_step_predictions,
-    identification_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
 )
 from spacecraft_conventions import STANDARD_OUTPUTS, single_threaded_blas
-from spacecraft_env import FlexibleSpacecraftEnv
+from spacecraft_lab.identification import env_record
 
 #: Index of the tracked mode among the truth's sorted modal frequencies.
 TRACKED = {"docking": 1, "paddle_rotation": 3, "solar_rotation": 1}
@@ -53,21 +52,6 @@ WINDOWS = {"docking": [((120.0, 180.0), 99.9), ((200.0, 250.0), 179.9)],
            "paddle_rotation": [((100.0, 250.0), 99.9)],
            "solar_rotation": [((100.0, 250.0), 99.9)]}
 GROUPS = ("attitude", "rate", "deflection")
-
-
-def env_record(scenario: str, seed: int, snr_db: float | None, rms: float,
-               steps: int = 2500) -> tuple[np.ndarray, ...]:
-    """Torques (N m), noisy outputs, noise-free outputs and the env's truth model."""
-    env = FlexibleSpacecraftEnv(scenario, snr_db=snr_db, task="regulation")
-    obs, info = env.reset(seed=seed)
-    u = identification_inputs(steps, np.random.default_rng(1000 + seed), rms=rms)
-    ys, xs = [obs], [info["state"]]
-    for k in range(steps - 1):
-        obs, _, _, _, info = env.step((u[k] / env.max_torque).astype(np.float32))
-        ys.append(obs)
-        xs.append(info["state"])
-    model = env.unwrapped.model
-    return u, np.array(ys)[:, :10].astype(float), np.array(xs) @ model.C.T, model
 
 
 def frozen_sequence(model, u: np.ndarray, y: np.ndarray, snr_db: float | None,

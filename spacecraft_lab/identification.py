@@ -71,7 +71,13 @@ from identifiers import (
     vaf,
 )
 from spacecraft_conventions import NOMINAL_TORQUE, single_threaded_blas
-from spacecraft_env import SCENARIOS, FlexibleSpacecraftModel, check_parameter, ets8_parameters
+from spacecraft_env import (
+    SCENARIOS,
+    FlexibleSpacecraftEnv,
+    FlexibleSpacecraftModel,
+    check_parameter,
+    ets8_parameters,
+)
 from spacecraft_lab.paper import PAPER_SNR_DB, PAPER_TABLES
 from spacecraft_lab.plots import (
     plot_identification_modal,
@@ -88,6 +94,7 @@ __all__ = [
     "PRESETS",
     "IdentificationRecord",
     "dominant_modes",
+    "env_record",
     "identification_records",
     "identify_task",
     "make_identifier",
@@ -213,6 +220,38 @@ def identification_records(truth: FlexibleSpacecraftModel, seed: int, n_samples:
     u_ho = identification_inputs(n_samples, rng, truth.dt)
     y_ho = add_measurement_noise(truth.simulate(u_ho)[1], snr_db, rng)
     return IdentificationRecord(u, y, y_clean, states, u_ho, y_ho)
+
+
+def env_record(scenario: str, seed: int, snr_db: float | None, rms: float = 1.0,
+               steps: int = 2500) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                          FlexibleSpacecraftModel]:
+    """A record of the public environment driven open-loop (the tracking benchmark's).
+
+    The env of ``scenario`` (regulation task; its sensor noise fixed in physical
+    units, ``snr_db`` of the nominal levels or None for noise-free), reset with
+    ``seed`` and driven by random-phase multisine torques of RMS ``rms`` (N m)
+    drawn from ``np.random.default_rng(1000 + seed)``.
+
+    Returns
+    -------
+    u : (steps, 3) ndarray
+        The torques (N m).
+    y, y_clean : (steps, 10) ndarray
+        The measured and noise-free outputs (the env's first ten observation
+        channels; the noise-free ones from its true state).
+    model : FlexibleSpacecraftModel
+        The env's truth model.
+    """
+    env = FlexibleSpacecraftEnv(scenario, snr_db=snr_db, task="regulation")
+    obs, info = env.reset(seed=seed)
+    u = identification_inputs(steps, np.random.default_rng(1000 + seed), rms=rms)
+    ys, xs = [obs], [info["state"]]
+    for k in range(steps - 1):
+        obs, _, _, _, info = env.step((u[k] / env.max_torque).astype(np.float32))
+        ys.append(obs)
+        xs.append(info["state"])
+    model = env.unwrapped.model
+    return u, np.array(ys)[:, :10].astype(float), np.array(xs) @ model.C.T, model
 
 
 def paper_test_response(truth: FlexibleSpacecraftModel,

@@ -14,7 +14,6 @@ from identifiers import (
     RigidFlexibleIdentifier,
     default_identifier,
     h_step_predictions,
-    identification_inputs,
     persistence_predictions,
     prediction_vaf,
     relative_gain_error,
@@ -23,8 +22,8 @@ from identifiers import (
 )
 from identifiers.structured.record_replay import clearly_worse, horizon_errors
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
-from spacecraft_env import FlexibleSpacecraftEnv, FlexibleSpacecraftModel
-from spacecraft_lab.identification import identification_records
+from spacecraft_env import FlexibleSpacecraftModel
+from spacecraft_lab.identification import env_record, identification_records
 
 RIGID = OutputLayout.of(("attitude", "rate"), n_sensors=0)
 RATE = STANDARD_OUTPUTS.slice("rate")
@@ -268,21 +267,6 @@ def test_noise_free_data_are_no_harder_than_noisy_data():
     assert vaf[:6].min() > 99.9 and vaf[6:].mean() > 90.0
 
 
-def _env_record(scenario: str, seed: int, snr_db: float | None):
-    """The tracking benchmark's record: the public env (its sensor noise in physical
-    units) driven open-loop by 1 N m RMS multisine torques for 250 s."""
-    env = FlexibleSpacecraftEnv(scenario, snr_db=snr_db, task="regulation")
-    obs, info = env.reset(seed=seed)
-    u = identification_inputs(2500, np.random.default_rng(1000 + seed))
-    ys, xs = [obs], [info["state"]]
-    for k in range(2499):
-        obs, _, _, _, info = env.step((u[k] / env.max_torque).astype(np.float32))
-        ys.append(obs)
-        xs.append(info["state"])
-    y = np.array(ys)[:, :STANDARD_OUTPUTS.size].astype(float)
-    return u, y, np.array(xs) @ env.unwrapped.model.C.T
-
-
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
     "not met: on paddle rotation the 10 s deflection VAF noise-free is below that at "
@@ -298,7 +282,7 @@ def test_deflection_prediction_does_not_fall_as_the_noise_falls():
     for snr in (40.0, None):
         vafs = []
         for seed in range(10):
-            u, y, y0 = _env_record("paddle_rotation", seed, snr)
+            u, y, y0, _ = env_record("paddle_rotation", seed, snr)
             seq = default_identifier().fit(u, y)
             vafs.append(prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
                         [deflection].mean())
