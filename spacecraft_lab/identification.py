@@ -236,9 +236,10 @@ def env_record(scenario: str, seed: int, snr_db: float | None, rms: float = 1.0,
     -------
     u : (steps, 3) ndarray
         The torques (N m).
-    y, y_clean : (steps, 10) ndarray
-        The measured and noise-free outputs (the env's first ten observation
-        channels; the noise-free ones from its true state).
+    y, y_clean : (steps, m) ndarray
+        The measured and noise-free outputs (the env's first ``m`` observation
+        channels, ``m`` the truth model's outputs: 10; the noise-free ones from its
+        true state).
     model : FlexibleSpacecraftModel
         The env's truth model.
     """
@@ -251,7 +252,8 @@ def env_record(scenario: str, seed: int, snr_db: float | None, rms: float = 1.0,
         ys.append(obs)
         xs.append(info["state"])
     model = env.unwrapped.model
-    return u, np.array(ys)[:, :10].astype(float), np.array(xs) @ model.C.T, model
+    n_outputs = model.C.shape[0]                # the observation's leading channels
+    return u, np.array(ys)[:, :n_outputs].astype(float), np.array(xs) @ model.C.T, model
 
 
 def paper_test_response(truth: FlexibleSpacecraftModel,
