@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_discrete_are
 
+from identifiers.core.checks import all_finite
 from identifiers.core.kalman_kernels import (
     _correct_all,
     _f64,
@@ -183,7 +184,7 @@ class KalmanPredictor:
         (n,) ndarray
             ``x_{k+1|k}``.
         """
-        if y is not None and y.shape[0] == c.shape[0] and np.isfinite(y).all():
+        if y is not None and y.shape[0] == c.shape[0] and all_finite(y):
             x, p, gain, e, s, ok = _full_update(self.x, self.P, a, b, c, q,
                                                 np.asarray(r, dtype=float), u, y)
             if ok:
@@ -221,7 +222,7 @@ class KalmanPredictor:
         a_key = _NO_MATRIX if a is None else a
         st = self._steady
         if (st is not None and self.P is st.prior and y is not None
-                and st.correction.holds((c, r, a_key)) and np.isfinite(y).all()):
+                and st.correction.holds((c, r, a_key)) and all_finite(y)):
             e = y - st.c @ self.x
             self.x = self.x + st.filter_gain @ e
             self.P = st.post
@@ -266,7 +267,7 @@ class KalmanPredictor:
         """
         st = self._steady
         if (st is not None and self.P is st.post) or y is None or y.shape[0] != c.shape[0] \
-                or not np.isfinite(y).all():
+                or not all_finite(y):
             # a held filter (two products each) or a sample with outputs missing
             self.predict(a, b, q, u)
             return self.correct(c, r, y, a=a_now)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from identifiers.core.checks import all_finite
 from identifiers.core.data_monitor import SKIP_SHARE, WINDOW
 from identifiers.core.health import HEALTH_EVERY, warn_health
 from identifiers.core.rollback import KEPT_ON_ROLLBACK
@@ -123,7 +124,7 @@ class SampleScreening:
                 return
         self._k += 1
         state = self._state_vector()
-        if self._k % HEALTH_EVERY == 0 or (state is not None and not np.isfinite(state).all()):
+        if self._k % HEALTH_EVERY == 0 or (state is not None and not all_finite(state)):
             self._check_health()
 
     # ------------------------------------------------------------ health

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from identifiers.core.checks import all_finite
 from identifiers.structured.change_detection import ChangeEvent
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.state_filter import ATTITUDE_STATES, RATE_STATES
@@ -61,7 +62,7 @@ class MinimalModelExport:
             a[re + 1, re] = mu.imag
             b[re], b[re + 1] = b_vecs.real, b_vecs.imag
             c[:, re], c[:, re + 1] = c_vecs.real.T, -c_vecs.imag.T
-        if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
+        if not (all_finite(a) and all_finite(b) and all_finite(c)):
             return
         self._mats = (a, b, c, np.zeros((m, 3)), None)
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identifiers.core.checks import all_finite
+
 __all__ = ["ATTITUDE_STATES", "RATE_STATES", "ModelFilter", "StateFilter"]
 
 #: States of the exported model that are the attitude (its first three) and
@@ -128,7 +130,7 @@ class StateFilter(ModelFilter):
         y_kf = y if real else (None if seen is None else np.where(seen, y, np.nan))
         self._kf.update(a, b, c, self._process_noise(), self._r, u, y_kf)
         innovation = self._kf.innovation
-        if real and innovation is not None and np.isfinite(innovation).all():
+        if real and innovation is not None and all_finite(innovation):
             self._measurement_noise(innovation)
 
     def _measurement_noise(self, innovation: np.ndarray) -> None:

@@ -19,6 +19,7 @@ from identifiers import (
     default_identifier,
     identification_inputs,
 )
+from identifiers.core.checks import all_finite
 from identifiers.core.data_monitor import WINDOW, DataMonitor
 from identifiers.core.health import IdentifierHealthWarning, degenerate, state_problem
 from spacecraft_conventions import STANDARD_OUTPUTS
@@ -193,3 +194,15 @@ def test_a_health_warning_points_at_the_callers_line(record, cls):
     health = [w for w in caught if issubclass(w.category, IdentifierHealthWarning)]
     assert health
     assert {w.filename for w in health} == {__file__}
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, None])
+def test_all_finite_is_the_numpy_check_for_any_shape_and_layout(bad):
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(6, 5)) * 1e300
+    if bad is not None:
+        a[4, 3] = bad
+    for view in (a, a.T, a[::2, 1:], a[4], a[:, 3], a[:0], a.ravel()):
+        assert all_finite(view) == bool(np.isfinite(view).all()), view.shape
+    assert all_finite(np.array([5e-324, -0.0, np.finfo(float).max]))
+
