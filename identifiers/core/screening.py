@@ -15,6 +15,7 @@ state) through :class:`~identifiers.core.online.OnlineIdentifier`.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from identifiers.core.checks import all_finite
 from identifiers.core.data_monitor import SKIP_SHARE, WINDOW
@@ -29,6 +30,37 @@ __all__ = ["OUTLIER_RUN", "SampleScreening"]
 #: level) the guard's reference no longer describes: the samples are learned
 #: from again, or the guard would shut the identifier off for good.
 OUTLIER_RUN = 5
+
+
+@njit(cache=True, nogil=True)
+def _idle_and_usable(u: np.ndarray, y: np.ndarray, last_y: np.ndarray, has_last: bool,
+                     max_abs: float) -> tuple[bool, bool]:
+    """Compiled: whether a normalized sample is idle (``has_last``, ``u`` all zero and
+    ``y`` equal to ``last_y`` entry by entry: ``not u.any() and np.array_equal(y,
+    last_y)``) and whether every entry is finite and within ``max_abs``
+    (``np.abs(u).max() <= max_abs and np.abs(y).max() <= max_abs``: a NaN fails)."""
+    idle = has_last
+    if idle:
+        for v in u:
+            if v != 0.0:
+                idle = False
+                break
+    if idle:
+        for i in range(y.shape[0]):
+            if not y[i] == last_y[i]:
+                idle = False
+                break
+    usable = True
+    for v in u:
+        if not abs(v) <= max_abs:
+            usable = False
+            break
+    if usable:
+        for v in y:
+            if not abs(v) <= max_abs:
+                usable = False
+                break
+    return idle, usable
 
 
 class SampleScreening:
@@ -70,7 +102,10 @@ class SampleScreening:
     def _process_sample(self, u: np.ndarray, y: np.ndarray) -> None:
         u = u / self._su
         y = y / self._sy
-        if self._last_y is not None and not u.any() and np.array_equal(y, self._last_y):
+        last = self._last_y
+        idle, usable = _idle_and_usable(u, y, y if last is None else last, last is not None,
+                                        self.max_abs)
+        if idle:
             # zero input and the same output bit for bit: a plant at rest or a frozen
             # sensor. No information; processing it would only let forgetting erase what
             # was learnt (and a warm-up end on nothing). Skipped without moving the clock.
@@ -78,9 +113,8 @@ class SampleScreening:
             return
         self._last_y = y
         received_u, received_y = u, y
-        # every entry finite and within max_abs (a NaN fails the comparison too); the
-        # per-entry masks are only needed for a sample that is not
-        usable = bool(np.abs(u).max() <= self.max_abs and np.abs(y).max() <= self.max_abs)
+        # usable: every entry finite and within max_abs; the per-entry masks are only
+        # needed for a sample that is not
         if not usable and (np.any(np.isfinite(u) & (np.abs(u) > self.max_abs))
                            or np.any(np.isfinite(y) & (np.abs(y) > self.max_abs))):
             self._range_skips += 1

@@ -22,6 +22,7 @@ from identifiers import (
 from identifiers.core.checks import all_finite
 from identifiers.core.data_monitor import WINDOW, DataMonitor
 from identifiers.core.health import IdentifierHealthWarning, degenerate, state_problem
+from identifiers.core.screening import _idle_and_usable
 from spacecraft_conventions import STANDARD_OUTPUTS
 from spacecraft_env import FlexibleSpacecraftModel
 
@@ -205,4 +206,20 @@ def test_all_finite_is_the_numpy_check_for_any_shape_and_layout(bad):
     for view in (a, a.T, a[::2, 1:], a[4], a[:, 3], a[:0], a.ravel()):
         assert all_finite(view) == bool(np.isfinite(view).all()), view.shape
     assert all_finite(np.array([5e-324, -0.0, np.finfo(float).max]))
+
+
+def test_the_compiled_screening_is_the_numpy_expressions():
+    """Idle (zero input, output equal to the last bit for bit) and usable (finite and
+    within max_abs) exactly as the NumPy expressions they replace, NaN, inf, -0.0 and
+    the bound itself included."""
+    rng = np.random.default_rng(1)
+    specials = [np.nan, np.inf, -np.inf, -0.0, 0.0, 10.0, -10.0, 10.000001]
+    for _ in range(2000):
+        u = rng.choice([0.0, -0.0, 1.0, np.nan, 20.0], size=3)
+        last = rng.choice(specials, size=4)
+        y = np.where(rng.random(4) < 0.8, last, rng.choice(specials, size=4))
+        for has_last in (True, False):
+            idle, usable = _idle_and_usable(u, y, last, has_last, 10.0)
+            assert idle == (has_last and not u.any() and np.array_equal(y, last))
+            assert usable == bool(np.abs(u).max() <= 10.0 and np.abs(y).max() <= 10.0)
 
