@@ -43,7 +43,12 @@ from spacecraft_env.scenarios import (
     SolarRotationScenario,
     make_scenario,
 )
-from spacecraft_env.wrappers import ActionRepeat, NominalUnits, ObservationAverage
+from spacecraft_env.wrappers import (
+    ActionRepeat,
+    NominalUnits,
+    ObservationAverage,
+    ObservationGroups,
+)
 
 __all__ = [
     "ANTENNA_FREQUENCIES_HZ",
@@ -67,6 +72,7 @@ __all__ = [
     "Limit",
     "NominalUnits",
     "ObservationAverage",
+    "ObservationGroups",
     "PaddleRotationScenario",
     "PlantDraw",
     "RewardWeights",

@@ -14,7 +14,9 @@ policy's weights keep their meaning while it learns, where a running
 normalization moves them. :class:`ObservationAverage` gives it the mean of the
 last samples instead of the last one: an agent that decides once a second sees the
 second's measurements with their noise averaged down (the anti-aliasing filter of a
-sampled-data controller), not one noisy sample of them.
+sampled-data controller), not one noisy sample of them. :class:`ObservationGroups`
+passes on some of the observation's groups: an agent that corrects a base law (which
+reads the whole observation) can see the attitude error and the rate alone.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage"]
+__all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage", "ObservationGroups"]
 
 
 def _count(name: str, value: Any) -> int:
@@ -169,3 +171,60 @@ class ObservationAverage(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
         self._recent.append(np.asarray(observation, dtype=np.float64))
         mean = np.mean(self._recent, axis=0)
         return mean.astype(self.observation_space.dtype)
+
+
+class ObservationGroups(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """The observation's channels of some of its groups, in the order named.
+
+    The groups are those of ``env.unwrapped.observation_layout`` (the env's
+    ``outputs``). Put it outside anything that reads the whole observation (a
+    base law under :class:`controllers.ResidualControl`): the agent sees the
+    groups named, the base the env's observation.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft environment, or a wrapper of one that keeps its observation
+        (for example :class:`NominalUnits`).
+    groups : sequence of str
+        Distinct group names of the env's layout, at least one.
+
+    Raises
+    ------
+    ValueError
+        If a name is not a group of the env's layout, is repeated, or none is
+        given, or the observation is not the layout's.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import spacecraft_env
+    >>> env = spacecraft_env.ObservationGroups(
+    ...     gym.make("FlexibleSpacecraft-v2", outputs=("attitude", "rate", "deflection",
+    ...                                                "attitude_error")),
+    ...     ("attitude_error", "rate"))
+    >>> obs, _ = env.reset(seed=0)
+    >>> obs.shape
+    (6,)
+    """
+
+    def __init__(self, env: gym.Env, groups: tuple[str, ...] | list[str]) -> None:
+        groups = tuple(groups)
+        gym.utils.RecordConstructorArgs.__init__(self, groups=groups)
+        gym.ObservationWrapper.__init__(self, env)
+        layout = env.unwrapped.observation_layout
+        if not groups or len(set(groups)) != len(groups) or not set(groups) <= set(layout.names):
+            raise ValueError(f"groups must be distinct names from the env's layout "
+                             f"{layout.names}, at least one; got {groups}")
+        space = env.observation_space
+        if space.shape != (layout.size,):
+            raise ValueError(f"ObservationGroups needs the environment's own observation, "
+                             f"of shape ({layout.size},); got {space.shape}")
+        self.groups = groups
+        self.rows = np.concatenate([layout.indices(name) for name in groups])
+        self.observation_space = gym.spaces.Box(space.low[self.rows], space.high[self.rows],
+                                                dtype=space.dtype)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """The channels of :attr:`groups` (the env's dtype)."""
+        return np.asarray(observation)[self.rows]

@@ -432,7 +432,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--repeat", type=_integer(1), default=None,
                        help=f"env steps each agent action is held for (ActionRepeat; "
                             f"default {ACTION_REPEAT} = one decision per second, "
-                            f"{RESIDUAL_REPEAT} for the residual-* settings)")
+                            f"{RESIDUAL_REPEAT} for the residual-* settings but the "
+                            f"*-averaged ones, which decide once per averaged second)")
     train.add_argument("--reward", choices=REWARDS, default="bounded",
                        help="env reward form: 'bounded' (1 - min(cost / saturation, 1) "
                             "per step alive), 'log' (the same on a log scale of the cost, "

@@ -35,7 +35,12 @@ of that one with the identifier's physical estimates observed
 schedule on the paddle angle does not know), or the same vector from the truth
 (``residual-scheduled-privileged``, or on the fixed LQG,
 ``residual-fixed-privileged``: the policies that :mod:`spacecraft_lab.adaptation`
-evaluates with true, estimated and nominal parameters).
+evaluates with true, estimated and nominal parameters). ``residual-fixed-averaged``
+and ``residual-scheduled-averaged`` show the agent of the fixed or the scheduled LQG
+what the linear agent without a base sees (the attitude error and the rate in nominal
+units, each the mean of the second since its last decision, one decision a second),
+with full torque as its authority: ARS's linear policy on it is a PD correction of
+the base law.
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -88,17 +93,24 @@ from controllers import (
 from controllers.lqg import INTEGRAL_SETTLE_S
 from controllers.rewards import check_window_start
 from spacecraft_conventions import single_threaded_blas
-from spacecraft_env import ActionRepeat, NominalUnits, ObservationAverage, env_id
+from spacecraft_env import (
+    ActionRepeat,
+    NominalUnits,
+    ObservationAverage,
+    ObservationGroups,
+    env_id,
+)
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 from spacecraft_lab.random_search import paired_ars
 from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
-__all__ = ["ACTION_REPEAT", "ALGORITHMS", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
-           "HYPERPARAMETERS", "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS",
-           "RESIDUAL_REPEAT", "RESIDUAL_SCALE", "NormalizedPolicy", "ZeroTorque",
-           "algorithm_class", "fast_adaptive_lqg", "run_training"]
+__all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_FEATURES", "AVERAGED_RESIDUAL_SCALE",
+           "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES", "HYPERPARAMETERS",
+           "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT",
+           "RESIDUAL_SCALE", "NormalizedPolicy", "ZeroTorque", "algorithm_class",
+           "fast_adaptive_lqg", "residual_scale", "run_training"]
 
 
 #: stable-baselines3 algorithms the job trains: PPO and SAC (MLP policies) and augmented
@@ -114,7 +126,8 @@ FEATURES = ("none", "attitude-error", "attitude-error-averaged", "identified", "
             "residual-adaptive", "residual-fixed",
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
             "residual-scheduled-physical", "residual-scheduled-privileged",
-            "residual-fixed-privileged")
+            "residual-fixed-privileged", "residual-fixed-averaged",
+            "residual-scheduled-averaged")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -150,11 +163,23 @@ _RESIDUAL = {"residual-adaptive": fast_adaptive_lqg, "residual-fixed": FixedLQG,
              "residual-scheduled-observed": ScheduledLQG,
              "residual-scheduled-physical": ScheduledLQG,
              "residual-scheduled-privileged": ScheduledLQG,
-             "residual-fixed-privileged": FixedLQG}
+             "residual-fixed-privileged": FixedLQG, "residual-fixed-averaged": FixedLQG,
+             "residual-scheduled-averaged": ScheduledLQG}
+#: Residual settings whose agent sees what the linear agent without a base sees (the
+#: attitude error and the rate in nominal units, each the mean of the samples since its
+#: last decision) while its base reads the env's whole observation: a linear policy on
+#: it (``--algo ars``) is a PD correction of the base law.
+_AVERAGED_RESIDUAL = frozenset({"residual-fixed-averaged", "residual-scheduled-averaged"})
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
 RESIDUAL_SCALE = 0.05
+#: The authority of the averaged residual settings' linear correction, as a fraction of
+#: full torque: that of the linear agent without a base, so ARS's perturbation (0.05 of
+#: full torque per degree and per 0.1 deg/s, about a tenth of the LQGs' own gains)
+#: explores around the base law as it explored around zero. Its weights start at zero:
+#: a fresh agent flies its base.
+AVERAGED_RESIDUAL_SCALE = 1.0
 #: Env steps per residual decision (0.2 s): a correction of the base's pointing must
 #: act within the flexible modes' period (the 0.51 Hz mode's is 2 s), which one
 #: decision a second cannot.
@@ -190,7 +215,20 @@ RESIDUAL_HYPERPARAMETERS: dict[str, dict[str, Any]] = {
 #: observation through ``VecNormalize``'s running normalization. Its weights then keep
 #: their meaning while it learns (normalized torque per degree of attitude error, per
 #: 0.1 deg/s of rate).
-NOMINAL_UNITS_FEATURES = frozenset({"attitude-error", "attitude-error-averaged"})
+NOMINAL_UNITS_FEATURES = frozenset({"attitude-error", "attitude-error-averaged",
+                                    *_AVERAGED_RESIDUAL})
+#: Settings whose observation is the mean of the samples since the last decision: their
+#: decision period is the window, :data:`ACTION_REPEAT` env steps.
+AVERAGED_FEATURES = frozenset({"attitude-error-averaged", *_AVERAGED_RESIDUAL})
+
+
+def residual_scale(features: str) -> float | None:
+    """The authority of a residual setting's agent (a fraction of full torque), None for
+    a setting without a base: :data:`AVERAGED_RESIDUAL_SCALE` for the averaged residual
+    settings, :data:`RESIDUAL_SCALE` for the others."""
+    if features not in _RESIDUAL:
+        return None
+    return AVERAGED_RESIDUAL_SCALE if features in _AVERAGED_RESIDUAL else RESIDUAL_SCALE
 
 
 def algorithm_class(algo: str) -> type:
@@ -286,6 +324,15 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
     trained on."""
+    if features in _AVERAGED_RESIDUAL:
+        # the base reads the whole observation, the agent the attitude error and the
+        # rate in nominal units, each the mean of the samples since its last decision
+        env = gym.make(env_id(scenario), **env_kwargs,
+                       outputs=("attitude", "rate", "deflection", "attitude_error"))
+        base = set_integral_settle(_RESIDUAL[features](env.unwrapped), base_settle_s)
+        env = ResidualControl(env, base, scale=residual_scale(features))
+        env = ObservationGroups(NominalUnits(env), ("attitude_error", "rate"))
+        return ObservationAverage(env, ACTION_REPEAT)
     if features in NOMINAL_UNITS_FEATURES:
         # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s);
         # -averaged: each the mean of the last second's samples
@@ -304,7 +351,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
         env = PrivilegedFeatures(env)
     if features in _RESIDUAL:
         base = set_integral_settle(_RESIDUAL[features](env.unwrapped), base_settle_s)
-        env = ResidualControl(env, base, scale=RESIDUAL_SCALE)
+        env = ResidualControl(env, base, scale=residual_scale(features))
     if features.endswith("-physical"):
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
@@ -544,7 +591,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                          f"whose zero action flies a base; got features {features!r}")
     reward_from_s = check_window_start(reward_from_s, "reward_from_s")
     if repeat is None:
-        repeat = RESIDUAL_REPEAT if residual else ACTION_REPEAT
+        repeat = (RESIDUAL_REPEAT if residual and features not in AVERAGED_FEATURES
+                  else ACTION_REPEAT)
+    if features in AVERAGED_FEATURES and repeat != ACTION_REPEAT:
+        raise ValueError(f"features {features!r} average the {ACTION_REPEAT} samples since "
+                         f"the last decision: repeat must be {ACTION_REPEAT}, got {repeat}")
     hyper = (RESIDUAL_HYPERPARAMETERS if residual else HYPERPARAMETERS)[algo]
     if log_std_init is not None:
         if algo != "ppo":
@@ -630,7 +681,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         "repeat": repeat, "reward": reward, "relative_to_base": bool(relative_to_base),
         "reward_from_s": reward_from_s,
         "hyperparameters": hyper, "envs": envs,
-        "residual_scale": RESIDUAL_SCALE if residual else None,
+        "residual_scale": residual_scale(features),
         # the comparator that is the residual's base (a fresh residual flies it exactly)
         "base_comparator": next((key for key, make in COMPARATORS
                                  if residual and make is _RESIDUAL[features]), None),

@@ -21,6 +21,7 @@ from spacecraft_env import (
     FlexibleSpacecraftEnv,
     NominalUnits,
     ObservationAverage,
+    ObservationGroups,
     RewardWeights,
 )
 
@@ -504,3 +505,40 @@ def test_observation_average_is_the_mean_of_the_last_window_samples():
 def test_observation_average_rejects_a_bad_window(window):
     with pytest.raises(ValueError, match="window must be an integer >= 1"):
         ObservationAverage(gym.make("FlexibleSpacecraftDocking-v2"), window)
+
+
+def test_observation_groups_pass_on_the_named_groups_in_the_order_named():
+    outputs = ("attitude", "rate", "deflection", "attitude_error")
+    raw = gym.make("FlexibleSpacecraftFamily-v2", task="slew", outputs=outputs)
+    env = ObservationGroups(gym.make("FlexibleSpacecraftFamily-v2", task="slew",
+                                     outputs=outputs), ("attitude_error", "rate"))
+    obs_raw, _ = raw.reset(seed=3)
+    obs, _ = env.reset(seed=3)
+    rows = [10, 11, 12, 3, 4, 5]
+    assert obs.shape == (6,) and obs.dtype == obs_raw.dtype
+    np.testing.assert_array_equal(obs, obs_raw[rows])
+    np.testing.assert_array_equal(env.observation_space.high, raw.observation_space.high[rows])
+    action = np.array([0.2, -0.1, 0.05], dtype=np.float32)
+    step_raw, step = raw.step(action), env.step(action)
+    np.testing.assert_array_equal(step[0], step_raw[0][rows])
+    assert step[1] == step_raw[1] and env.observation_space.contains(step[0])
+    assert pickle.loads(pickle.dumps(env)).rows.tolist() == rows
+    # over NominalUnits (which keeps the layout): the same channels in nominal units
+    nominal = ObservationGroups(NominalUnits(gym.make("FlexibleSpacecraftFamily-v2",
+                                                      task="slew", outputs=outputs)),
+                                ("attitude_error",))
+    np.testing.assert_allclose(nominal.reset(seed=3)[0], obs_raw[10:13] / np.deg2rad(1.0),
+                               rtol=1e-6)
+
+
+@pytest.mark.parametrize("groups", [(), ("rate", "rate"), ("reference",), ["speed"]])
+def test_observation_groups_refuse_groups_the_env_does_not_observe(groups):
+    with pytest.raises(ValueError, match="groups must be distinct names from the env's layout"):
+        ObservationGroups(gym.make("FlexibleSpacecraftDocking-v2"), groups)
+
+
+def test_observation_groups_refuse_an_observation_that_is_not_the_envs_own():
+    from controllers import PhysicalFeatures
+
+    with pytest.raises(ValueError, match="ObservationGroups needs the environment's own"):
+        ObservationGroups(PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2")), ("rate",))

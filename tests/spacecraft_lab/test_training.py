@@ -334,6 +334,45 @@ def test_a_fresh_residual_flies_exactly_its_base():
     assert RESIDUAL_REPEAT == 2 and env.scale == RESIDUAL_SCALE == 0.05
 
 
+def test_an_averaged_residual_sees_the_attitude_error_and_rate_its_base_reads_everything():
+    """``residual-*-averaged``: the base reads the env's whole observation, the agent the
+    attitude error and the rate in nominal units, each averaged over its decision; a
+    zero action flies the base alone, and its authority is full torque."""
+    from controllers import FixedLQG
+    from spacecraft_lab.training import (
+        ACTION_REPEAT,
+        AVERAGED_RESIDUAL_SCALE,
+        ZeroTorque,
+        _evaluate,
+        residual_scale,
+    )
+
+    kwargs = {"task": "slew", "reward": "cost", "max_episode_steps": 1100}
+    env = _make_env("family", "residual-fixed-averaged", kwargs)
+    assert env.observation_space.shape == (6,) and env.window == ACTION_REPEAT
+    assert env.unwrapped.observation_layout.names[-1] == "attitude_error"
+    raw = gym.make(env_id("family"), **kwargs, outputs=("attitude_error", "rate"))
+    obs, _ = env.reset(seed=4)
+    obs_raw, _ = raw.reset(seed=4)
+    level = np.array([np.deg2rad(1.0)] * 3 + [np.deg2rad(0.1)] * 3)
+    np.testing.assert_allclose(obs, obs_raw / level, rtol=1e-5)
+    assert residual_scale("residual-fixed-averaged") == AVERAGED_RESIDUAL_SCALE == 1.0
+    assert residual_scale("residual-fixed") == 0.05 and residual_scale("physical") is None
+    seeds = (1000, 1001)
+    base = _evaluate(lambda e: FixedLQG(e), "family", "none", kwargs, seeds=seeds)
+    silent = _evaluate(ZeroTorque(), "family", "residual-fixed-averaged", kwargs, seeds=seeds)
+    np.testing.assert_allclose(silent["cost_after_100s_per_seed"],
+                               base["cost_after_100s_per_seed"], rtol=1e-12)
+
+
+def test_an_averaged_setting_decides_once_per_averaging_window(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    for features in ("attitude-error-averaged", "residual-fixed-averaged"):
+        with pytest.raises(ValueError, match="repeat must be 10, got 2"):
+            run_training("ars", features, 2048, 1, tmp_path, scenario="family", repeat=2,
+                         progress=False)
+
+
 def test_rl_figure_under_a_cost_reward_shows_the_mean_episode_not_the_slew(tmp_path):
     """A cost reward's return is the whole episode's cost, which the slew dominates
     alike for every policy; the figure's second panel is then the cost from 100 s over
