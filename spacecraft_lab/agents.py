@@ -42,6 +42,7 @@ from spacecraft_lab.training import (
     _score_comparators,
     _training_env_kwargs,
     algorithm_class,
+    residual_scale,
 )
 
 __all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
@@ -58,6 +59,9 @@ SHIPPED_AGENTS = {
         AGENT_DIRECTORY / "residual-scheduled-family" / "ppo-residual-scheduled-seed0.zip",
     "ars-averaged-family":
         AGENT_DIRECTORY / "ars-averaged-family" / "ars-attitude-error-averaged-seed1.zip",
+    "ars-residual-scheduled-family":
+        AGENT_DIRECTORY / "ars-residual-scheduled-family"
+        / "ars-residual-scheduled-averaged-seed1.zip",
 }
 #: Training settings an agent's ``metrics.json`` must hold.
 _SETTINGS = ("algo", "features", "scenario", "randomize", "reward", "repeat")
@@ -94,6 +98,11 @@ def _settings(path: Path) -> dict[str, Any]:
     if settings["algo"] not in ALGORITHMS or settings["features"] not in FEATURES:
         raise ValueError(f"{metrics_path}: algo {settings['algo']!r} / features "
                          f"{settings['features']!r} are not ones this version trains")
+    trained, present = metrics.get("residual_scale"), residual_scale(settings["features"])
+    if trained is not None and trained != present:
+        raise ValueError(f"{metrics_path}: the agent was trained with a residual authority of "
+                         f"{trained} of full torque; this version's {settings['features']!r} "
+                         f"setting flies {present}")
     if not (isinstance(settings["repeat"], int) and settings["repeat"] >= 1):
         raise ValueError(f"{metrics_path}: repeat must be an integer >= 1, "
                          f"got {settings['repeat']!r}")

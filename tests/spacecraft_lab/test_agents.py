@@ -35,13 +35,14 @@ def test_every_shipped_agent_is_in_the_repository_with_what_it_needs():
     # trained before the integral's settle time was recorded: its base integrates at once
     ("residual-scheduled-family", "residual-scheduled", 2, 0.0),
     ("ars-averaged-family", "attitude-error-averaged", 10, None),      # no base
+    ("ars-residual-scheduled-family", "residual-scheduled-averaged", 10, 50.0),
 ])
 def test_each_shipped_agent_flies_as_it_did_when_it_was_trained(name, features, repeat,
                                                                  settle):
     """Loaded from the repository, the agent scores the training run's final evaluation
     episodes exactly as the run recorded them (same policy, same statistics)."""
     pytest.importorskip("stable_baselines3")
-    if features.startswith("attitude-error"):
+    if name.startswith("ars-"):
         pytest.importorskip("sb3_contrib")
     policy, settings = load_agent(name)
     assert settings["features"] == features and settings["repeat"] == repeat
@@ -109,6 +110,10 @@ def test_a_model_without_its_record_or_statistics_is_refused(tmp_path):
     record = json.loads((source.parent / "metrics.json").read_text())
     (tmp_path / "metrics.json").write_text(json.dumps({**record, "features": "telepathy"}))
     with pytest.raises(ValueError, match="not ones this version trains"):
+        load_agent(tmp_path / source.name)
+    # a residual trained with another authority would fly another law than it learnt
+    (tmp_path / "metrics.json").write_text(json.dumps({**record, "residual_scale": 0.2}))
+    with pytest.raises(ValueError, match="residual authority of 0.2 of full torque"):
         load_agent(tmp_path / source.name)
 
 
