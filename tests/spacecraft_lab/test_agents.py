@@ -113,7 +113,7 @@ def test_a_model_without_its_record_or_statistics_is_refused(tmp_path):
         load_agent(tmp_path / source.name)
     # a residual trained with another authority would fly another law than it learnt
     (tmp_path / "metrics.json").write_text(json.dumps({**record, "residual_scale": 0.2}))
-    with pytest.raises(ValueError, match="residual authority of 0.2 of full torque"):
+    with pytest.raises(ValueError, match=r"residual authority of 0\.2 of full torque"):
         load_agent(tmp_path / source.name)
 
 
