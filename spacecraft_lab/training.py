@@ -223,9 +223,21 @@ AVERAGED_FEATURES = frozenset({"attitude-error-averaged", *_AVERAGED_RESIDUAL})
 
 
 def residual_scale(features: str) -> float | None:
-    """The authority of a residual setting's agent (a fraction of full torque), None for
-    a setting without a base: :data:`AVERAGED_RESIDUAL_SCALE` for the averaged residual
-    settings, :data:`RESIDUAL_SCALE` for the others."""
+    """The authority of a residual setting's agent.
+
+    Parameters
+    ----------
+    features : str
+        One of :data:`FEATURES`.
+
+    Returns
+    -------
+    float or None
+        The torque an agent action of 1 adds, as a fraction of full torque:
+        :data:`AVERAGED_RESIDUAL_SCALE` for the averaged residual settings,
+        :data:`RESIDUAL_SCALE` for the other residual settings; None for a setting
+        without a base law.
+    """
     if features not in _RESIDUAL:
         return None
     return AVERAGED_RESIDUAL_SCALE if features in _AVERAGED_RESIDUAL else RESIDUAL_SCALE
