@@ -336,23 +336,17 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
     trained on."""
-    if features in _AVERAGED_RESIDUAL:
-        # the base reads the whole observation, the agent the attitude error and the
-        # rate in nominal units, each the mean of the samples since its last decision
-        env = gym.make(env_id(scenario), **env_kwargs,
-                       outputs=("attitude", "rate", "deflection", "attitude_error"))
-        base = set_integral_settle(_RESIDUAL[features](env.unwrapped), base_settle_s)
-        env = ResidualControl(env, base, scale=residual_scale(features))
-        env = ObservationGroups(NominalUnits(env), ("attitude_error", "rate"))
-        return ObservationAverage(env, ACTION_REPEAT)
-    if features in NOMINAL_UNITS_FEATURES:
+    if features in NOMINAL_UNITS_FEATURES and features not in _RESIDUAL:
         # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s);
         # -averaged: each the mean of the last second's samples
         env = gym.make(env_id(scenario), **env_kwargs, outputs=("attitude_error", "rate"))
-        if features == "attitude-error-averaged":
+        if features in AVERAGED_FEATURES:
             env = ObservationAverage(env, ACTION_REPEAT)
         return NominalUnits(env)
-    env = gym.make(env_id(scenario), **env_kwargs)
+    # an averaged residual's base reads the whole observation, its agent the error group
+    extra = ({"outputs": ("attitude", "rate", "deflection", "attitude_error")}
+             if features in _AVERAGED_RESIDUAL else {})
+    env = gym.make(env_id(scenario), **env_kwargs, **extra)
     if features in _IDENTIFIED:
         env = IdentifiedModelFeatures(env, **_IDENTIFIED[features])
     elif features == "oracle":
@@ -372,6 +366,11 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     if features.endswith("-observed"):
         # the attitude error, the last torque and the base's state estimate
         env = ResidualObservations(env)
+    if features in _AVERAGED_RESIDUAL:
+        # the attitude error and the rate in nominal units, each the mean of the
+        # samples since the agent's last decision
+        env = ObservationGroups(NominalUnits(env), ("attitude_error", "rate"))
+        env = ObservationAverage(env, ACTION_REPEAT)
     return env
 
 

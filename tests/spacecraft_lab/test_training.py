@@ -359,7 +359,7 @@ def test_an_averaged_residual_sees_the_attitude_error_and_rate_its_base_reads_ev
     assert residual_scale("residual-fixed-averaged") == AVERAGED_RESIDUAL_SCALE == 1.0
     assert residual_scale("residual-fixed") == 0.05 and residual_scale("physical") is None
     seeds = (1000, 1001)
-    base = _evaluate(lambda e: FixedLQG(e), "family", "none", kwargs, seeds=seeds)
+    base = _evaluate(FixedLQG, "family", "none", kwargs, seeds=seeds)
     silent = _evaluate(ZeroTorque(), "family", "residual-fixed-averaged", kwargs, seeds=seeds)
     np.testing.assert_allclose(silent["cost_after_100s_per_seed"],
                                base["cost_after_100s_per_seed"], rtol=1e-12)
