@@ -222,4 +222,3 @@ def test_the_compiled_screening_is_the_numpy_expressions():
             idle, usable = _idle_and_usable(u, y, last, has_last, 10.0)
             assert idle == (has_last and not u.any() and np.array_equal(y, last))
             assert usable == bool(np.abs(u).max() <= 10.0 and np.abs(y).max() <= 10.0)
-
