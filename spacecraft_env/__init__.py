@@ -48,6 +48,7 @@ from spacecraft_env.wrappers import (
     NominalUnits,
     ObservationAverage,
     ObservationGroups,
+    ObservationProducts,
 )
 
 __all__ = [
@@ -73,6 +74,7 @@ __all__ = [
     "NominalUnits",
     "ObservationAverage",
     "ObservationGroups",
+    "ObservationProducts",
     "PaddleRotationScenario",
     "PlantDraw",
     "RewardWeights",

@@ -27,7 +27,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage", "ObservationGroups"]
+__all__ = ["ActionRepeat", "NominalUnits", "ObservationAverage", "ObservationGroups",
+           "ObservationProducts"]
 
 
 def _count(name: str, value: Any) -> int:
@@ -82,15 +83,20 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     per 0.1 deg/s), which a running normalization (SB3's ``VecNormalize``) would
     rescale as its statistics move.
 
+    Channels a feature wrapper appended after the layout's (for example
+    :class:`controllers.PrivilegedFeatures`' parameter vector, already in a
+    normalized frame) pass unchanged.
+
     Parameters
     ----------
     env : gymnasium.Env
-        A spacecraft environment (or a wrapper of one that keeps its observation).
+        A spacecraft environment, or a wrapper of one that keeps its observation
+        or appends channels after it.
 
     Raises
     ------
     ValueError
-        If the observation's size is not the environment's layout's.
+        If the observation is shorter than the environment's layout.
 
     Examples
     --------
@@ -109,10 +115,12 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         gym.ObservationWrapper.__init__(self, env)
         scales = np.asarray(env.unwrapped.observation_layout.scales(), dtype=np.float64)
         space = env.observation_space
-        if space.shape != scales.shape:
-            raise ValueError(f"NominalUnits needs the environment's own observation, of "
-                             f"shape {scales.shape}; got {space.shape}")
-        self.scales = scales
+        if len(space.shape) != 1 or space.shape[0] < scales.size:
+            raise ValueError(f"NominalUnits needs the environment's own observation (of "
+                             f"shape {scales.shape}, appended channels allowed); got "
+                             f"{space.shape}")
+        self.scales = np.concatenate([scales, np.ones(space.shape[0] - scales.size)])
+        scales = self.scales
         self.observation_space = gym.spaces.Box(
             (space.low / scales).astype(np.float32), (space.high / scales).astype(np.float32),
             dtype=np.float32)
@@ -179,13 +187,14 @@ class ObservationGroups(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
     The groups are those of ``env.unwrapped.observation_layout`` (the env's
     ``outputs``). Put it outside anything that reads the whole observation (a
     base law under :class:`controllers.ResidualControl`): the agent sees the
-    groups named, the base the env's observation.
+    groups named, the base the env's observation. Channels a feature wrapper
+    appended after the layout's follow the groups, in their order.
 
     Parameters
     ----------
     env : gymnasium.Env
         A spacecraft environment, or a wrapper of one that keeps its observation
-        (for example :class:`NominalUnits`).
+        (for example :class:`NominalUnits`) or appends channels after it.
     groups : sequence of str
         Distinct group names of the env's layout, at least one.
 
@@ -193,7 +202,7 @@ class ObservationGroups(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
     ------
     ValueError
         If a name is not a group of the env's layout, is repeated, or none is
-        given, or the observation is not the layout's.
+        given, or the observation is shorter than the layout.
 
     Examples
     --------
@@ -217,14 +226,84 @@ class ObservationGroups(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
             raise ValueError(f"groups must be distinct names from the env's layout "
                              f"{layout.names}, at least one; got {groups}")
         space = env.observation_space
-        if space.shape != (layout.size,):
+        if len(space.shape) != 1 or space.shape[0] < layout.size:
             raise ValueError(f"ObservationGroups needs the environment's own observation, "
-                             f"of shape ({layout.size},); got {space.shape}")
+                             f"of shape ({layout.size},) (appended channels allowed); got "
+                             f"{space.shape}")
         self.groups = groups
-        self.rows = np.concatenate([layout.indices(name) for name in groups])
+        self.rows = np.concatenate([layout.indices(name) for name in groups]
+                                   + [np.arange(layout.size, space.shape[0])])
         self.observation_space = gym.spaces.Box(space.low[self.rows], space.high[self.rows],
                                                 dtype=space.dtype)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        """The channels of :attr:`groups` (the env's dtype)."""
+        """The channels of :attr:`groups`, then any appended ones (the env's dtype)."""
         return np.asarray(observation)[self.rows]
+
+
+class ObservationProducts(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """The observation's leading channels and their products with scheduling channels.
+
+    For an observation ``[x, ..., s_j, ...]`` with ``x`` its first ``state``
+    channels and ``s`` the channels ``schedule``, the wrapped observation is
+    ``[x, x_1 s_1, x_1 s_2, ..., x_n s_m]`` (``x`` then ``outer(x, s)`` row by
+    row); the other channels are dropped. A linear policy on it is a
+    gain-scheduled linear law, ``u = (W_0 + sum_j s_j W_j) x``: its gains move
+    with the scheduling channels (a parameter vector appended by a feature
+    wrapper, e.g. the rigid-body gain of :class:`controllers.PrivilegedFeatures`)
+    where a linear policy on ``[x, s]`` could only add a torque bias.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An environment with a one-dimensional ``Box`` observation.
+    state : int
+        ``n``, the leading channels that are kept and multiplied, >= 1.
+    schedule : sequence of int
+        Indices of the scheduling channels in the observation, distinct, at least
+        one, each >= ``state``.
+
+    Raises
+    ------
+    ValueError
+        If ``state`` or an index is out of range, or the indices are not distinct.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import spacecraft_env
+    >>> env = spacecraft_env.ObservationProducts(gym.make("FlexibleSpacecraft-v2"), 6, (8, 9))
+    >>> obs, _ = env.reset(seed=0)
+    >>> obs.shape                        # 6 channels, then 6 x 2 products
+    (18,)
+    """
+
+    def __init__(self, env: gym.Env, state: int, schedule: tuple[int, ...] | list[int]) -> None:
+        state = _count("state", state)
+        schedule = tuple(int(j) for j in schedule)
+        gym.utils.RecordConstructorArgs.__init__(self, state=state, schedule=schedule)
+        gym.ObservationWrapper.__init__(self, env)
+        space = env.observation_space
+        if len(space.shape) != 1 or space.shape[0] <= state:
+            raise ValueError(f"state must be below the observation's size {space.shape}, "
+                             f"got {state}")
+        size = space.shape[0]
+        if (not schedule or len(set(schedule)) != len(schedule)
+                or not all(state <= j < size for j in schedule)):
+            raise ValueError(f"schedule must be distinct indices in [{state}, {size}), at "
+                             f"least one; got {schedule}")
+        self.state, self.schedule = state, np.asarray(schedule, dtype=int)
+        x_max = np.maximum(np.abs(space.low[:state]), np.abs(space.high[:state]))
+        s_max = np.maximum(np.abs(space.low[self.schedule]), np.abs(space.high[self.schedule]))
+        high = np.concatenate([x_max, np.outer(x_max, s_max).ravel()]).astype(np.float64)
+        low = np.concatenate([space.low[:state], -np.outer(x_max, s_max).ravel()])
+        high[:state] = space.high[:state]
+        self.observation_space = gym.spaces.Box(low.astype(space.dtype),
+                                                high.astype(space.dtype), dtype=space.dtype)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """``[x, outer(x, s).ravel()]`` (the env's dtype)."""
+        obs = np.asarray(observation, dtype=np.float64)
+        x = obs[:self.state]
+        return np.concatenate([x, np.outer(x, obs[self.schedule]).ravel()]).astype(
+            self.observation_space.dtype)

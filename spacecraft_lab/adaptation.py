@@ -3,9 +3,12 @@
 ``spacecraft adapt AGENT.zip [AGENT.zip ...] [--episodes 20] [--out DIR]``
 calls :func:`run_adaptation` on policies that ``spacecraft train`` trained
 with the true plant's parameters observed (``--features privileged``,
-``residual-scheduled-privileged`` or ``residual-fixed-privileged``:
-:class:`controllers.PrivilegedFeatures`, the rigid-body gain with the actuator
-efficiency, the dominant modes and the paddle angle). For each policy it
+``residual-scheduled-privileged``, ``residual-fixed-privileged`` or
+``residual-scheduled-averaged-privileged``: :class:`controllers.PrivilegedFeatures`,
+the rigid-body gain with the actuator efficiency, the dominant modes and the paddle
+angle). Each source's vector is put where the setting reads the truth's (the
+``parameters`` of :func:`spacecraft_lab.training._make_env`), so the policy flies its
+training env with only the vector changed. For each policy it
 
 1. flies the policy (the truth observed) on ``episodes`` episodes of the
    family (seeds from :data:`COLLECTION_SEED`, disjoint from training, from
@@ -32,6 +35,7 @@ efficiency, the dominant modes and the paddle angle). For each policy it
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +48,7 @@ from controllers import (
     EstimatedFeatures,
     PhysicalFeatures,
     PrivilegedFeatures,
+    run_episode,
 )
 from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent, paired_ratio
 from spacecraft_lab.score_cache import default_cache
@@ -73,27 +78,61 @@ def _unprivileged(features: str) -> str:
                      "or 'residual-*-privileged')")
 
 
+class _PairedVectors(gym.ObservationWrapper):
+    """The identifier's physical vector and the truth's side by side: appends the
+    privileged vector alone (what the policy was trained on) and records both at every
+    refresh with its time (s)."""
+
+    def __init__(self, env: gym.Env, every: int = 10) -> None:
+        inner = PrivilegedFeatures(PhysicalFeatures(env, every=every), every=every)
+        super().__init__(inner)
+        self.d, self.every = inner.n_features, int(every)
+        size = inner.observation_space.shape[0] - self.d
+        self.observation_space = gym.spaces.Box(
+            np.delete(inner.observation_space.low, np.s_[size - self.d:size]),
+            np.delete(inner.observation_space.high, np.s_[size - self.d:size]),
+            dtype=inner.observation_space.dtype)
+        self.records: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self._steps = 0
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        self._steps = 0
+        return super().reset(**kwargs)
+
+    def step(self, action: Any) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
+        kept = len(self.records)
+        obs, reward, terminated, truncated, info = super().step(action)
+        if terminated or truncated:
+            del self.records[kept:]            # no decision follows the last observation
+        return obs, reward, terminated, truncated, info
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        d = self.d
+        if self._steps % self.every == 0:
+            self.records.append((observation[-2 * d:-d].astype(float),
+                                 observation[-d:].astype(float), self.env.unwrapped.time))
+        self._steps += 1
+        return np.concatenate([observation[:-2 * d], observation[-d:]])
+
+
 def _paired_rollouts(policy: Any, make: Any, seeds: Sequence[int],
                      every: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fly ``policy`` with the truth observed; return the physical and privileged vectors
-    at every refresh and the refresh times (s). ``make()``: the env without features."""
-    physical, privileged, times = [], [], []
+    at every refresh and the refresh times (s). ``make(parameters)``: the setting's env
+    with ``parameters`` appending its parameter vector."""
+    records: list[tuple[np.ndarray, np.ndarray, float]] = []
     for seed in seeds:
-        env = PrivilegedFeatures(PhysicalFeatures(make(), every=every), every=every)
-        d = env.n_features
-        obs, info = env.reset(seed=int(seed))
-        policy.reset(seed=int(seed))
-        steps, done = 0, False
-        while not done:
-            if steps % every == 0:
-                physical.append(obs[-2 * d:-d])
-                privileged.append(obs[-d:])
-                times.append(info["time"])
-            action = policy.act(np.concatenate([obs[:-2 * d], obs[-d:]]), info)
-            obs, _, terminated, truncated, info = env.step(action)
-            steps += 1
-            done = terminated or truncated
+        paired: list[_PairedVectors] = []
+
+        def parameters(env: gym.Env, into: list = paired) -> gym.Env:
+            into.append(_PairedVectors(env, every))
+            return into[-1]
+
+        env = make(parameters)
+        run_episode(env, policy, seed=int(seed))
+        records.extend(paired[0].records)
         env.close()
+    physical, privileged, times = zip(*records, strict=True)
     return (np.asarray(physical, dtype=float), np.asarray(privileged, dtype=float),
             np.asarray(times, dtype=float))
 
@@ -153,11 +192,13 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
         if any(other[key] != settings[key] for key in ("features", "scenario", "reward")):
             raise ValueError("the agents must share their training setting; "
                              f"{other['path']} differs from {settings['path']}")
-    base = _unprivileged(settings["features"])
+    features = settings["features"]
+    base = _unprivileged(features)
     scenario, env_kwargs = settings["scenario"], settings["env_kwargs"]
 
-    def make() -> gym.Env:
-        return _make_env(scenario, base, env_kwargs, settings["base_integral_settle_s"])
+    def make(parameters: Any) -> gym.Env:
+        return _make_env(scenario, features, env_kwargs, settings["base_integral_settle_s"],
+                         parameters=parameters)
 
     collection = tuple(range(COLLECTION_SEED, COLLECTION_SEED + int(episodes)))
     comparators = _score_comparators(scenario, env_kwargs, seeds, workers, progress,
@@ -172,9 +213,9 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
             physical, privileged, _ = _paired_rollouts(policy, make, collection)
             module = AdaptationModule().fit(physical, privileged)
             bar.update()
-            makers = {"true": lambda: PrivilegedFeatures(make()),
-                      "estimated": lambda m=module: EstimatedFeatures(make(), m),
-                      "nominal": lambda: PrivilegedFeatures(make(), source="nominal")}
+            makers = {"true": lambda: make(PrivilegedFeatures),
+                      "estimated": lambda m=module: make(lambda env: EstimatedFeatures(env, m)),
+                      "nominal": lambda: make(partial(PrivilegedFeatures, source="nominal"))}
             scores = {}
             for source in SOURCES:
                 scores[source] = _evaluate(policy, scenario, base, env_kwargs, seeds,
@@ -183,7 +224,7 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
             # the parameters themselves on the scored episodes, the truth flown
             phys, priv, times = _paired_rollouts(policy, make, seeds)
             late = times >= _ERROR_FROM_S
-            nominal_env = PrivilegedFeatures(make(), source="nominal")
+            nominal_env = PrivilegedFeatures(make(None).unwrapped, source="nominal")
             nominal = np.broadcast_to(nominal_env.nominal_vector, priv[late].shape)
             nominal_env.close()
             errors = {"estimated": _group_errors(module.predict(phys[late]), priv[late]),

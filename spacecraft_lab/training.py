@@ -40,7 +40,12 @@ and ``residual-scheduled-averaged`` show the agent of the fixed or the scheduled
 what the linear agent without a base sees (the attitude error and the rate in nominal
 units, each the mean of the second since its last decision, one decision a second),
 with full torque as its authority: ARS's linear policy on it is a PD correction of
-the base law.
+the base law. ``residual-scheduled-averaged-privileged`` adds the truth's parameter
+vector to that one, and shows the agent the averaged error and rate followed by their
+products with the rigid-body gain's channels (:data:`SCHEDULE_CHANNELS`,
+:class:`spacecraft_env.ObservationProducts`): ARS's linear policy on it is a PD
+correction whose gains move with the plant's gain, the policy
+:mod:`spacecraft_lab.adaptation` flies with the true, estimated and nominal vectors.
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -90,6 +95,7 @@ from controllers import (
     run_episode,
     set_integral_settle,
 )
+from controllers.features import PHYSICAL_FEATURE_NAMES
 from controllers.lqg import INTEGRAL_SETTLE_S
 from controllers.rewards import check_window_start
 from spacecraft_conventions import single_threaded_blas
@@ -98,6 +104,7 @@ from spacecraft_env import (
     NominalUnits,
     ObservationAverage,
     ObservationGroups,
+    ObservationProducts,
     env_id,
 )
 from spacecraft_lab.control import SCENARIO_NAMES
@@ -109,8 +116,8 @@ from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_FEATURES", "AVERAGED_RESIDUAL_SCALE",
            "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES", "HYPERPARAMETERS",
            "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT",
-           "RESIDUAL_SCALE", "NormalizedPolicy", "ZeroTorque", "algorithm_class",
-           "fast_adaptive_lqg", "residual_scale", "run_training"]
+           "RESIDUAL_SCALE", "SCHEDULE_CHANNELS", "NormalizedPolicy", "ZeroTorque",
+           "algorithm_class", "fast_adaptive_lqg", "residual_scale", "run_training"]
 
 
 #: stable-baselines3 algorithms the job trains: PPO and SAC (MLP policies) and augmented
@@ -127,7 +134,7 @@ FEATURES = ("none", "attitude-error", "attitude-error-averaged", "identified", "
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
             "residual-scheduled-physical", "residual-scheduled-privileged",
             "residual-fixed-privileged", "residual-fixed-averaged",
-            "residual-scheduled-averaged")
+            "residual-scheduled-averaged", "residual-scheduled-averaged-privileged")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -164,12 +171,20 @@ _RESIDUAL = {"residual-adaptive": fast_adaptive_lqg, "residual-fixed": FixedLQG,
              "residual-scheduled-physical": ScheduledLQG,
              "residual-scheduled-privileged": ScheduledLQG,
              "residual-fixed-privileged": FixedLQG, "residual-fixed-averaged": FixedLQG,
-             "residual-scheduled-averaged": ScheduledLQG}
+             "residual-scheduled-averaged": ScheduledLQG,
+             "residual-scheduled-averaged-privileged": ScheduledLQG}
 #: Residual settings whose agent sees what the linear agent without a base sees (the
 #: attitude error and the rate in nominal units, each the mean of the samples since its
 #: last decision) while its base reads the env's whole observation: a linear policy on
 #: it (``--algo ars``) is a PD correction of the base law.
-_AVERAGED_RESIDUAL = frozenset({"residual-fixed-averaged", "residual-scheduled-averaged"})
+_AVERAGED_RESIDUAL = frozenset({"residual-fixed-averaged", "residual-scheduled-averaged",
+                                "residual-scheduled-averaged-privileged"})
+#: The parameter channels that schedule the gains of an averaged residual with the
+#: plant's parameters observed (``residual-scheduled-averaged-privileged``): the
+#: rigid-body gain's log diagonal, the loop gain a law designed for the nominal
+#: actuator and inertia lacks or has in excess (measured: the shipped averaged residual
+#: adds gain that the family's low-gain draws need and its high-gain draws do not).
+SCHEDULE_CHANNELS = ("log_gain_xx", "log_gain_yy", "log_gain_zz")
 #: A trained residual's authority, as a fraction of full torque (0.5 N m on the 10 N m
 #: actuators): about ten times the LQGs' torque RMS after the slew, so it can correct
 #: the base's pointing without the authority to tumble the spacecraft.
@@ -332,10 +347,17 @@ def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
 
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
-              base_settle_s: float = INTEGRAL_SETTLE_S) -> gym.Env:
+              base_settle_s: float = INTEGRAL_SETTLE_S,
+              parameters: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
     """The setting's env. ``base_settle_s``: the residual base's integral settle time
     (:func:`controllers.set_integral_settle`), so a saved agent flies the base it was
-    trained on."""
+    trained on. ``parameters``: for a setting with the plant's parameters observed
+    (``*-privileged``), the wrapper that appends them where the setting reads them
+    (default :class:`controllers.PrivilegedFeatures`, the truth; an RMA comparison
+    puts the estimated or nominal vector there)."""
+    if parameters is not None and not features.endswith("privileged"):
+        raise ValueError(f"features {features!r} observe no parameter vector")
+    appended = parameters or PrivilegedFeatures
     if features in NOMINAL_UNITS_FEATURES and features not in _RESIDUAL:
         # the pointing error and the rate alone, in nominal units (1 deg, 0.1 deg/s);
         # -averaged: each the mean of the last second's samples
@@ -354,7 +376,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     elif features == "physical":
         env = PhysicalFeatures(env)
     elif features == "privileged":
-        env = PrivilegedFeatures(env)
+        env = appended(env)
     if features in _RESIDUAL:
         base = set_integral_settle(_RESIDUAL[features](env.unwrapped), base_settle_s)
         env = ResidualControl(env, base, scale=residual_scale(features))
@@ -362,7 +384,7 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
         # outside the residual wrapper: the identifier sees the whole torque
         env = PhysicalFeatures(env)
     if features.endswith("-privileged"):
-        env = PrivilegedFeatures(env)
+        env = appended(env)
     if features.endswith("-observed"):
         # the attitude error, the last torque and the base's state estimate
         env = ResidualObservations(env)
@@ -371,6 +393,10 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
         # samples since the agent's last decision
         env = ObservationGroups(NominalUnits(env), ("attitude_error", "rate"))
         env = ObservationAverage(env, ACTION_REPEAT)
+        if features.endswith("-privileged"):
+            # the agent's linear law scheduled on the parameters: its gains move with them
+            env = ObservationProducts(env, 6, [6 + PHYSICAL_FEATURE_NAMES.index(name)
+                                               for name in SCHEDULE_CHANNELS])
     return env
 
 

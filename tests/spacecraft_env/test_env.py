@@ -22,6 +22,7 @@ from spacecraft_env import (
     NominalUnits,
     ObservationAverage,
     ObservationGroups,
+    ObservationProducts,
     RewardWeights,
 )
 
@@ -471,11 +472,35 @@ def test_nominal_units_divide_each_channel_by_its_groups_level():
     assert pickle.loads(pickle.dumps(env)).scales.tolist() == env.scales.tolist()
 
 
-def test_nominal_units_refuse_an_observation_that_is_not_the_envs_own():
-    from controllers import PhysicalFeatures
-
+def test_nominal_units_refuse_an_observation_shorter_than_the_envs_own():
+    fewer = ObservationGroups(gym.make("FlexibleSpacecraftFamily-v2"), ("rate",))
     with pytest.raises(ValueError, match="NominalUnits needs the environment's own"):
-        NominalUnits(PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2")))
+        NominalUnits(fewer)
+
+
+def test_nominal_units_and_groups_pass_appended_channels_unchanged():
+    """A feature wrapper's appended vector (already normalized) follows the groups as
+    it is; the layout's channels are scaled and selected as without it."""
+    from controllers import PrivilegedFeatures
+
+    outputs = ("attitude", "rate", "deflection", "attitude_error")
+    plain = ObservationGroups(NominalUnits(gym.make("FlexibleSpacecraftFamily-v2",
+                                                    task="slew", outputs=outputs)),
+                              ("attitude_error", "rate"))
+    features = PrivilegedFeatures(gym.make("FlexibleSpacecraftFamily-v2", task="slew",
+                                           outputs=outputs))
+    env = ObservationGroups(NominalUnits(features), ("attitude_error", "rate"))
+    d = features.n_features
+    assert env.observation_space.shape == (6 + d,)
+    action = np.array([0.2, -0.1, 0.05], dtype=np.float32)
+    for obs, (expected, vector) in zip(
+            (env.reset(seed=3)[0], env.step(action)[0]),
+            ((plain.reset(seed=3)[0], features._feats), (plain.step(action)[0],
+                                                         features._feats)), strict=True):
+        np.testing.assert_allclose(obs[:6], expected, rtol=1e-6)
+        np.testing.assert_array_equal(obs[6:], vector.astype(np.float32))
+        assert env.observation_space.contains(obs)
+    assert np.abs(obs[6:]).max() > 0.01                  # the vector is there, not zeros
 
 
 def test_observation_average_is_the_mean_of_the_last_window_samples():
@@ -537,8 +562,38 @@ def test_observation_groups_refuse_groups_the_env_does_not_observe(groups):
         ObservationGroups(gym.make("FlexibleSpacecraftDocking-v2"), groups)
 
 
-def test_observation_groups_refuse_an_observation_that_is_not_the_envs_own():
-    from controllers import PhysicalFeatures
-
+def test_observation_groups_refuse_an_observation_shorter_than_the_envs_own():
+    fewer = ObservationGroups(gym.make("FlexibleSpacecraftFamily-v2"), ("rate",))
     with pytest.raises(ValueError, match="ObservationGroups needs the environment's own"):
-        ObservationGroups(PhysicalFeatures(gym.make("FlexibleSpacecraftFamily-v2")), ("rate",))
+        ObservationGroups(fewer, ("rate",))
+
+
+def test_observation_products_are_the_state_times_each_scheduling_channel():
+    raw = gym.make("FlexibleSpacecraftDocking-v2", task="slew")
+    env = ObservationProducts(gym.make("FlexibleSpacecraftDocking-v2", task="slew"), 3, (6, 8))
+    obs_raw, _ = raw.reset(seed=2)
+    obs, _ = env.reset(seed=2)
+    action = np.array([0.3, -0.2, 0.1], dtype=np.float32)
+    for _ in range(2):
+        x, s = obs_raw[:3].astype(float), obs_raw[[6, 8]].astype(float)
+        expected = [x[0], x[1], x[2], x[0] * s[0], x[0] * s[1], x[1] * s[0], x[1] * s[1],
+                    x[2] * s[0], x[2] * s[1]]
+        np.testing.assert_allclose(obs, expected, rtol=1e-6, atol=1e-12)
+        assert obs.dtype == np.float32 and env.observation_space.contains(obs)
+        obs_raw, obs = raw.step(action)[0], env.step(action)[0]
+    assert obs.shape == (9,) and env.observation_space.shape == (9,)
+    copy = pickle.loads(pickle.dumps(env))
+    assert copy.state == 3 and copy.schedule.tolist() == [6, 8]
+
+
+@pytest.mark.parametrize(("state", "schedule", "match"), [
+    (0, (6,), "state must be an integer >= 1"),
+    (10, (6,), "state must be below"),
+    (3, (), "schedule must be distinct"),
+    (3, (6, 6), "schedule must be distinct"),
+    (3, (2,), "schedule must be distinct"),
+    (3, (10,), "schedule must be distinct"),
+])
+def test_observation_products_refuse_bad_channels(state, schedule, match):
+    with pytest.raises(ValueError, match=match):
+        ObservationProducts(gym.make("FlexibleSpacecraftDocking-v2"), state, schedule)

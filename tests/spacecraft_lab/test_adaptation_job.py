@@ -89,3 +89,37 @@ def test_cli_adapt_writes_json_and_table(adapted):
     assert (out / "table.md").read_text().startswith("RMA comparison")
     assert (out / "adaptation.png").stat().st_size > 10_000
     assert "wrote" in printed
+
+
+def test_paired_rollouts_record_both_vectors_where_the_setting_reads_its_parameters():
+    """The adaptation module's pairs on a setting whose agent reads the parameters through
+    averaged, scheduled channels (``residual-scheduled-averaged-privileged``): one pair
+    per refresh (1 s), the policy flying the truth's vector exactly as in training."""
+    from controllers import PrivilegedFeatures, run_episode
+    from spacecraft_lab.adaptation import _paired_rollouts
+    from spacecraft_lab.training import ZeroTorque, _make_env
+
+    kwargs = {"task": "slew", "reward": "cost", "randomize": True, "max_episode_steps": 600}
+    features = "residual-scheduled-averaged-privileged"
+    seen = []
+
+    class Spy(ZeroTorque):
+        def act(self, obs, info=None):
+            seen.append(np.asarray(obs).copy())
+            return super().act(obs, info)
+
+    def make(parameters):
+        return _make_env("family", features, kwargs, parameters=parameters)
+
+    physical, privileged, times = _paired_rollouts(Spy(), make, (3000,))
+    assert physical.shape == privileged.shape == (60, 17) and times.shape == (60,)
+    np.testing.assert_allclose(np.diff(times), 1.0)
+    assert np.all(privileged[:, -1] == 1.0) and np.all(physical[:5, -1] == 0.0)  # ready
+    assert np.all(physical[-1, -1] == 1.0)           # the identifier is warm after 50 s
+    np.testing.assert_allclose(times[[0, -1]], [0.0, 59.0])
+    # what the policy saw is the training env's observation
+    truth = make(PrivilegedFeatures)
+    spy_obs = list(seen)
+    seen.clear()
+    run_episode(truth, Spy(), seed=3000)
+    np.testing.assert_allclose(np.array(spy_obs), np.array(seen), rtol=1e-6, atol=1e-9)

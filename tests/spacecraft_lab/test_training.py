@@ -365,6 +365,47 @@ def test_an_averaged_residual_sees_the_attitude_error_and_rate_its_base_reads_ev
                                base["cost_after_100s_per_seed"], rtol=1e-12)
 
 
+def test_the_scheduled_averaged_residual_sees_its_state_times_the_parameters():
+    """``residual-scheduled-averaged-privileged``: the agent's observation is the averaged
+    attitude error and rate, then their products with the truth's rigid-gain channels
+    (a linear policy on it is a gain-scheduled law); the parameter wrapper can be
+    swapped (the RMA comparison's estimated and nominal vectors), and a setting without
+    a parameter vector refuses one."""
+    from controllers import PrivilegedFeatures
+    from controllers.features import PHYSICAL_FEATURE_NAMES
+    from spacecraft_lab.training import SCHEDULE_CHANNELS, ZeroTorque, _evaluate
+
+    kwargs = {"task": "slew", "reward": "cost", "max_episode_steps": 1100}
+    features = "residual-scheduled-averaged-privileged"
+    plain = _make_env("family", "residual-scheduled-averaged", kwargs)
+    appended = []
+
+    def parameters(env, source="truth"):
+        appended.append(PrivilegedFeatures(env, source=source))
+        return appended[-1]
+
+    env = _make_env("family", features, kwargs, parameters=parameters)
+    assert env.observation_space.shape == (6 + 6 * len(SCHEDULE_CHANNELS),)
+    action = np.zeros(3, dtype=np.float32)
+    cols = [PHYSICAL_FEATURE_NAMES.index(name) for name in SCHEDULE_CHANNELS]
+    for obs, x in ((env.reset(seed=5)[0], plain.reset(seed=5)[0]),
+                   (env.step(action)[0], plain.step(action)[0])):
+        gain = appended[0]._feats[cols]
+        assert np.abs(gain).max() > 0.01                     # a draw off the nominal plant
+        np.testing.assert_allclose(obs[:6], x, rtol=1e-5)
+        np.testing.assert_allclose(obs[6:], np.outer(x, gain).ravel(), rtol=1e-4, atol=1e-6)
+    nominal = _make_env("family", features, kwargs,
+                        parameters=lambda e: parameters(e, "nominal"))
+    obs = nominal.reset(seed=5)[0]
+    assert np.abs(obs[6:]).max() == 0.0                      # the nominal gain is the origin
+    with pytest.raises(ValueError, match="observe no parameter vector"):
+        _make_env("family", "residual-scheduled-averaged", kwargs, parameters=parameters)
+    seeds = (1000,)
+    silent = _evaluate(ZeroTorque(), "family", features, kwargs, seeds=seeds)
+    base = _evaluate(ZeroTorque(), "family", "residual-scheduled-averaged", kwargs, seeds=seeds)
+    assert silent["cost_after_100s_per_seed"] == base["cost_after_100s_per_seed"]
+
+
 def test_an_averaged_setting_decides_once_per_averaging_window(tmp_path):
     pytest.importorskip("sb3_contrib")
     for features in ("attitude-error-averaged", "residual-fixed-averaged"):
