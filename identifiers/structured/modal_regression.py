@@ -43,8 +43,12 @@ FLEXIBLE_FLOOR = 1e-2
 #: differ, or a frequency by more than this (relative): smaller moves are the
 #: tracker's.
 REBUILD_TOLERANCE = 0.02
-#: Samples replayed after a rebuild (the last 150 s of the kept record).
-REPLAY = 1500
+#: Samples replayed after a rebuild: the whole kept record (``history``, 300 s by
+#: default). Replaying only its last 150 s lost the rigid gain's information from the
+#: excitation before them: in a quiet closed loop (an agent or an LQG holding the
+#: attitude) the 200 s rebuild's gain was then worse than the nominal guess (measured,
+#: docs/results/rl.md).
+REPLAY = None
 #: Samples at the end of a replay over which the Kalman filter runs (the gains
 #: learn from the whole replay): its state settles within a few hundred.
 FILTER_TAIL = 300
@@ -249,7 +253,8 @@ class ModalRegression(RecordReplay):
         found = self._find_resonators()
         if _same_modes(found, self.resonators, REBUILD_TOLERANCE):
             return
-        if self._try_modes(found, min(len(self._history), REPLAY)):
+        if self._try_modes(found, len(self._history) if REPLAY is None
+                           else min(len(self._history), REPLAY)):
             self.n_rediscoveries += 1
         else:
             self.n_searches_rejected += 1
