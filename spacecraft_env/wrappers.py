@@ -295,9 +295,10 @@ class ObservationProducts(gym.ObservationWrapper, gym.utils.RecordConstructorArg
         self.state, self.schedule = state, np.asarray(schedule, dtype=int)
         x_max = np.maximum(np.abs(space.low[:state]), np.abs(space.high[:state]))
         s_max = np.maximum(np.abs(space.low[self.schedule]), np.abs(space.high[self.schedule]))
-        high = np.concatenate([x_max, np.outer(x_max, s_max).ravel()]).astype(np.float64)
-        low = np.concatenate([space.low[:state], -np.outer(x_max, s_max).ravel()])
-        high[:state] = space.high[:state]
+        with np.errstate(invalid="ignore"):                  # inf * 0: unbounded
+            bound = np.nan_to_num(np.outer(x_max, s_max).ravel(), nan=np.inf, posinf=np.inf)
+        low = np.concatenate([space.low[:state], -bound])
+        high = np.concatenate([space.high[:state], bound])
         self.observation_space = gym.spaces.Box(low.astype(space.dtype),
                                                 high.astype(space.dtype), dtype=space.dtype)
 

@@ -597,3 +597,15 @@ def test_observation_products_are_the_state_times_each_scheduling_channel():
 def test_observation_products_refuse_bad_channels(state, schedule, match):
     with pytest.raises(ValueError, match=match):
         ObservationProducts(gym.make("FlexibleSpacecraftDocking-v2"), state, schedule)
+
+
+def test_observation_products_bounds_are_never_nan():
+    """An unbounded channel times one fixed at 0 has an unbounded (not NaN) bound."""
+    class Fixed(gym.Env):
+        observation_space = gym.spaces.Box(np.array([-np.inf, 0.0, -2.0], dtype=np.float32),
+                                           np.array([np.inf, 0.0, 2.0], dtype=np.float32))
+        action_space = gym.spaces.Box(-1.0, 1.0, (1,))
+
+    space = ObservationProducts(Fixed(), 1, (1, 2)).observation_space
+    assert not np.isnan(space.low).any() and not np.isnan(space.high).any()
+    assert np.all(np.isinf(space.high)) and np.all(np.isinf(space.low))
