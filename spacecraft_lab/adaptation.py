@@ -50,6 +50,7 @@ from controllers import (
     PrivilegedFeatures,
     run_episode,
 )
+from spacecraft_env import env_id
 from spacecraft_lab.agents import HELD_OUT_SEEDS, load_agent, paired_ratio
 from spacecraft_lab.score_cache import default_cache
 from spacecraft_lab.training import _evaluate, _make_env, _one_torch_thread, _score_comparators
@@ -224,7 +225,9 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
             # the parameters themselves on the scored episodes, the truth flown
             phys, priv, times = _paired_rollouts(policy, make, seeds)
             late = times >= _ERROR_FROM_S
-            nominal_env = PrivilegedFeatures(make(None).unwrapped, source="nominal")
+            # the nominal vector depends on the scenario's nominal plant alone
+            nominal_env = PrivilegedFeatures(gym.make(env_id(scenario), **env_kwargs),
+                                             source="nominal")
             nominal = np.broadcast_to(nominal_env.nominal_vector, priv[late].shape)
             nominal_env.close()
             errors = {"estimated": _group_errors(module.predict(phys[late]), priv[late]),

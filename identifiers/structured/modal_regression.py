@@ -30,7 +30,7 @@ from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
 from identifiers.structured.record_replay import RecordReplay
 from spacecraft_conventions import MEASURES
 
-__all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE", "REPLAY",
+__all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE",
            "ModalRegression"]
 
 #: Initial covariance of every gain (unit-RMS regressors, units of the output
@@ -43,12 +43,6 @@ FLEXIBLE_FLOOR = 1e-2
 #: differ, or a frequency by more than this (relative): smaller moves are the
 #: tracker's.
 REBUILD_TOLERANCE = 0.02
-#: Samples replayed after a rebuild: the whole kept record (``history``, 300 s by
-#: default). Replaying only its last 150 s lost the rigid gain's information from the
-#: excitation before them: in a quiet closed loop (an agent or an LQG holding the
-#: attitude) the 200 s rebuild's gain was then worse than the nominal guess (measured,
-#: docs/results/rl.md).
-REPLAY = None
 #: Samples at the end of a replay over which the Kalman filter runs (the gains
 #: learn from the whole replay): its state settles within a few hundred.
 FILTER_TAIL = 300
@@ -253,8 +247,10 @@ class ModalRegression(RecordReplay):
         found = self._find_resonators()
         if _same_modes(found, self.resonators, REBUILD_TOLERANCE):
             return
-        if self._try_modes(found, len(self._history) if REPLAY is None
-                           else min(len(self._history), REPLAY)):
+        # the whole kept record is replayed: its last 150 s alone lost the rigid gain's
+        # information from the excitation before them, so that in a quiet closed loop the
+        # 200 s rebuild's gain was worse than the nominal guess (docs/results/rl.md)
+        if self._try_modes(found, len(self._history)):
             self.n_rediscoveries += 1
         else:
             self.n_searches_rejected += 1
