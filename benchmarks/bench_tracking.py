@@ -18,9 +18,11 @@ condition, printed side by side, median [worst] over seeds:
   region, pooled over seeds (mean of the seeds' shares).
 
 Usage: ``python benchmarks/bench_tracking.py [--seeds 3] [--first-seed 0]
-[--scenarios ...] [--conditions 40:1 none:1 ...] [--coupling-drift D] [--json out.json]``
+[--scenarios ...] [--conditions 40:1 none:1 ...] [--coupling-drift D] [--drift-reference V]
+[--json out.json]``
 (a condition is ``SNR:RMS``, SNR in dB of the env's nominal levels or ``none``, RMS in
-N m; ``--coupling-drift`` overrides the default identifier's modal couplings' random
+N m; ``--drift-reference`` sets the default identifier's ``drift_reference``, the noise
+level at which its drifts are stated; ``--coupling-drift`` overrides its modal couplings' random
 walk, for the ablation in docs/results/identification.md).
 """
 
@@ -136,12 +138,15 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--coupling-drift", type=float, default=None)
+    parser.add_argument("--drift-reference", type=float, default=None)
     parser.add_argument("--scenarios", nargs="+", default=list(TRACKED))
     parser.add_argument("--conditions", nargs="+",
                         default=["20:1", "40:1", "60:1", "none:1", "40:0.1"])
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     options = {} if args.coupling_drift is None else {"coupling_drift": args.coupling_drift}
+    if args.drift_reference is not None:
+        options["drift_reference"] = args.drift_reference
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     out = {}
     print("10 s-ahead VAF (%) attitude / rate / deflection from 150 s, median [worst] over "

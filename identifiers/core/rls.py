@@ -156,15 +156,8 @@ class RecursiveLeastSquares:
         if hold_mask.shape != (n_regressors,) or hold_mask.dtype != bool:
             raise ValueError(f"hold must be a boolean array of shape ({n_regressors},)")
         self.hold = hold_mask.copy()
-        drift_arr = np.broadcast_to(np.asarray(drift, dtype=float), (n_regressors,))
-        if not (np.isfinite(drift_arr).all() and np.all(drift_arr >= 0)):
-            raise ValueError(f"drift must be >= 0 (a scalar or ({n_regressors},)), got {drift}")
-        self.drift = drift_arr.copy()
-        # the floor's pseudo-rows: w^2 = d (1 - lambda) delta replaces what forgetting
-        # removes; under a random walk of variance q it is w^2 = d q delta^2, for which
-        # the variance of an unexcited coordinate settles at 1 / delta
-        self._pseudo_weights = np.sqrt(n_regressors * ((1.0 - self._lam) * delta
-                                                       + self.drift * delta**2))
+        self.drift = np.zeros(n_regressors)
+        self.set_drift(drift)
         if gate is not None and not (np.isfinite(gate) and gate > 0):
             raise ValueError(f"gate must be a positive fraction or None, got {gate}")
         self.gate = None if gate is None else float(gate)
@@ -272,6 +265,35 @@ class RecursiveLeastSquares:
         self._scale = 1.0
         self._cycle = 0
         self.n_rejected = 0
+
+    def set_drift(self, drift: float | ArrayLike) -> None:
+        """Replace the random-walk variance per sample (see ``drift`` above).
+
+        The floor's pseudo-rows follow it, so the variance of an unexcited
+        coordinate still settles at ``1 / regularization``; the estimate and
+        ``P`` are kept. After this call the recursion is that of an RLS
+        constructed with ``drift`` and holding the present state.
+
+        Raises
+        ------
+        ValueError
+            For a negative or non-finite drift, or one that is neither a scalar
+            nor of shape ``(d,)``.
+        """
+        d = self.drift.size
+        try:
+            value = np.broadcast_to(np.asarray(drift, dtype=float), (d,))
+        except ValueError:
+            raise ValueError(f"drift must be a scalar or of shape ({d},), "
+                             f"got shape {np.shape(drift)}") from None
+        if not (np.isfinite(value).all() and np.all(value >= 0)):
+            raise ValueError(f"drift must be >= 0 (a scalar or ({d},)), got {drift}")
+        self.drift[:] = value           # in place: the compiled steps read this array
+        # the floor's pseudo-rows: w^2 = d (1 - lambda) delta replaces what forgetting
+        # removes; under a random walk of variance q it is w^2 = d q delta^2, for which
+        # the variance of an unexcited coordinate settles at 1 / delta
+        delta = self.regularization
+        self._pseudo_weights = np.sqrt(d * ((1.0 - self._lam) * delta + self.drift * delta**2))
 
     def set_covariance(self, covariance: ArrayLike) -> None:
         """Replace ``P`` (symmetric positive definite, (d, d)), e.g. to inflate it

@@ -38,7 +38,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["CALM", "ChangeEvent", "InnovationCUSUM", "RegressionGLR"]
+__all__ = ["CALM", "RESOLUTION", "ChangeEvent", "InnovationCUSUM", "RegressionGLR"]
+
+#: Smallest relative error (of the high-passed signal's RMS) the structure-aware
+#: identifiers treat as evidence: 1e-3, a 60 dB signal-to-error ratio. Smaller
+#: errors are no evidence of a change, and no finer a noise level for the
+#: regressions' drifts.
+RESOLUTION = 1e-3
 
 #: The calm level of a statistic is tracked by a running mean of every value
 #: clipped at this multiple of the level: nearly unbiased for the

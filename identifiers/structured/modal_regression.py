@@ -23,7 +23,7 @@ from identifiers.core.residual_statistics import (
     mean_square_step,
 )
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
+from identifiers.structured.change_detection import RESOLUTION, ChangeEvent, RegressionGLR
 from identifiers.structured.modal_basis import Resonator
 from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
 from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
@@ -154,7 +154,7 @@ class ModalRegression(RecordReplay):
         for block in ("attitude", "rate"):                   # the rigid gains
             drift[bank.slices[block]] = self.rigid_drift
             hold[bank.slices[block]] = True
-        self._fits = []
+        self._fits, self._stated_drifts, self._drift_scales = [], [], None
         for rows_g, cols in self._regression_groups():
             rls = RecursiveLeastSquares(rows_g.size, cols.size, 1.0, INITIAL_COVARIANCE,
                                         regularization=floor[cols], hold=hold[cols],
@@ -163,6 +163,7 @@ class ModalRegression(RecordReplay):
             # variance it settles at when they stop exciting it
             rls.set_covariance(np.diag(np.minimum(INITIAL_COVARIANCE, 1.0 / floor[cols])))
             self._fits.append((rows_g, cols, rls))
+            self._stated_drifts.append(drift[cols])
         self._tracker = (ModalTracker(self._tracker_groups(), n_res, self.tracking_memory)
                          if self.track_modes and n_res else None)
         if self._detector is None:
@@ -236,6 +237,33 @@ class ModalRegression(RecordReplay):
                                 dtype=int).reshape(n_res, 2)
             groups.append(TrackerGroup(rows, cols, flex_pos, free_pos, component))
         return groups
+
+    def _scale_drifts(self) -> None:
+        """Each group's drifts at its data's error level: the stated drifts (at the
+        sensor-noise variance ``drift_reference``) times ``max(1, drift_reference / v)``,
+        ``v`` the running mean square of the group's a-priori errors over the
+        high-pass's noise gain (noise and misfit: what the regression cannot explain),
+        at least :data:`RESOLUTION` of the high-passed signal on each output and
+        ``RESOLUTION**2`` (60 dB of the nominal levels). A rebuild starts as stated."""
+        if self.drift_reference is None or self._resvar is None:
+            return
+        level = np.maximum(self._resvar, RESOLUTION**2 * self._sigvar)
+        scales = []
+        for (rows, _, rls), stated in zip(self._fits, self._stated_drifts, strict=True):
+            v = max(float(np.mean(level[rows])) / self._noise_gain, RESOLUTION**2)
+            scales.append(max(1.0, self.drift_reference / v))
+            rls.set_drift(stated * scales[-1])
+        self._drift_scales = scales
+
+    @property
+    def drift_scales(self) -> dict[str, float]:
+        """Factor by which each sensor group's regression now walks faster than stated
+        (1 where its data are no cleaner than ``drift_reference``; empty before the
+        warm-up's end)."""
+        if not self._fits:
+            return {}
+        scales = self._drift_scales or [1.0] * len(self._fits)
+        return dict(zip(self.layout.names, scales, strict=True))
 
     def _maybe_rediscover(self) -> None:
         """Look for the modes again in the longer history; rebuild if they differ."""

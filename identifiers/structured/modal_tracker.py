@@ -46,15 +46,13 @@ import numpy as np
 from numba import njit
 from scipy.linalg import get_lapack_funcs
 
+from identifiers.structured.change_detection import RESOLUTION
 from identifiers.structured.modal_basis import MAX_DAMPING, MIN_DAMPING
 
 __all__ = ["ModalTracker", "TrackerGroup"]
 
 #: Largest log-frequency step per refinement (0.5 %) and damping-ratio step.
 MAX_STEP = (0.005, 0.005)
-#: Smallest relative residual taken as evidence (a 60 dB signal-to-error ratio):
-#: on noise-free data the residual left is the model's structural error.
-RESOLUTION = 1e-3
 
 _TRTRS = get_lapack_funcs("trtrs", (np.zeros((1, 1)),))
 

@@ -205,6 +205,7 @@ def test_the_default_restart_of_a_past_window_method_starts_afresh(constant_reco
     ({"tracking_memory": 1.0}, ValueError, "tracking_memory"),
     ({"highpass": 1.0}, ValueError, "highpass"),
     ({"rediscover": 0}, ValueError, "rediscover"),
+    ({"drift_reference": 0.0}, ValueError, "drift_reference"),
 ])
 def test_bad_constructor_arguments(kwargs, error, match):
     with pytest.raises(error, match=match):
@@ -265,6 +266,28 @@ def test_noise_free_data_are_no_harder_than_noisy_data():
     seq = ident.fit(u, y0)
     vaf = prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
     assert vaf[:6].min() > 99.9 and vaf[6:].mean() > 90.0
+
+
+def test_a_drift_reference_speeds_the_walk_up_only_where_the_data_are_cleaner():
+    """Drifts stated at 40 dB of the nominal levels: noisier data keep them, noise-free
+    data walk faster (at most 100x); without a reference the drifts are never scaled."""
+    scales = {}
+    for snr in (20.0, None):
+        _, u, _, y = _spacecraft("constant", 0, n_samples=900, snr_db=snr)
+        for reference in (1e-4, None):
+            ident = default_identifier(drift_reference=reference)
+            ident.fit(u, y)
+            scales[snr, reference] = ident.drift_scales
+            for (_, _, rls), stated, group in zip(ident._fits, ident._stated_drifts,
+                                                  STANDARD_OUTPUTS.names, strict=True):
+                np.testing.assert_allclose(rls.drift, stated * ident.drift_scales[group])
+    assert set(scales[20.0, 1e-4]) == {"attitude", "rate", "deflection"}
+    assert all(s == 1.0 for key in [(20.0, 1e-4), (20.0, None), (None, None)]
+               for s in scales[key].values())
+    clean = scales[None, 1e-4]
+    assert clean["attitude"] > 10 and clean["rate"] > 10, clean
+    assert max(clean.values()) <= 100.0 + 1e-9, clean
+    assert default_identifier().drift_scales == {}           # before the warm-up
 
 
 @pytest.mark.slow

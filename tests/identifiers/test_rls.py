@@ -252,3 +252,34 @@ def test_update_many_refuses_mismatched_shapes():
         rls.update_many(np.zeros((5, 4)), np.zeros((5, 2)))
     with pytest.raises(ValueError, match="use"):
         rls.update_many(np.zeros((5, 3)), np.zeros((5, 2)), use=np.ones(4, dtype=bool))
+
+
+def test_set_drift_continues_as_an_rls_built_with_that_drift():
+    """Changing the walk mid-run: from then on the recursion (floor's pseudo-rows
+    included) is that of an RLS constructed with the new drift and the same state."""
+    phi, _, y = _data(n=400, d=6, q=2)
+    kwargs = dict(regularization=np.linspace(1e-3, 1e-1, 6), hold=np.arange(6) < 2, gate=0.25)
+    changed = RecursiveLeastSquares(2, 6, 1.0, 10.0, drift=1e-6, **kwargs)
+    for k in range(200):
+        changed.update(phi[k], y[k])
+    built = RecursiveLeastSquares(2, 6, 1.0, 10.0, drift=np.full(6, 3e-4), **kwargs)
+    built.theta[:] = changed.theta
+    built.set_covariance(changed.P)
+    changed.set_covariance(changed.P)           # the same normalization of P on both
+    built._cycle = changed._cycle               # and the floor's pseudo-row in turn
+    changed.set_drift(3e-4)
+    for k in range(200, 400):
+        changed.update(phi[k], y[k])
+        built.update(phi[k], y[k])
+    np.testing.assert_array_equal(changed.drift, built.drift)
+    np.testing.assert_allclose(changed.theta, built.theta, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(changed.P, built.P, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize(("drift", "match"), [(-1e-6, ">= 0"), (np.nan, ">= 0"),
+                                              (np.ones(5), "shape")])
+def test_set_drift_refuses_bad_values_and_keeps_the_old_one(drift, match):
+    rls = RecursiveLeastSquares(1, 6, 1.0, 1.0, drift=1e-5)
+    with pytest.raises(ValueError, match=match):
+        rls.set_drift(drift)
+    np.testing.assert_array_equal(rls.drift, np.full(6, 1e-5))
