@@ -110,7 +110,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         the couplings turn with the paddles. Default couplings' drift 1e-4
         (1e-7 until 2026-11-29, which held them fixed while the paddles turned:
         on paddle rotation the 10 s deflection VAF fell as the data got cleaner;
-        ``docs/results/identification.md``). Stated at ``drift_reference``.
+        ``docs/results/identification.md``). See also ``drift_reference``.
     drift_reference : float or None
         Opt-in: the sensor-noise variance (units of the nominal levels
         squared; 1e-4 is 40 dB of them) at which the drifts are stated. A
@@ -122,8 +122,8 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         (noise and misfit: what the regression cannot explain), at least
         ``RESOLUTION**2`` (so at most 100x at 1e-4; :attr:`drift_scales`).
         Noisier data keep the stated drifts. It makes the rigid gain's 2-sigma
-        region cover the truth at 60 dB and noise-free (84-98 % of samples
-        against 5-56 %) at the price of a noisier gain on a constant plant
+        region cover the truth at 60 dB and noise-free (74-98 % of samples
+        against 3-56 %) at the price of a noisier gain on a constant plant
         (``docs/results/identification.md``). Default None: drifts in units
         of the noise at every level.
     warmup : int
