@@ -202,8 +202,9 @@ class RegressionGLR:
     threshold : float
         Alarm level as a multiple of the degrees of freedom.
     holdoff : int
-        Samples after start and after an alarm during which the test only
-        recalibrates.
+        Samples after start during which the test only calibrates its calm
+        level, and after an alarm during which it cannot fire (the calm level
+        keeps following, clipped, as at any other time).
     dt : float
         Sample time, s.
     """
