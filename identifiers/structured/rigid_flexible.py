@@ -84,7 +84,6 @@ from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayou
 __all__ = ["RESOLUTION", "RigidFlexibleIdentifier"]
 
 
-
 class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
                               OnlineIdentifier):
     """Online identifier with known rigid-body kinematics and estimated flexible modes.
