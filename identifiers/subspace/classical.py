@@ -68,5 +68,11 @@ class ClassicalRPBSID(PredictionStateIdentifier):
         super().__init__(n, p, forgetting, **kwargs)
 
     def _predictions(self, phi: np.ndarray) -> np.ndarray:
-        lk = predictor_product(self._varx.theta, self.n_inputs, self._horizon, self.weighted)
-        return lk @ phi
+        return self._state_map() @ phi
+
+    def _predictions_many(self, phis: np.ndarray) -> np.ndarray:
+        return phis @ self._state_map().T          # one LK for the warm-up's samples
+
+    def _state_map(self) -> np.ndarray:
+        """LK of the current VARX, (f m, p (r + m))."""
+        return predictor_product(self._varx.theta, self.n_inputs, self._horizon, self.weighted)

@@ -273,7 +273,11 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
     * ``basis="svd"`` (default): the n leading left singular vectors of the
       predictions over the warm-up samples, computed once when warm-up ends
       and fixed afterwards (no SVD per step). A balanced, well-conditioned
-      basis.
+      basis. The warm-up's states in that basis then go through the system
+      stage at once, so ``C`` and ``[A B K]`` learn from the warm-up too
+      (without it they would start after it: in a closed loop whose only
+      large torques are the warm-up's excitation, ``B`` would see the loop's
+      torques at the noise level alone).
     * ``basis="selection"``: ``W = [I_n 0]``, the first n predicted outputs.
       Cheapest, but on outputs that are nearly collinear over a few samples
       (an angle and its rate at dt = 0.1 s) the basis is badly conditioned.
@@ -301,7 +305,8 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
     def reset(self) -> None:
         super().reset()
         self._w = None
-        self._basis_data: list[np.ndarray] = []
+        self._basis_data: list[np.ndarray] = []       # phi_(k+1) of the warm-up's samples
+        self._basis_samples: list[tuple[int, np.ndarray, np.ndarray]] = []   # (k, u_k, y_k)
 
     def _allocate(self, r: int, m: int) -> None:
         super()._allocate(r, m)
@@ -313,12 +318,25 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
     def _predictions(self, phi: np.ndarray) -> np.ndarray:
         """Stacked output predictions ``LK phi`` over the horizon, (f m,)."""
 
+    def _predictions_many(self, phis: np.ndarray) -> np.ndarray:
+        """:meth:`_predictions` of each row of ``phis`` (N, p (r + m)), as rows (N, f m)."""
+        return np.array([self._predictions(phi) for phi in phis])
+
     def _fix_basis(self) -> None:
-        """W from the SVD of the warm-up predictions (once)."""
-        preds = np.array([self._predictions(phi) for phi in self._basis_data]).T
-        left = np.linalg.svd(preds, full_matrices=False)[0]
+        """W from the SVD of the warm-up predictions (once), then the warm-up's state
+        sequence ``x_(k+1) = W P(phi_(k+1))`` through the system stage: sample ``k``
+        teaches ``C`` and ``[A B K]`` whenever ``x_k`` is known (sample ``k - 1`` was
+        learnt from too), as :meth:`_step` does from here on."""
+        preds = self._predictions_many(np.array(self._basis_data))
+        left = np.linalg.svd(preds.T, full_matrices=False)[0]
         self._w = left[:, :self.n].T.copy()
-        self._basis_data = []
+        states = preds @ self._w.T
+        samples = self._basis_samples
+        for j in range(1, len(samples)):
+            k, u, y = samples[j]
+            if samples[j - 1][0] == k - 1:
+                self._learn_system(states[j - 1], u, y, states[j])
+        self._basis_data, self._basis_samples = [], []
 
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         if learn:
@@ -327,10 +345,11 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
         if self._w is None:
             if learn:
                 self._basis_data.append(self._phi.copy())
+                self._basis_samples.append((self._k, u, y))
             if self._k + 1 >= self.warmup and len(self._basis_data) >= self.n:
-                self._fix_basis()
-            else:
-                return
+                self._fix_basis()        # this sample's system step included
+                self._x = self._w @ self._predictions(self._phi)
+            return
         x_next = self._w @ self._predictions(self._phi)
         if learn and self._x is not None:
             self._learn_system(self._x, u, y, x_next)
