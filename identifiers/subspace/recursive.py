@@ -305,8 +305,8 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
     def reset(self) -> None:
         super().reset()
         self._w = None
-        self._basis_data: list[np.ndarray] = []       # phi_(k+1) of the warm-up's samples
-        self._basis_samples: list[tuple[int, np.ndarray, np.ndarray]] = []   # (k, u_k, y_k)
+        # the warm-up's learnt samples: (k, phi_(k+1), u_k, y_k)
+        self._basis_data: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def _allocate(self, r: int, m: int) -> None:
         super()._allocate(r, m)
@@ -327,16 +327,16 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
         sequence ``x_(k+1) = W P(phi_(k+1))`` through the system stage: sample ``k``
         teaches ``C`` and ``[A B K]`` whenever ``x_k`` is known (sample ``k - 1`` was
         learnt from too), as :meth:`_step` does from here on."""
-        preds = self._predictions_many(np.array(self._basis_data))
+        samples = self._basis_data
+        preds = self._predictions_many(np.array([phi for _, phi, _, _ in samples]))
         left = np.linalg.svd(preds.T, full_matrices=False)[0]
         self._w = left[:, :self.n].T.copy()
         states = preds @ self._w.T
-        samples = self._basis_samples
         for j in range(1, len(samples)):
-            k, u, y = samples[j]
+            k, _, u, y = samples[j]
             if samples[j - 1][0] == k - 1:
                 self._learn_system(states[j - 1], u, y, states[j])
-        self._basis_data, self._basis_samples = [], []
+        self._basis_data = []
 
     def _step(self, u: np.ndarray, y: np.ndarray, learn: bool) -> None:
         if learn:
@@ -344,8 +344,7 @@ class PredictionStateIdentifier(SystemRLSIdentifier):
         self._push(u, y)
         if self._w is None:
             if learn:
-                self._basis_data.append(self._phi.copy())
-                self._basis_samples.append((self._k, u, y))
+                self._basis_data.append((self._k, self._phi.copy(), u, y))
             if self._k + 1 >= self.warmup and len(self._basis_data) >= self.n:
                 self._fix_basis()        # this sample's system step included
                 self._x = self._w @ self._predictions(self._phi)
