@@ -25,7 +25,12 @@
   scores (from 100 s, a crash whenever it comes).
 """
 
-from controllers.acceptance import GainAcceptance, effective_gains, input_disk_margin
+from controllers.acceptance import (
+    GainAcceptance,
+    effective_gains,
+    input_disk_margin,
+    stable_under_input_gains,
+)
 from controllers.adaptation import AdaptationModule, EstimatedFeatures
 from controllers.adaptive import AdaptiveLQG, FallbackWarning, ScheduleWarning
 from controllers.base import Controller, PolicyController
@@ -125,6 +130,7 @@ __all__ = [
     "scheduled_identifier",
     "set_integral_settle",
     "spectral_radius",
+    "stable_under_input_gains",
     "stage_costs",
     "structured_identifier",
 ]
