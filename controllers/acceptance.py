@@ -180,11 +180,12 @@ def stable_under_input_gains(a: np.ndarray, b: np.ndarray, c: np.ndarray, k: np.
         f_p = np.hstack([np.zeros((r, n)), gain[:, n:]])
     else:
         a_p, b_p, f_p = a, b, np.zeros((r, n))
-    n_p = a_p.shape[0]
-    k_c = np.hstack([k @ c, np.zeros((n, n_p - n))])
-    lower = np.hstack([k_c - b @ f_p, a - k @ c - b @ g_x])
+    kc = k @ c
+    lower = np.hstack([np.hstack([kc, np.zeros((n, a_p.shape[0] - n))]) - b @ f_p,
+                       a - kc - b @ g_x])
+    bf, bg = b_p @ f_p, b_p @ g_x            # the plant's input terms, scaled below
     for scale in np.asarray(gains, dtype=float).ravel():
-        upper = np.hstack([a_p - scale * b_p @ f_p, -scale * b_p @ g_x])
+        upper = np.hstack([a_p - scale * bf, -scale * bg])
         loop = np.vstack([upper, lower])
         if not np.isfinite(loop).all() or spectral_radius(loop) >= 1.0:
             return False

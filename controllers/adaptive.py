@@ -479,16 +479,16 @@ class AdaptiveLQG(_LQGController):
                 self._stable_over = 0.0
             reason = self.acceptance.check_margin(self._margin, self._uncertainty,
                                                   self._stable_over)
-            spread = 2.0 * self._uncertainty
-            if reason == "uncertain" and spread < 1.0:
+            if reason == "uncertain" and 2.0 * self._uncertainty < 1.0:
                 # the disk margin does not cover the gain's band: is the loop stable
                 # for real input gains across it? (checked with 10 % to spare, kept
-                # until the margin is evaluated again)
-                wide = min(1.1 * spread, 0.99)
+                # until the margin is evaluated again; check_margin judges the result)
+                wide = min(2.2 * self._uncertainty, 0.99)
                 if stable_under_input_gains(a, b, c, model.K, gain, self._att_rows, self.dt,
                                             1.0 + wide * np.array([-1.0, -0.5, 0.5, 1.0])):
                     self._stable_over = wide
-                    reason = None
+                    reason = self.acceptance.check_margin(self._margin, self._uncertainty,
+                                                          wide)
         self._reason = reason
         if reason is not None:
             self.stats["rejected"] += 1
