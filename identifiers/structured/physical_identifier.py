@@ -57,7 +57,7 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
 
     Attributes
     ----------
-    fit : PhysicalFit or None
+    held_fit : PhysicalFit or None
         The fit, once the warm-up is over.
 
     Examples
@@ -91,7 +91,7 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
                          output_scale=self.layout.scales() if output_scale is None
                          else output_scale, max_abs=max_abs)
 
-    def _fit(self) -> bool:
+    def _fit_record(self) -> bool:
         """Fit the physical model to the record (physical units), build the
         normalized model and start the state's filter over the record; False if the
         model is not finite."""
@@ -105,7 +105,7 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
         c = model.C / sy[:, None]
         if not all(np.isfinite(m).all() for m in (a, b, c)):
             return False
-        self.fit = fit
+        self.held_fit = fit
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
         self._q = self._process_noise(b)
         # the filter's measurement noise: the fit's residual per output
@@ -121,12 +121,13 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """``J^-1`` (rad/s^2 per N m) with the fit's covariance; None before the fit."""
-        if self.fit is None:
+        if self.held_fit is None:
             return None
-        return RigidGainEstimate(np.array(self.fit.model.gain), self.fit.gain_covariance)
+        return RigidGainEstimate(np.array(self.held_fit.model.gain), self.held_fit.gain_covariance)
 
     def __repr__(self) -> str:
-        modes = [] if self.fit is None else [round(float(f), 4) for f in
-                                             np.sort(self.fit.model.frequencies_hz)]
-        return (f"{type(self).__name__}(n_modes={self.n_modes}, fitted={self.fit is not None}, "
-                f"modes_hz={modes}, samples={self.n_samples})")
+        modes = [] if self.held_fit is None else [round(float(f), 4) for f in
+                                             np.sort(self.held_fit.model.frequencies_hz)]
+        return (f"{type(self).__name__}(n_modes={self.n_modes}, "
+                f"fitted={self.held_fit is not None}, modes_hz={modes}, "
+                f"samples={self.n_samples})")

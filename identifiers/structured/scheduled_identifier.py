@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
+from identifiers.core.model import ModelSequence
 from identifiers.core.online import OnlineIdentifier
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.scheduled_fit import fit_scheduled_model
@@ -139,7 +140,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
 
     Attributes
     ----------
-    fit : ScheduledFit or None
+    held_fit : ScheduledFit or None
         The fit, once the warm-up is over.
     angle : float
         The latest drive angle, rad.
@@ -238,6 +239,52 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             raise ValueError(f"the drive angle must be finite, got {angle}")
         self.angle = angle
 
+    def fit(self, U: ArrayLike, Y: ArrayLike,
+            schedule: ArrayLike | None = None) -> ModelSequence:
+        """Feed a whole record; return the model after each sample.
+
+        Parameters
+        ----------
+        U : (N, 3) array_like
+            Torques, N m.
+        Y : (N, m) array_like
+            Outputs in the order of ``layout``.
+        schedule : (N,) array_like, optional
+            The drive angle (rad) at each sample, set (:meth:`set_schedule`)
+            before that sample's :meth:`update`. Default: the angle held at
+            :attr:`angle`.
+
+        Returns
+        -------
+        ModelSequence
+            As :meth:`identifiers.OnlineIdentifier.fit`.
+
+        Raises
+        ------
+        ValueError
+            If ``schedule`` is not ``N`` finite angles.
+        """
+        if schedule is None:
+            return super().fit(U, Y)
+        angles = np.asarray(schedule, dtype=float)
+        n = np.shape(U)[0] if np.ndim(U) else 0
+        if angles.shape != (n,) or not np.isfinite(angles).all():
+            raise ValueError(f"schedule must hold one finite drive angle (rad) per sample of U, "
+                             f"shape ({n},); got shape {angles.shape}")
+        self._fit_angles = iter(angles)
+        try:
+            return super().fit(U, Y)
+        finally:
+            self._fit_angles = None
+
+    def update(self, u: ArrayLike, y: ArrayLike) -> None:
+        angles = self.__dict__.get("_fit_angles")
+        if angles is not None:            # a scheduled fit: this sample's angle first
+            self.set_schedule(next(angles))
+        super().update(u, y)
+
+    update.__doc__ = OnlineIdentifier.update.__doc__
+
     # ------------------------------------------------------------ streaming
     def _record_item(self, u: np.ndarray, y: np.ndarray) -> tuple:
         return (u.copy(), y.copy(), self.angle)
@@ -250,7 +297,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         """Normalized ``(A, B, C)`` of the fitted model at ``angle``; False if not finite."""
         su, sy = self._su, self._sy
         try:
-            model = self.fit.model.discrete(angle, self.dt, self.layout)
+            model = self.held_fit.model.discrete(angle, self.dt, self.layout)
         except (np.linalg.LinAlgError, ValueError):
             return False
         a, b, c = model.A, model.B * su[None, :], model.C / sy[:, None]
@@ -275,20 +322,20 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             return True
         u, y, angle = self._record_arrays()
         try:
-            cov = predicted_gain_covariance(self.fit, u, y, angle, self.dt, self.layout,
+            cov = predicted_gain_covariance(self.held_fit, u, y, angle, self.dt, self.layout,
                                             self.refit_start)
         except (np.linalg.LinAlgError, ValueError):
             return True
-        predicted = RigidGainEstimate(self.fit.model.gain(float(angle[-1])), cov)
+        predicted = RigidGainEstimate(self.held_fit.model.gain(float(angle[-1])), cov)
         return predicted.relative_std() <= SCREEN_MARGIN * held_std
 
-    def _fit(self) -> bool:
+    def _fit_record(self) -> bool:
         """Fit the model to the record (physical units), then start the state's filter
         over the record; False if no fit or no finite model came out."""
         su, sy = self._su, self._sy
         u, y, angle = self._record_arrays()
         initial = None if self.refit_start is None else \
-            (self.fit.model, self.refit_start, self.fit.disturbance_torque)
+            (self.held_fit.model, self.refit_start, self.held_fit.disturbance_torque)
         options = self.fit_options
         if initial is not None and self.accumulating_refit and not self.refit_restarts:
             options = {**options, "filter_constants": ()}     # the held model alone
@@ -299,10 +346,10 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
                                       **options)
         except np.linalg.LinAlgError:
             return False
-        held = self.fit
-        self.fit = fit
+        held = self.held_fit
+        self.held_fit = fit
         if not self._discretize(float(angle[-1])):
-            self.fit = held
+            self.held_fit = held
             return False
         self._gain_at = self._gain_now = None
         states = simulate_scheduled(fit.model, u + fit.disturbance_torque, angle, self.dt,
@@ -313,7 +360,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
 
     def _filter_input(self, u: np.ndarray) -> np.ndarray:
         """The torques plus the fit's constant disturbance (normalized)."""
-        return u + self.fit.disturbance_torque / self._su
+        return u + self.held_fit.disturbance_torque / self._su
 
     # ------------------------------------------------------------ results
     @property
@@ -323,19 +370,20 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         ``schedule_resolution`` of it: over that travel the gain moves by up to 0.15 %,
         which a band 0.5-2 % wide must not omit, the covariance far less); None before
         the fit."""
-        if self.fit is None:
+        if self.held_fit is None:
             return None
         if self._gain_at is None or self._gain_at[0] != self._mats_angle:
             angle = self._mats_angle
-            self._gain_at = (angle, self.fit.gain_covariance(angle))
+            self._gain_at = (angle, self.held_fit.gain_covariance(angle))
         if self._gain_now is None or self._gain_now[0] != (self.angle, self._mats_angle):
             self._gain_now = ((self.angle, self._mats_angle),
-                              RigidGainEstimate(self.fit.model.gain(self.angle),
+                              RigidGainEstimate(self.held_fit.model.gain(self.angle),
                                                 self._gain_at[1]))
         return self._gain_now[1]
 
     def __repr__(self) -> str:
-        modes = [] if self.fit is None else [round(float(f), 4) for f in
-                                             self.fit.model.frequencies_hz]
-        return (f"{type(self).__name__}(turning={self.turning}, fitted={self.fit is not None}, "
-                f"modes_hz={modes}, angle={self.angle:.4g}, samples={self.n_samples})")
+        modes = [] if self.held_fit is None else [round(float(f), 4) for f in
+                                             self.held_fit.model.frequencies_hz]
+        return (f"{type(self).__name__}(turning={self.turning}, "
+                f"fitted={self.held_fit is not None}, modes_hz={modes}, "
+                f"angle={self.angle:.4g}, samples={self.n_samples})")

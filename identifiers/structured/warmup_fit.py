@@ -1,7 +1,7 @@
 """What the identifiers that fit to their warm-up and then hold the fit share.
 
 :class:`WarmupFit` records the samples until the warm-up is over, calls the
-host's ``_fit`` (retried once the record is half a warm-up longer when it
+host's ``_fit_record`` (retried once the record is half a warm-up longer when it
 fails: each attempt is a nonlinear fit of seconds), then runs a Kalman filter
 on the held model (:class:`~identifiers.structured.state_filter.ModelFilter`),
 its measurement noise the fit's residual per output and its process noise an
@@ -11,7 +11,7 @@ A host with ``refit_on_change`` set also watches the filter's innovations
 with a CUSUM test (:class:`~identifiers.structured.change_detection.InnovationCUSUM`):
 when it fires, the change is reported in :attr:`WarmupFit.events`, the held
 model keeps flying while a new record of ``warmup`` samples is taken, and the
-host's ``_fit`` then fits that record (it may start from the held fit); a
+host's ``_fit_record`` then fits that record (it may start from the held fit); a
 failed refit keeps the held model. So the fit is renewed where the data say
 the plant moved, not on a clock.
 
@@ -44,14 +44,14 @@ class WarmupFit(ModelFilter):
     """Mixin: the record, the fit's hold and the filter on it.
 
     The host provides ``process_torque`` (N m per axis), ``refit_on_change``
-    (bool), ``_fit() -> bool`` (fit the record, set ``fit`` and ``_mats``,
+    (bool), ``_fit_record() -> bool`` (fit the record, set ``held_fit`` and ``_mats``,
     start the filter with :meth:`_start_filter`; False when it failed, with
-    ``fit`` and ``_mats`` as they were) and may override :meth:`_record_item`
+    ``held_fit`` and ``_mats`` as they were) and may override :meth:`_record_item`
     (what each sample adds to the record) and :meth:`_follow` (run before the
     filter's update once the model is held). During a refit's record
     :attr:`refit_start` holds the filter's state at the record's first sample
     (a start for the refit); it is None otherwise. :attr:`accumulating_refit`
-    is True while ``_fit`` runs for an accumulating refit (the held model's
+    is True while ``_fit_record`` runs for an accumulating refit (the held model's
     record grown, no change detected), so the host may refit more cheaply.
     """
 
@@ -63,7 +63,7 @@ class WarmupFit(ModelFilter):
 
     def reset(self) -> None:
         super().reset()
-        self.fit: Any = None
+        self.held_fit: Any = None
         self._record: list[tuple] = []
         self._retry_at = 0
         self._kf: KalmanPredictor | None = None
@@ -133,18 +133,18 @@ class WarmupFit(ModelFilter):
         item = self._record_item(u, y) if self.accumulate else None
         if self.accumulate:
             self._history.append(item)
-        if self.fit is None:
+        if self.held_fit is None:
             if self.accumulate:
                 self._priors.append(np.full(self.n, np.nan))
             self._record.append(item or self._record_item(u, y))
             if len(self._record) >= max(self.warmup, self._retry_at):
                 length = len(self._record)
-                if self._fit():
+                if self._fit_record():
                     self._fitted(self._count - length, length)
                     self._watch()
                 else:
                     # keep recording; try again once the record is half a warm-up longer
-                    self.fit = None
+                    self.held_fit = None
                     self._retry_at = len(self._record) + max(self.warmup // 2, 1)
             return
         self._follow()
@@ -188,7 +188,7 @@ class WarmupFit(ModelFilter):
             self._history.extend(self._record)
             self._priors.clear()
             self._priors.extend([np.full(self.n, np.nan)] * length)
-        if self._fit():
+        if self._fit_record():
             self.n_refits += 1
             self._fitted(self._count - length, length)
         else:
@@ -225,7 +225,7 @@ class WarmupFit(ModelFilter):
         held = dict(self.__dict__)
         self.accumulating_refit = True
         try:
-            fitted = self._fit()
+            fitted = self._fit_record()
         finally:
             self.accumulating_refit = False
         if fitted and self._gain_relative_std() <= held_std:
@@ -257,7 +257,7 @@ class WarmupFit(ModelFilter):
     def _fit_initial_state(self) -> np.ndarray | None:
         """The held fit's state at its record's first sample (physical units), or None;
         the host's fit object carries it as ``initial_state``."""
-        state = getattr(self.fit, "initial_state", None)
+        state = getattr(self.held_fit, "initial_state", None)
         return None if state is None else np.asarray(state, dtype=float)
 
     def _watch(self) -> None:
@@ -286,4 +286,4 @@ class WarmupFit(ModelFilter):
     @property
     def ready(self) -> bool:
         """True once the model is fitted."""
-        return self.fit is not None and super().ready
+        return self.held_fit is not None and super().ready

@@ -376,7 +376,7 @@ def test_the_identifiers_filter_propagates_the_fitted_disturbance():
     for k in range(260):
         ident.set_schedule(angle[k])
         ident.update(u[k], y[k])
-    np.testing.assert_allclose(ident.fit.disturbance_torque, torque, rtol=1e-4)
+    np.testing.assert_allclose(ident.held_fit.disturbance_torque, torque, rtol=1e-4)
     rigid = states[260, :6]
     np.testing.assert_allclose(ident.state[:6], rigid, rtol=0, atol=1e-6 * np.abs(rigid).max())
 
@@ -421,11 +421,35 @@ def test_the_identifier_follows_the_drive_after_its_fit():
     ident.set_schedule(near)
     ident.update(u[259], y[259])
     np.testing.assert_array_equal(ident.model.A, exported)
-    np.testing.assert_array_equal(ident.rigid_gain.gain, ident.fit.model.gain(near))
-    np.testing.assert_allclose(ident.rigid_gain.covariance, ident.fit.gain_covariance(far),
+    np.testing.assert_array_equal(ident.rigid_gain.gain, ident.held_fit.model.gain(near))
+    np.testing.assert_allclose(ident.rigid_gain.covariance, ident.held_fit.gain_covariance(far),
                                rtol=1e-9, atol=0)
-    assert not np.array_equal(ident.fit.model.gain(near), ident.fit.model.gain(far))
+    assert not np.array_equal(ident.held_fit.model.gain(near), ident.held_fit.model.gain(far))
 
+
+
+def test_fit_takes_the_drive_schedule_and_is_the_update_loop():
+    """``fit(U, Y, schedule=angles)`` sets each sample's angle before its update: the same
+    models and states as the loop; without a schedule the angle is held."""
+    rng = np.random.default_rng(2)
+    u, y, angle = _record(_model(), 230, rng)
+    options = {"turning": TURNING, "warmup": 200, "fit_options": {"filter_constants": (1.0,)}}
+    seq = ScheduledPhysicalIdentifier(**options).fit(u, y, schedule=angle)
+    loop = ScheduledPhysicalIdentifier(**options)
+    for k in range(230):
+        loop.set_schedule(angle[k])
+        loop.update(u[k], y[k])
+    assert seq.valid[199:].all() and not seq.valid[:199].any()
+    np.testing.assert_array_equal(seq[229].A, loop.model.A)
+    np.testing.assert_array_equal(seq.states[229], loop.state)
+    held = ScheduledPhysicalIdentifier(**options)
+    held.set_schedule(0.3)
+    unscheduled = held.fit(u, y)
+    assert held.angle == 0.3 and unscheduled.valid[229]
+    assert not np.allclose(unscheduled[229].A, seq[229].A)   # the drive turned 23 deg
+    for bad in (angle[:5], np.where(np.arange(230) == 7, np.nan, angle), angle[:, None]):
+        with pytest.raises(ValueError, match="one finite drive angle"):
+            ScheduledPhysicalIdentifier(**options).fit(u, y, schedule=bad)
 
 def test_the_identifier_refuses_what_it_cannot_identify():
     with pytest.raises(ValueError, match="needs attitude, rate and deflection"):
@@ -461,7 +485,7 @@ def test_a_failed_fit_is_retried_after_half_a_warmup_not_every_sample(monkeypatc
     for _ in range(79):
         ident.update(rng.normal(size=3), rng.normal(size=10) * STANDARD_OUTPUTS.scales())
     assert calls == [40, 60]                      # at the warm-up, then 20 samples later
-    assert ident.model is None and ident.fit is None
+    assert ident.model is None and ident.held_fit is None
 
 
 def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatch):
@@ -524,7 +548,7 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
         ident.update(u, y)
         if k == 158:
             held_filter = ident._kf
-    assert len(fits) == 3 and ident.fit is fits[1]
+    assert len(fits) == 3 and ident.held_fit is fits[1]
     assert ident.n_refits == 1 and ident.n_refits_kept_out == 1
     assert ident._kf is held_filter                # updated on, not replaced
     with pytest.raises(ValueError, match="max_record must be at least warmup"):
@@ -625,7 +649,7 @@ def test_a_change_the_innovations_show_is_reported_and_refitted():
         ident.update(u[k], y[k])
         if k == change - 1:
             assert ident.events == [] and not ident.refitting     # no false alarm
-            first = ident.fit
+            first = ident.held_fit
     assert len(ident.events) >= 1 and ident.n_refits == 1
     assert change <= ident.events[0].sample <= change + 150
     truth = after.gain(angle[-1])
@@ -633,7 +657,7 @@ def test_a_change_the_innovations_show_is_reported_and_refitted():
     def error(gain):
         return np.linalg.norm(gain - truth) / np.linalg.norm(truth)
 
-    assert ident.fit is not first
+    assert ident.held_fit is not first
     assert error(ident.rigid_gain.gain) < 0.6 * error(first.model.gain(angle[-1]))
     with pytest.raises(TypeError, match="refit_on_change"):
         ScheduledPhysicalIdentifier(refit_on_change="yes")
