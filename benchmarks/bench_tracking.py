@@ -37,6 +37,8 @@ import numpy as np
 from identifiers import (
     KalmanPredictor,
     ModelSequence,
+    OnlineIdentifier,
+    ScheduledPhysicalIdentifier,
     default_identifier,
     h_step_predictions,
     persistence_predictions,
@@ -81,23 +83,50 @@ def _vaf(pred: np.ndarray, y_clean: np.ndarray, start: int) -> list[float]:
     return [float(np.mean(v[STANDARD_OUTPUTS.indices(g)])) for g in GROUPS]
 
 
+def make_identifier(kind: str, model, **options) -> OnlineIdentifier:
+    """The identifier under test: ``"default"`` (:func:`identifiers.default_identifier`,
+    which needs no drive angle) or ``"scheduled"`` (the adaptive LQG's default,
+    :class:`identifiers.ScheduledPhysicalIdentifier`, given the record's drive angles and
+    the appendages' description the environments give it); ``options`` go to it."""
+    if kind == "default":
+        return default_identifier(**options)
+    return ScheduledPhysicalIdentifier(turning=model.appendage_turns,
+                                       sensor_appendage=model.sensor_appendage,
+                                       drive_axis=model.drive_axis, dt=model.dt, **options)
+
+
+def run(ident: OnlineIdentifier, u: np.ndarray, y: np.ndarray,
+        schedule: np.ndarray | None) -> tuple[ModelSequence, dict]:
+    """``ident.fit`` over the record in stretches that end at every 10th sample: the
+    models after each sample, and the rigid-body gain's estimate after samples 0, 10,
+    20, ... (``fit`` keeps models, not bands)."""
+    ends = [*range(0, len(u), 10), len(u) - 1]
+    parts, bands, first = [], {}, 0
+    for last in sorted(set(ends)):
+        chunk = slice(first, last + 1)
+        parts.append(ident.fit(u[chunk], y[chunk]) if schedule is None
+                     else ident.fit(u[chunk], y[chunk], schedule=schedule[chunk]))
+        if last % 10 == 0:
+            bands[last] = ident.rigid_gain
+        first = last + 1
+    stack = [np.concatenate([getattr(p, name) for p in parts])
+             for name in ("A", "B", "C", "D", "K", "states", "valid")]
+    return ModelSequence(*stack[:5], stack[6], parts[-1].dt, parts[-1].consistent_basis,
+                         states=stack[5]), bands
+
+
 def score(scenario: str, seed: int, snr_db: float | None, rms: float,
-          **options) -> dict:
-    """One record's figures; ``options`` go to :func:`identifiers.default_identifier`."""
+          identifier: str = "default", **options) -> dict:
+    """One record's figures; ``options`` go to the identifier (:func:`make_identifier`)."""
     u, y, y_clean, model = env_record(scenario, seed, snr_db, rms)
     dt = model.dt
     start = round(150.0 / dt)
-    ident = default_identifier(**options)
+    schedule = (None if identifier == "default" else
+                np.array([model.scenario.paddle_angle(k * dt) for k in range(len(u))]))
+    ident = make_identifier(identifier, model, **options)
     tic = time.perf_counter()
-    seq = ident.fit(u, y)
+    seq, bands = run(ident, u, y, schedule)
     seconds = time.perf_counter() - tic
-    # the identifier's rigid gain and band every 1 s (fit() keeps models, not bands)
-    replay = default_identifier(**options)
-    bands = {}
-    for k in range(len(u)):
-        replay.update(u[k], y[k])
-        if k % 10 == 0:
-            bands[k] = replay.rigid_gain
     windows = WINDOWS[scenario]
     frozen = frozen_sequence(model, u, y, snr_db, [f for _, f in windows])
     mode, mode_frozen, gain, covered = [], [], [], []
@@ -142,16 +171,24 @@ def main() -> None:
     parser.add_argument("--scenarios", nargs="+", default=list(TRACKED))
     parser.add_argument("--conditions", nargs="+",
                         default=["20:1", "40:1", "60:1", "none:1", "40:0.1"])
+    parser.add_argument("--identifier", choices=("default", "scheduled"), default="default")
+    parser.add_argument("--refit-on-change", action="store_true")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     options = {} if args.coupling_drift is None else {"coupling_drift": args.coupling_drift}
     if args.drift_reference is not None:
         options["drift_reference"] = args.drift_reference
+    if args.refit_on_change:
+        options["refit_on_change"] = True
+    if options and (args.identifier == "default") == args.refit_on_change:
+        parser.error("--coupling-drift and --drift-reference are the default identifier's "
+                     "options, --refit-on-change the scheduled one's")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     out = {}
     print("10 s-ahead VAF (%) attitude / rate / deflection from 150 s, median [worst] over "
           f"{args.seeds} seeds ({seeds.start}-{seeds.stop - 1}); mode and gain errors (%) over "
-          f"the tracking windows{'; identifier options ' + str(options) if options else ''}")
+          f"the tracking windows; identifier: {args.identifier}"
+          f"{', options ' + str(options) if options else ''}")
     header = (f"{'scenario':<16}{'SNR dB':>7}{'N m':>5}  {'persistence':<22}"
               f"{'frozen before change':<22}{'identifier':<22}{'mode err':>15}"
               f"{'frozen':>8}{'gain err':>15}{'2-sigma':>8}{'s/run':>7}")
@@ -161,7 +198,7 @@ def main() -> None:
             for cond in args.conditions:
                 snr_text, rms_text = cond.split(":")
                 snr = None if snr_text == "none" else float(snr_text)
-                runs = [score(scenario, seed, snr, float(rms_text), **options)
+                runs = [score(scenario, seed, snr, float(rms_text), args.identifier, **options)
                         for seed in seeds]
                 out[f"{scenario} {cond}"] = runs
                 vaf = {row: " / ".join(f"{np.median([r['vaf'][row][g] for r in runs]):.1f}"
