@@ -153,6 +153,7 @@ def score(scenario: str, seed: int, snr_db: float | None, rms: float,
         "frozen_mode_error_pct": 100 * float(np.median(mode_frozen)),
         "gain_error_pct": 100 * float(np.median(gain)),
         "coverage": float(np.mean(covered)),
+        "change_events": [round(e.time, 1) for e in getattr(ident, "events", [])],
         "seconds": seconds,
     }
 
