@@ -1,0 +1,59 @@
+"""benchmarks/bench_tracking.py: its one pass over a record and the README's command."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from identifiers import default_identifier
+from spacecraft_lab.identification import env_record
+
+
+def _bench():
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_tracking.py"
+    spec = importlib.util.spec_from_file_location("bench_tracking", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_pass_in_stretches_is_one_fit_and_reads_the_bands_on_the_way():
+    bench = _bench()
+    u, y, _, _ = env_record("docking", 0, 40.0, steps=700)
+    seq, bands = bench.run(default_identifier(), u, y, None)
+    whole = default_identifier().fit(u, y)
+    np.testing.assert_array_equal(seq.valid, whole.valid)
+    np.testing.assert_array_equal(seq.A[whole.valid], whole.A[whole.valid])
+    np.testing.assert_array_equal(seq.states[whole.valid], whole.states[whole.valid])
+    loop = default_identifier()
+    for k in range(700):
+        loop.update(u[k], y[k])
+        if k % 10 == 0 and bands[k] is not None:
+            np.testing.assert_array_equal(bands[k].gain, loop.rigid_gain.gain)
+    assert sorted(bands) == list(range(0, 700, 10)) and bands[690] is not None
+
+
+def test_the_readmes_command_runs_the_scheduled_fit(monkeypatch, capsys):
+    """`python benchmarks/bench_tracking.py --identifier scheduled --seeds 10`, its
+    arguments parsed and handed on (each record's scoring stubbed: minutes each)."""
+    bench = _bench()
+    calls = []
+
+    def score(scenario, seed, snr, rms, identifier, **options):
+        calls.append((scenario, seed, snr, rms, identifier, options))
+        return {"vaf": {row: [99.0, 98.0, 97.0] for row in
+                        ("persistence", "frozen", "identifier")},
+                "mode_error_pct": 0.1, "frozen_mode_error_pct": 1.46, "gain_error_pct": 0.4,
+                "coverage": 0.9, "change_events": [], "seconds": 1.0}
+
+    monkeypatch.setattr(bench, "score", score)
+    monkeypatch.setattr(sys, "argv", ["bench_tracking.py", "--identifier", "scheduled",
+                                      "--seeds", "10", "--refit-on-change",
+                                      "--scenarios", "paddle_rotation"])
+    bench.main()
+    assert len(calls) == 50 and {c[4] for c in calls} == {"scheduled"}
+    assert all(c[5] == {"refit_on_change": True} for c in calls)
+    assert "identifier: scheduled" in capsys.readouterr().out
