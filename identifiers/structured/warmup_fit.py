@@ -218,6 +218,7 @@ class WarmupFit(ModelFilter):
             self._since_fit = 0
             self.n_refits_skipped += 1
             self.refit_start = None
+            self._watch()
             return
         # what the fit replaces (the held fit, its matrices, its filter: the host's as
         # well), restored if the refit is kept out
@@ -236,6 +237,7 @@ class WarmupFit(ModelFilter):
             self._since_fit = 0
             self.n_refits_kept_out += 1
         self.refit_start = None
+        self._watch()
 
     def _refit_worthwhile(self, held_std: float) -> bool:
         """Whether to run the accumulating refit of ``_record`` (from ``refit_start``)
