@@ -126,8 +126,8 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
         return RigidGainEstimate(np.array(self.held_fit.model.gain), self.held_fit.gain_covariance)
 
     def __repr__(self) -> str:
-        modes = [] if self.held_fit is None else [round(float(f), 4) for f in
-                                             np.sort(self.held_fit.model.frequencies_hz)]
+        modes = [] if self.held_fit is None else [
+            round(float(f), 4) for f in np.sort(self.held_fit.model.frequencies_hz)]
         return (f"{type(self).__name__}(n_modes={self.n_modes}, "
                 f"fitted={self.held_fit is not None}, modes_hz={modes}, "
                 f"samples={self.n_samples})")

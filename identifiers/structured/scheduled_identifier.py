@@ -382,8 +382,8 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         return self._gain_now[1]
 
     def __repr__(self) -> str:
-        modes = [] if self.held_fit is None else [round(float(f), 4) for f in
-                                             self.held_fit.model.frequencies_hz]
+        modes = [] if self.held_fit is None else [
+            round(float(f), 4) for f in self.held_fit.model.frequencies_hz]
         return (f"{type(self).__name__}(turning={self.turning}, "
                 f"fitted={self.held_fit is not None}, modes_hz={modes}, "
                 f"angle={self.angle:.4g}, samples={self.n_samples})")
