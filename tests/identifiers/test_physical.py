@@ -125,7 +125,6 @@ def test_the_identifier_fits_at_the_end_of_its_warmup_and_holds_the_model():
     assert ident.health.healthy
 
 
-
 def test_fit_is_the_update_loop():
     """``fit(U, Y)``, the streaming API's batch call, was shadowed by the attribute that
     holds the fit (``held_fit`` since): it must run and equal ``update`` in a loop."""
@@ -140,6 +139,7 @@ def test_fit_is_the_update_loop():
     np.testing.assert_array_equal(seq[229].A, loop.model.A)
     np.testing.assert_array_equal(seq.states[229], loop.state)
     assert batch.held_fit is not None
+
 
 def test_the_identifier_refuses_what_it_cannot_identify():
     with pytest.raises(ValueError, match=r"sensor groups \['rate'\]"):

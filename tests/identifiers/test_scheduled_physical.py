@@ -430,7 +430,6 @@ def test_the_identifier_follows_the_drive_after_its_fit():
     assert not np.array_equal(ident.held_fit.model.gain(near), ident.held_fit.model.gain(far))
 
 
-
 def test_fit_takes_the_drive_schedule_and_is_the_update_loop():
     """``fit(U, Y, schedule=angles)`` sets each sample's angle before its update: the same
     models and states as the loop; without a schedule the angle is held."""
@@ -453,6 +452,7 @@ def test_fit_takes_the_drive_schedule_and_is_the_update_loop():
     for bad in (angle[:5], np.where(np.arange(230) == 7, np.nan, angle), angle[:, None]):
         with pytest.raises(ValueError, match="one finite drive angle"):
             ScheduledPhysicalIdentifier(**options).fit(u, y, schedule=bad)
+
 
 def test_the_identifier_refuses_what_it_cannot_identify():
     with pytest.raises(ValueError, match="needs attitude, rate and deflection"):
@@ -669,9 +669,9 @@ def test_a_change_the_innovations_show_is_reported_and_refitted():
 @pytest.mark.slow
 def test_on_a_turning_paddle_the_scheduled_fit_tracks_the_mode_at_every_noise_level():
     """The adaptive LQG's identifier on the tracking benchmark's paddle-rotation records
-    (seeds 0-2): the mode the paddles move within a third of the true model frozen at
-    100 s from 100 to 250 s, and the 10 s deflection predictions from 150 s no worse
-    noise-free or at 60 dB than at 40 dB."""
+    (seeds 0-2): the mode the paddles move within a third of the error of the true model
+    frozen at 100 s, at 175 and 249 s, and the 10 s deflection predictions from 150 s no
+    worse noise-free or at 60 dB than at 40 dB."""
     deflection = STANDARD_OUTPUTS.slice("deflection")
     vaf = {}
     for snr in (40.0, 60.0, None):
