@@ -8,10 +8,32 @@ it says otherwise: results must not depend on it.
 
 from __future__ import annotations
 
+import importlib.util
 import inspect
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
+
+#: The repository's benchmark scripts (not a package: loaded by path).
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _load_benchmark(name: str) -> ModuleType:
+    """``benchmarks/<name>.py`` executed as a new module (each call a fresh one)."""
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def load_benchmark() -> Callable[[str], ModuleType]:
+    """A function that loads a benchmark script by name, e.g.
+    ``load_benchmark("bench_tracking")``, as a fresh module."""
+    return _load_benchmark
 
 
 @pytest.fixture

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import pickle
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -376,20 +374,12 @@ def test_long_run_stays_finite(n_steps):
 
 
 # ------------------------------------------------------------------ tracking a pole jump
-def _pole_jump_benchmark():
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_pole_jump.py"
-    spec = importlib.util.spec_from_file_location("bench_pole_jump", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_recursive_rpbsids_track_a_pole_jump():
+def test_recursive_rpbsids_track_a_pole_jump(load_benchmark):
     """benchmarks/bench_pole_jump.py on 3 seeds: 300+ samples after the jump both
     recursive methods are far closer to the new poles than a model that stopped
     learning (0.2); the batch PBSID on the new data is the ceiling. The issue's
     bar (0.02) is not met (docs/results/identification.md)."""
-    bench = _pole_jump_benchmark()
+    bench = load_benchmark("bench_pole_jump")
     res = bench.run(seeds=3, noise=0.1)
     frozen = np.median(res["frozen"]["after"])
     assert frozen == pytest.approx(0.2, abs=1e-3)

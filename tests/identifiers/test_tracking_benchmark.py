@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -12,16 +10,8 @@ from identifiers import default_identifier
 from spacecraft_lab.identification import env_record
 
 
-def _bench():
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_tracking.py"
-    spec = importlib.util.spec_from_file_location("bench_tracking", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_pass_in_stretches_is_one_fit_and_reads_the_bands_on_the_way():
-    bench = _bench()
+def test_the_pass_in_stretches_is_one_fit_and_reads_the_bands_on_the_way(load_benchmark):
+    bench = load_benchmark("bench_tracking")
     u, y, _, _ = env_record("docking", 0, 40.0, steps=700)
     seq, bands = bench.run(default_identifier(), u, y, None)
     whole = default_identifier().fit(u, y)
@@ -36,10 +26,10 @@ def test_the_pass_in_stretches_is_one_fit_and_reads_the_bands_on_the_way():
     assert sorted(bands) == list(range(0, 700, 10)) and bands[690] is not None
 
 
-def test_the_readmes_command_runs_the_scheduled_fit(monkeypatch, capsys):
+def test_the_readmes_command_runs_the_scheduled_fit(load_benchmark, monkeypatch, capsys):
     """`python benchmarks/bench_tracking.py --identifier scheduled --seeds 10`, its
     arguments parsed and handed on (each record's scoring stubbed: minutes each)."""
-    bench = _bench()
+    bench = load_benchmark("bench_tracking")
     calls = []
 
     def score(scenario, seed, snr, rms, identifier, **options):
