@@ -30,7 +30,8 @@ __all__ = ["COUPLING_SCALES", "equation_error_start"]
 #: appendages carry: on solar rotation seed 0 noise-free the regression's
 #: couplings were 1.6-4x too large, and every start refined from them ended
 #: with two modes on their bounds and the rigid gain 67 % off; scaled by
-#: 0.5-0.7 each reached the right basin (0.1 %).
+#: 0.5-0.7 each reached the right basin (0.1-0.3 %). Nine simulations of the
+#: record per start, next to the refinement's hundreds (its Jacobian columns).
 COUPLING_SCALES = tuple(2.0 ** np.arange(-4.0, 0.25, 0.5))
 
 
