@@ -46,7 +46,7 @@ from identifiers import (
     relative_gain_error,
 )
 from spacecraft_conventions import STANDARD_OUTPUTS, single_threaded_blas
-from spacecraft_lab.identification import env_record
+from spacecraft_lab.identification import drive_angles, env_record
 
 #: Index of the tracked mode among the truth's sorted modal frequencies.
 TRACKED = {"docking": 1, "paddle_rotation": 3, "solar_rotation": 1}
@@ -121,8 +121,7 @@ def score(scenario: str, seed: int, snr_db: float | None, rms: float,
     u, y, y_clean, model = env_record(scenario, seed, snr_db, rms)
     dt = model.dt
     start = round(150.0 / dt)
-    schedule = (None if identifier == "default" else
-                np.array([model.scenario.paddle_angle(k * dt) for k in range(len(u))]))
+    schedule = None if identifier == "default" else drive_angles(model, len(u))
     ident = make_identifier(identifier, model, **options)
     tic = time.perf_counter()
     seq, bands = run(ident, u, y, schedule)

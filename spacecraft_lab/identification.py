@@ -94,6 +94,7 @@ __all__ = [
     "PRESETS",
     "IdentificationRecord",
     "dominant_modes",
+    "drive_angles",
     "env_record",
     "identification_records",
     "identify_task",
@@ -255,6 +256,13 @@ def env_record(scenario: str, seed: int, snr_db: float | None, rms: float = 1.0,
     n_outputs = model.C.shape[0]                # the observation's leading channels
     return u, np.array(ys)[:, :n_outputs].astype(float), np.array(xs) @ model.C.T, model
 
+
+
+def drive_angles(model: FlexibleSpacecraftModel, steps: int) -> np.ndarray:
+    """The drive's angle at each of the first ``steps`` samples of a record of
+    ``model`` (rad; the env's ``info["paddle_angle"]``), the schedule
+    :class:`identifiers.ScheduledPhysicalIdentifier` is fed."""
+    return np.array([model.scenario.paddle_angle(k * model.dt) for k in range(steps)])
 
 def paper_test_response(truth: FlexibleSpacecraftModel,
                         n_samples: int = 2500) -> tuple[np.ndarray, np.ndarray]:

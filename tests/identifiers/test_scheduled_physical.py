@@ -24,7 +24,7 @@ from identifiers.structured.scheduled_identifier import EXPORT_RESOLUTION
 from identifiers.structured.scheduled_model import _cross, drive_rotation, plane_basis
 from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
-from spacecraft_lab.identification import env_record
+from spacecraft_lab.identification import drive_angles, env_record
 
 TURNING = (True, True, False, False)
 REST = np.array([[2.0e4, 500.0, 300.0], [500.0, 1.5e4, -200.0], [300.0, -200.0, 2.5e4]])
@@ -304,7 +304,7 @@ def test_the_start_gives_the_appendages_the_share_of_inertia_the_record_shows():
     error 30x the floor the second differences read (7,700x before)."""
     u, y, _, truth = env_record("solar_rotation", 0, None)
     u, y = u[:300], y[:300]
-    angle = np.array([truth.scenario.paddle_angle(k * truth.dt) for k in range(300)])
+    angle = drive_angles(truth, 300)
     fit = fit_scheduled_model(u, y, angle, truth.dt, STANDARD_OUTPUTS, truth.appendage_turns,
                               sensor_appendage=truth.sensor_appendage,
                               drive_axis=truth.drive_axis, filter_constants=(1.0,))
@@ -685,22 +685,21 @@ def test_a_change_the_innovations_show_is_reported_and_refitted():
 
 
 @pytest.mark.slow
-def test_on_a_turning_paddle_the_scheduled_fit_tracks_the_mode_at_every_noise_level():
+def test_on_a_turning_paddle_the_scheduled_fit_tracks_the_mode_at_every_noise_level(
+        load_benchmark):
     """The adaptive LQG's identifier on the tracking benchmark's paddle-rotation records
     (seeds 0-2): the mode the paddles move within a third of the error of the true model
     frozen at 100 s, at 175 and 249 s, and the 10 s deflection predictions from 150 s no
     worse noise-free or at 60 dB than at 40 dB."""
+    bench = load_benchmark("bench_tracking")
     deflection = STANDARD_OUTPUTS.slice("deflection")
     vaf = {}
     for snr in (40.0, 60.0, None):
         vafs = []
         for seed in range(3):
             u, y, y0, truth = env_record("paddle_rotation", seed, snr)
-            angle = [truth.scenario.paddle_angle(k * truth.dt) for k in range(len(u))]
-            ident = ScheduledPhysicalIdentifier(
-                turning=truth.appendage_turns, sensor_appendage=truth.sensor_appendage,
-                drive_axis=truth.drive_axis, dt=truth.dt)
-            seq = ident.fit(u, y, schedule=angle)
+            ident = bench.make_identifier("scheduled", truth)
+            seq = ident.fit(u, y, schedule=drive_angles(truth, len(u)))
             vafs.append(prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
                         [deflection].mean())
             frozen = truth.modal_residues(99.9)[0]
