@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from identifiers import InnovationCUSUM, RegressionGLR
+from identifiers.structured.change_detection import misfit_confirms_change
 
 THETA = np.array([[1.0, 0.5, -0.3], [0.2, -1.0, 0.4], [0.0, 0.3, 0.8]])
 
@@ -55,3 +56,27 @@ def test_cusum_detects_a_growth_of_the_innovations():
 def test_bad_parameters(make):
     with pytest.raises(ValueError):
         make()
+
+
+def test_a_refit_confirms_a_change_only_by_a_clear_margin_over_the_floor():
+    """Excess misfits (above the floor) of 10 against 4 confirm at the factor 2, 7 against
+    4 do not; at a misfit all noise the margin of three standard errors decides."""
+    assert misfit_confirms_change(11.0, 5.0, 1.0, 10**8)
+    assert not misfit_confirms_change(8.0, 5.0, 1.0, 10**8)
+    # all noise: n = 3000 residuals -> margin 3 sqrt(2/3000) = 0.0775 of the floor
+    assert not misfit_confirms_change(1.15, 1.0, 1.0, 3000)
+    assert misfit_confirms_change(1.16, 1.0, 1.0, 3000)
+    assert not misfit_confirms_change(1.0, 0.9, 1.0, 3000)     # a refit below the floor
+    # the same verdicts on data with no noise at all, at any scale
+    for scale in (1e-9, 1.0, 1e6):
+        assert misfit_confirms_change(2.1 * scale, scale, 0.0, 3000)
+        assert not misfit_confirms_change(1.9 * scale, scale, 0.0, 3000)
+    assert misfit_confirms_change(np.inf, 1.0, 1.0, 3000)        # a held model that broke
+    assert not misfit_confirms_change(1.0, np.nan, 1.0, 3000)
+
+
+@pytest.mark.parametrize("args", [(1.0, 1.0, -1.0, 10), (1.0, 1.0, 1.0, 0),
+                                  (1.0, 1.0, 1.0, 10, 1.0)])
+def test_confirmation_refuses_bad_arguments(args):
+    with pytest.raises(ValueError, match="factor > 1"):
+        misfit_confirms_change(*args)
