@@ -11,6 +11,9 @@ and solar rotation (the paper's two cases):
 * the exact rigid block (true J(t)^-1 at every sample): the flexible modes' share;
 * the gain frozen at t = 0 (a model that does not track the change at all);
 * the true gain times 1.05 (a 5 % gain error);
+* the true gain 5, 10 and 20 s late (``J(t - D)^-1``: a tracker that follows every
+  change exactly, D seconds after it; on docking, the gain of each docking learnt D s
+  after it);
 * the double pole at z = 1 moved inside the unit circle by 3e-4 and by 1e-3
   (``A = [[(1 - d) I, dt I], [0, (1 - d) I]]``);
 * white noise of standard deviation 1e-5 on the rigid A's entries (median of 10 draws).
@@ -75,6 +78,9 @@ def main() -> None:
             "gain frozen at t = 0": rigid_response(np.broadcast_to(gains[0], gains.shape), u,
                                                    dt),
             "true gain x 1.05": rigid_response(1.05 * gains, u, dt),
+            **{f"true gain {lag} s late": rigid_response(
+                gains[np.maximum(np.arange(args.samples) - round(lag / dt), 0)], u, dt)
+               for lag in (5, 10, 20)},
             "double pole moved in by 3e-4": rigid_response(gains, u, dt, pole_shift=3e-4),
             "double pole moved in by 1e-3": rigid_response(gains, u, dt, pole_shift=1e-3),
         }
