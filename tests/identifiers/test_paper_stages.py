@@ -7,9 +7,6 @@ and the RLS for the system matrices on a state sequence (Eq. 47-55)."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -18,16 +15,19 @@ from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.subspace.recursive import SystemRLSIdentifier
 from identifiers.subspace.varx import regressor_matrix
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from bench_pole_jump import BEFORE, JUMP, closed_loop_record, eigenvalue_error
-
 ONES = {"input_scale": np.ones(1), "output_scale": np.ones(2)}
 
 
 @pytest.fixture(scope="module")
-def lti():
+def pole_jump(load_benchmark):
+    """``benchmarks/bench_pole_jump.py``: its closed loop and eigenvalue error."""
+    return load_benchmark("bench_pole_jump")
+
+
+@pytest.fixture(scope="module")
+def lti(pole_jump):
     """The pole-jump benchmark's closed loop before its jump: 3rd order, 1 input, 2 outputs."""
-    u, y = closed_loop_record(0, n_samples=JUMP)
+    u, y = pole_jump.closed_loop_record(0, n_samples=pole_jump.JUMP)
     return u, y
 
 
@@ -71,7 +71,7 @@ def test_apsa_state_step_is_equation_42(lti):
     np.testing.assert_allclose(ident._x, expected, rtol=1e-12, atol=1e-15)
 
 
-def test_the_printed_state_step_cannot_follow_a_moving_state(lti):
+def test_the_printed_state_step_cannot_follow_a_moving_state(lti, pole_jump):
     """Why the paper's settings cannot converge: the sign step moves the estimate by at
     most mu = 0.01 per sample (||mu g / sqrt(g^T g + nu)|| < mu), while the state of a
     system with poles 0.8-0.9 moves by about (A - I) x + B u, of the order of the signals
@@ -87,7 +87,8 @@ def test_the_printed_state_step_cannot_follow_a_moving_state(lti):
         if before is not None and ident._x is not None:
             steps.append(np.linalg.norm(ident._x - before))
     assert max(steps) < 0.01
-    assert eigenvalue_error(ident.model.A, BEFORE) == pytest.approx(0.8, abs=0.01)
+    assert pole_jump.eigenvalue_error(ident.model.A, pole_jump.BEFORE) == \
+        pytest.approx(0.8, abs=0.01)
 
 
 def test_system_matrix_stage_recovers_a_known_system_from_its_states():
@@ -111,16 +112,18 @@ def test_system_matrix_stage_recovers_a_known_system_from_its_states():
     np.testing.assert_allclose(b_id, b, atol=1e-6)
 
 
-def _eigen_error(method, u, y) -> float:
+def _eigen_error(bench, method, u, y) -> float:
     seq = method().fit(u, y)
-    return float(np.median([eigenvalue_error(seq[k].A, BEFORE) for k in range(700, JUMP, 10)]))
+    return float(np.median([bench.eigenvalue_error(seq[k].A, bench.BEFORE)
+                            for k in range(700, bench.JUMP, 10)]))
 
 
-def test_classical_rpbsid_converges_to_within_2x_batch_pbsid(lti):
+def test_classical_rpbsid_converges_to_within_2x_batch_pbsid(lti, pole_jump):
     u, y = lti
-    batch = eigenvalue_error(pbsid(u[300:], y[300:], 3, 5, regularization=0.0).A, BEFORE)
-    recursive = _eigen_error(lambda: ClassicalRPBSID(3, p=5, forgetting=0.999, warmup=100),
-                             u, y)
+    batch = pole_jump.eigenvalue_error(pbsid(u[300:], y[300:], 3, 5, regularization=0.0).A,
+                                       pole_jump.BEFORE)
+    recursive = _eigen_error(pole_jump,
+                             lambda: ClassicalRPBSID(3, p=5, forgetting=0.999, warmup=100), u, y)
     assert recursive <= max(2 * batch, 0.02), (recursive, batch)
 
 
@@ -130,9 +133,10 @@ def test_classical_rpbsid_converges_to_within_2x_batch_pbsid(lti):
     "predict step and any step size or forgetting tried (mu 0.03-1, sign, normalized and "
     "least-squares corrections, forgetting 0.98-0.995) the eigenvalue error stays at "
     "0.05-0.37 before the jump against batch PBSID's 0.008-0.02"))
-def test_improved_rpbsid_converges_to_within_2x_batch_pbsid(lti):
+def test_improved_rpbsid_converges_to_within_2x_batch_pbsid(lti, pole_jump):
     u, y = lti
-    batch = eigenvalue_error(pbsid(u[300:], y[300:], 3, 5, regularization=0.0).A, BEFORE)
-    recursive = _eigen_error(lambda: ImprovedRPBSID(3, p=5, forgetting=0.999, warmup=100),
-                             u, y)
+    batch = pole_jump.eigenvalue_error(pbsid(u[300:], y[300:], 3, 5, regularization=0.0).A,
+                                       pole_jump.BEFORE)
+    recursive = _eigen_error(pole_jump,
+                             lambda: ImprovedRPBSID(3, p=5, forgetting=0.999, warmup=100), u, y)
     assert recursive <= max(2 * batch, 0.02), (recursive, batch)
