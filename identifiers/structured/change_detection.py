@@ -44,13 +44,20 @@ import numpy as np
 from numba import njit
 
 __all__ = ["CALM", "CONFIRM_FACTOR", "RESOLUTION", "ChangeEvent", "InnovationCUSUM",
-           "RegressionGLR", "misfit_confirms_change"]
+           "RegressionGLR", "misfit_confirms_change", "resolved_variance"]
 
 #: Smallest relative error (of the high-passed signal's RMS) the structure-aware
 #: identifiers treat as evidence: 1e-3, a 60 dB signal-to-error ratio. Smaller
 #: errors are no evidence of a change, and no finer a noise level for the
 #: regressions' drifts.
 RESOLUTION = 1e-3
+
+
+def resolved_variance(error: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """``max(error, RESOLUTION^2 signal)`` elementwise: an error variance no smaller
+    than :data:`RESOLUTION` of the signal's mean square allows, below which an error
+    is no evidence (the variance a change test or a noise level divides by)."""
+    return np.maximum(error, RESOLUTION**2 * signal)
 
 #: The calm level of a statistic is tracked by a running mean of every value
 #: clipped at this multiple of the level: nearly unbiased for the

@@ -68,7 +68,7 @@ from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import RESOLUTION
+from identifiers.structured.change_detection import RESOLUTION, resolved_variance
 from identifiers.structured.minimal_model import MinimalModelExport
 from identifiers.structured.modal_basis import (
     HighPass,
@@ -367,9 +367,8 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
             if (err is not None and self.detect_changes and replay_k is None
                     and self._resvar is not None):
                 rate = self._rate_rows                 # a change of inertia shows here
-                # errors below RESOLUTION of the signal are not evidence of a change
-                # (on noise-free data the a-priori error is all slow model error)
-                variance = np.maximum(self._resvar[rate], RESOLUTION**2 * self._sigvar[rate])
+                # on noise-free data the a-priori error is all slow model error
+                variance = resolved_variance(self._resvar[rate], self._sigvar[rate])
                 event = self._detector.update(phi[bank.slices["rate"]], err[rate], variance,
                                               sample=k)
                 if event is not None:

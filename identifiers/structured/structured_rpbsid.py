@@ -37,7 +37,7 @@ from scipy.linalg import block_diag
 from identifiers.core.checks import positive_float
 from identifiers.core.kalman import KalmanPredictor
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import ChangeEvent, RegressionGLR
+from identifiers.structured.change_detection import ChangeEvent, RegressionGLR, resolved_variance
 from identifiers.structured.flexible_part import FLEXIBLE_METHODS, FlexiblePart
 from identifiers.structured.modal_basis import HighPass
 from identifiers.structured.resonant import resonant_part
@@ -47,7 +47,6 @@ from identifiers.structured.rigid_block import (
     RigidBlock,
     highpass_offset,
 )
-from identifiers.structured.rigid_flexible import RESOLUTION
 from identifiers.structured.rigid_gain import RigidGainEstimate
 from identifiers.structured.state_filter import ModelFilter
 from identifiers.subspace.improved import ImprovedRPBSID
@@ -316,8 +315,7 @@ class StructuredRPBSID(ImprovedRPBSID):
         if not self.detect_changes:
             return
         rate = self._rate_rows
-        # errors below RESOLUTION of the signal are not evidence of a change
-        variance = np.maximum(self._errvar[rate], RESOLUTION**2 * self._sigvar[rate])
+        variance = resolved_variance(self._errvar[rate], self._sigvar[rate])
         if self._detector.update(rho[3:6], err[rate], variance, sample=self._k) is not None:
             factor = np.ones(self._varx.P.shape[0])
             factor[:N_RIGID_REGRESSORS] = np.sqrt(self.discount)
