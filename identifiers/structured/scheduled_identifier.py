@@ -59,7 +59,7 @@ SCREEN_MARGIN = 2.0
 
 class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up and
-    again as the record grows (``accumulate``).
+    again as the record grows (``accumulate``) or changes.
 
     Call :meth:`set_schedule` with the drive angle at a sample before the
     :meth:`update` that carries it (``controllers.AdaptiveLQG`` does, from the
@@ -99,14 +99,12 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     process_torque : float
         Unmodelled torque (N m per axis) the state's Kalman filter assumes.
     refit_on_change : bool
-        Watch the filter's innovations for a change of the plant (CUSUM), fit
-        again to the ``warmup`` samples after an alarm, the held model refined
-        first, and keep that refit only where it explains those samples clearly
-        better than the held model does (the alarm is then confirmed; every
-        alarm in :attr:`events`). Default True: open loop it follows both
-        dockings at 40 dB, 60 dB and noise-free and leaves a constant plant's
-        fit as it was (docs/results/identification.md); in the closed-loop
-        scenarios the test has not fired (docs/design/control.md).
+        Watch the filter's innovations for a change (CUSUM), fit again to the
+        ``warmup`` samples after an alarm from the held model, and keep that refit
+        only where it explains them clearly better than the held model refined on
+        its whole record (every alarm in :attr:`events`). Default True: open loop
+        it follows both dockings from 40 dB to noise-free; in the closed loop the
+        test has not fired (docs/results/identification.md, docs/design/control.md).
     accumulate : bool
         Let the information accumulate (default True): fit again, the held
         model refined first, to the last ``max_record`` samples each time as
@@ -328,9 +326,10 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         predicted = RigidGainEstimate(self.held_fit.model.gain(float(angle[-1])), cov)
         return predicted.relative_std() <= SCREEN_MARGIN * held_std
 
+    judges_changes = True
+
     def _held_misfit(self) -> float | None:
-        """The held model's misfit of the refit's record from the filter's state at its
-        first sample (:func:`~identifiers.structured.scheduled_information.held_misfit`)."""
+        """The held model's misfit of the refit's record (``held_misfit``, from there)."""
         if self.refit_start is None or not np.isfinite(self.refit_start).all():
             return None
         u, y, angle = self._record_arrays()

@@ -13,14 +13,14 @@ alarm level :data:`CHANGE_THRESHOLD`, allowance :data:`CHANGE_DRIFT`; the test
 runs on across accumulating refits): when it fires, the held model keeps flying
 while a new record of ``warmup`` samples is taken, and the host's
 ``_fit_record`` then fits that record (it may start from the held fit). A host
-that can say how well the held model explains that record (``_held_misfit``)
-has the alarm confirmed first: the refit replaces the held model only where it
-explains the record clearly better
-(:func:`~identifiers.structured.change_detection.misfit_confirms_change`);
-otherwise, and where the refit fails, the held model and its accumulated record
-stay. Each alarm is reported in :attr:`WarmupFit.events`, its ``confirmed`` flag
-set by the outcome. So the fit is renewed where the data say the plant moved,
-not on a clock.
+that ``judges_changes`` (``_held_misfit``) has the alarm confirmed first: the
+refit replaces the held model only where it explains the record clearly better
+(:func:`~identifiers.structured.change_detection.misfit_confirms_change`) than
+the held model refined on the whole accumulated record does; otherwise that
+refinement flies and the record stays (where the refit fails, the held model).
+Each alarm is reported in :attr:`WarmupFit.events`, its ``confirmed`` flag set by
+the outcome. So the fit is renewed where the data say the plant moved, not on a
+clock.
 
 A host with ``accumulate`` set lets the information grow instead of holding
 the warm-up's fit: it keeps the last ``max_record`` samples and fits them
@@ -80,6 +80,9 @@ class WarmupFit(ModelFilter):
     """
 
     refit_on_change: bool = False
+    #: Whether the host judges an alarm (:meth:`_held_misfit`) before a refit replaces
+    #: the held model.
+    judges_changes: bool = False
     accumulate: bool = False
     max_record: int = 1200
 
@@ -207,47 +210,86 @@ class WarmupFit(ModelFilter):
                 self._record = [item or self._record_item(u, y)]
 
     def _refit(self) -> None:
-        """Fit the record taken since the detected change; keep the held model (and
-        its accumulated record) if the fit fails or does not confirm the change
-        (:meth:`_held_misfit`, :func:`misfit_confirms_change`). Once the change is
-        confirmed the accumulating record restarts with the refit's (the samples
-        before the change are another plant's)."""
-        length = len(self._record)
-        record = self._record
-        misfit = self._held_misfit()
+        """Fit the record taken since the detected change and judge the alarm.
+
+        Without a judge (:meth:`_held_misfit` None) the refit replaces the held
+        model. With one, the alarm is confirmed where the refit explains its record
+        clearly better (:func:`misfit_confirms_change`) than the model that holds no
+        change does: the held model fitted again to its accumulated record with the
+        alarm's record in it (``accumulate``; otherwise the held model as it is). A
+        confirmed change restarts the accumulating record with the refit's (the
+        samples before the change are another plant's); an unconfirmed one keeps that
+        joint refit, an accumulating refit, where it knows the rigid-body gain at least
+        as well as the held model. A failed refit keeps the held model and judges
+        nothing."""
+        length, record, start = len(self._record), self._record, self.refit_start
         held = dict(self.__dict__)
-        if self._fit_record() and (misfit is None or self._confirms(misfit, length)):
-            self.n_refits += 1
-            if misfit is not None:
-                self._events[-1] = replace(self._events[-1], confirmed=True)
-            if self.accumulate:
-                self._history.clear()
-                self._history.extend(record)
-                self._priors.clear()
-                self._priors.extend([np.full(self.n, np.nan)] * length)
-            self._fitted(self._count - length, length)
-        else:
-            failed = self.held_fit is held["held_fit"]     # no refit: no verdict
+        if not self._fit_record():
             self.__dict__.update(held)
-            if not failed:
+        else:
+            after = dict(self.__dict__)
+            joint = misfit = None
+            if self.judges_changes:
+                joint = self._joint_refit(held)
+                self._record, self.refit_start = record, start
+                misfit = self._held_misfit()
+            if misfit is None or self._confirms(misfit, length, after["held_fit"]):
+                self.__dict__.update(after)
+                self.n_refits += 1
+                if misfit is not None:
+                    self._events[-1] = replace(self._events[-1], confirmed=True)
+                if self.accumulate:
+                    self._history.clear()
+                    self._history.extend(record)
+                    self._priors.clear()
+                    self._priors.extend([np.full(self.n, np.nan)] * length)
+                self._fitted(self._count - length, length)
+            else:
+                self.__dict__.update(held if joint is None else joint)
                 self.n_alarms_unconfirmed += 1
                 self._events[-1] = replace(self._events[-1], confirmed=False)
-            self._record = []
+                if joint is not None:
+                    self.n_refits += 1
+                    self._fitted(self._count - len(self._history), len(self._history))
+        self._record = []
         self.refit_start = None
         self._watch()
 
-    def _held_misfit(self) -> float | None:
-        """The held model's misfit of the refit's record (``_record`` from
-        ``refit_start``), in the units of the fit's ``cost``; None (the default)
-        where the host cannot say, and a refit then replaces the held model
-        unconfirmed."""
+    def _joint_refit(self, held: dict) -> dict | None:
+        """From the held state ``held``: the held model refined on the accumulated
+        record (the alarm's record its last part), as an accumulating refit; the
+        resulting state, or None where it fails or knows the gain less well (the
+        identifier is left in the held state then)."""
+        self.__dict__.update(held)
+        if not self.accumulate:
+            return None
+        start = self._priors[0]
+        if self._count - len(self._history) == self._fit_origin:
+            start = self._fit_initial_state()
+        self.refit_start = start if start is not None and np.isfinite(start).all() else None
+        self._record = list(self._history)
+        held_std = self._gain_relative_std()
+        self.accumulating_refit = True
+        try:
+            fitted = self._fit_record()
+        finally:
+            self.accumulating_refit = False
+        if fitted and self._gain_relative_std() <= held_std:
+            return dict(self.__dict__)
+        self.__dict__.update(held)
         return None
 
-    def _confirms(self, misfit: float, length: int) -> bool:
-        """Whether the fit just made explains its record clearly better than the held
-        model's ``misfit`` of it (the fit's ``cost`` and ``noise_floor`` over
-        ``length`` samples of every output)."""
-        fit = self.held_fit
+    def _held_misfit(self) -> float | None:
+        """The held model's misfit of the refit's record (``_record`` from
+        ``refit_start``), in the units of the fit's ``cost``, for a host that
+        ``judges_changes``; None where it cannot say, and the refit then replaces the
+        held model unconfirmed."""
+        return None
+
+    def _confirms(self, misfit: float, length: int, fit: Any) -> bool:
+        """Whether ``fit`` (the refit) explains its record clearly better than the
+        no-change model's ``misfit`` of it (``fit``'s ``cost`` and ``noise_floor``
+        over ``length`` samples of every output)."""
         return misfit_confirms_change(misfit, float(fit.cost),
                                       max(float(getattr(fit, "noise_floor", 0.0)), 0.0),
                                       length * self.n_outputs)

@@ -699,11 +699,14 @@ class FiresOnce:
                            statistic=99.0) if self.k == 50 else None
 
 
-def test_an_alarm_the_data_after_it_do_not_confirm_keeps_the_held_model(monkeypatch):
+@pytest.mark.parametrize("accumulate", [True, False])
+def test_an_alarm_the_data_after_it_do_not_confirm_keeps_the_record(monkeypatch, accumulate):
     """A change test that fires (a stand-in, 5 s after the fit) on a plant that did not
-    change: the refit on the 20 s after it explains them no better than the held model
-    (1.03x the noise floor), so the held fit, its filter and its accumulated record
-    stay, and the alarm is reported unconfirmed."""
+    change: the refit on the 20 s after it explains them no better than the no-change
+    model (the held model refined on the whole record; without ``accumulate``, the held
+    model), so the alarm is reported unconfirmed and the record is kept: the held model
+    refined on all of it flies (an accumulating refit), or the held model and its
+    filter as they were."""
     monkeypatch.setattr(warmup_fit, "InnovationCUSUM", FiresOnce)
     rng = np.random.default_rng(3)
     model, warmup, steps = _model(), 200, 500
@@ -714,7 +717,8 @@ def test_an_alarm_the_data_after_it_do_not_confirm_keeps_the_held_model(monkeypa
     y = y + 1e-3 * STANDARD_OUTPUTS.scales() * rng.normal(size=y.shape)
     options = {"filter_constants": (1.0,), "start_nfev": 20, "max_nfev": 30}
     ident = ScheduledPhysicalIdentifier(turning=TURNING, warmup=warmup, refit_on_change=True,
-                                        max_record=1000, fit_options=options)
+                                        accumulate=accumulate, max_record=1000,
+                                        fit_options=options)
     held = None
     for k in range(steps):
         ident.set_schedule(angle[k])
@@ -728,22 +732,29 @@ def test_an_alarm_the_data_after_it_do_not_confirm_keeps_the_held_model(monkeypa
         if k > warmup + 49 and not ident.refitting:
             break
     assert k == warmup + 49 + warmup - 1           # the refit's record, then the verdict
-    assert ident.held_fit is held and ident.n_refits == 0
     assert ident.n_alarms_unconfirmed == 1
     assert [e.confirmed for e in ident.events] == [False]
-    # the accumulated record kept every sample, the alarm's included, and the held
-    # model's filter ran on through them
-    assert len(ident._history) == k + 1
-    assert ident._kf is kf and np.all(np.isfinite(kf.x))
+    if accumulate:
+        # every sample kept, the alarm's included, and fitted from the held model
+        assert len(ident._history) == k + 1 and ident.n_refits == 1
+        assert ident.held_fit is not held
+        assert (ident._fit_origin, ident._fit_length) == (0, k + 1)
+    else:
+        # the held model's filter ran on through the alarm's record
+        assert ident.held_fit is held and ident.n_refits == 0
+        assert ident._kf is kf and np.all(np.isfinite(kf.x))
 
 
 @pytest.mark.slow
 def test_on_a_turning_paddle_the_scheduled_fit_tracks_the_mode_at_every_noise_level(
         load_benchmark):
     """The adaptive LQG's identifier on the tracking benchmark's paddle-rotation records
-    (seeds 0-2): the mode the paddles move within a third of the error of the true model
-    frozen at 100 s, at 175 and 249 s, and the 10 s deflection predictions from 150 s no
-    worse noise-free or at 60 dB than at 40 dB."""
+    (seeds 0-2): the mode the paddles move within a tenth of the true model frozen at
+    100 s over the benchmark's window (medians of each second's error from 100 s; the
+    frozen model's: 1.46 %), within a third of it at 175 and 249 s, and the 10 s
+    deflection predictions from 150 s no worse noise-free or at 60 dB than at 40 dB.
+    (The yardstick is the frozen model's error over the window, not at the instant: at
+    249 s another of its modes sits 0.25 % from the moved one.)"""
     bench = load_benchmark("bench_tracking")
     deflection = STANDARD_OUTPUTS.slice("deflection")
     vaf = {}
@@ -755,12 +766,17 @@ def test_on_a_turning_paddle_the_scheduled_fit_tracks_the_mode_at_every_noise_le
             seq = ident.fit(u, y, schedule=drive_angles(truth, len(u)))
             vafs.append(prediction_vaf(y0, h_step_predictions(seq, u, (100,)), 1500)[100]
                         [deflection].mean())
-            frozen = truth.modal_residues(99.9)[0]
-            for t in (175.0, 249.0):
+            frozen_modes = truth.modal_residues(99.9)[0]
+            errors, frozen = {}, []
+            for t in np.arange(100.0, 250.0, 1.0):
                 moved = truth.modal_residues(t)[0][3]           # the benchmark's mode
                 f_id = seq[round(t / truth.dt)].modal(unique=False)[0]
-                error = np.min(np.abs(f_id / moved - 1.0))
-                assert error <= np.min(np.abs(frozen / moved - 1.0)) / 3, (snr, seed, t, error)
+                errors[t] = np.min(np.abs(f_id / moved - 1.0))
+                frozen.append(np.min(np.abs(frozen_modes / moved - 1.0)))
+            yardstick = np.median(frozen)
+            assert np.median(list(errors.values())) <= yardstick / 10, (snr, seed)
+            for t in (175.0, 249.0):
+                assert errors[t] <= yardstick / 3, (snr, seed, t, errors[t])
         vaf[snr] = np.median(vafs)
     assert vaf[None] >= vaf[40.0] - 0.1 and vaf[60.0] >= vaf[40.0] - 0.1, vaf
     assert vaf[40.0] > 95.0, vaf
