@@ -263,21 +263,32 @@ class WarmupFit(ModelFilter):
         self.__dict__.update(held)
         if not self.accumulate:
             return None
+        if self._fit_accumulated(self._stage_accumulated()):
+            return dict(self.__dict__)
+        self.__dict__.update(held)
+        return None
+
+    def _stage_accumulated(self) -> float:
+        """Make the accumulated record the one to fit, from the held model's state at
+        its first sample; return the held fit's relative gain standard deviation."""
         start = self._priors[0]
         if self._count - len(self._history) == self._fit_origin:
-            start = self._fit_initial_state()
-        self.refit_start = start if start is not None and np.isfinite(start).all() else None
+            start = self._fit_initial_state()     # the held fit's record starts there too
+        self.refit_start = start if start is not None and np.isfinite(start).all() \
+            else None
         self._record = list(self._history)
-        held_std = self._gain_relative_std()
+        return self._gain_relative_std()
+
+    def _fit_accumulated(self, held_std: float) -> bool:
+        """Fit the staged record as an accumulating refit; True where the fit worked
+        and knows the rigid-body gain at least as well as ``held_std`` says the held
+        fit did (the caller restores the held state otherwise)."""
         self.accumulating_refit = True
         try:
             fitted = self._fit_record()
         finally:
             self.accumulating_refit = False
-        if fitted and self._gain_relative_std() <= held_std:
-            return dict(self.__dict__)
-        self.__dict__.update(held)
-        return None
+        return fitted and self._gain_relative_std() <= held_std
 
     def _held_misfit(self) -> float | None:
         """The held model's misfit of the refit's record (``_record`` from
@@ -302,13 +313,7 @@ class WarmupFit(ModelFilter):
         (:meth:`_refit_worthwhile`; ``n_refits_skipped``)."""
         length = len(self._history)
         origin = self._count - length
-        start = self._priors[0]
-        if origin == self._fit_origin:
-            start = self._fit_initial_state()     # the held fit's record starts there too
-        self.refit_start = start if start is not None and np.isfinite(start).all() \
-            else None
-        self._record = list(self._history)
-        held_std = self._gain_relative_std()
+        held_std = self._stage_accumulated()
         if not self._refit_worthwhile(held_std):
             # what a refit the guard keeps out leaves, without fitting
             self._record = []
@@ -320,12 +325,7 @@ class WarmupFit(ModelFilter):
         # what the fit replaces (the held fit, its matrices, its filter: the host's as
         # well), restored if the refit is kept out
         held = dict(self.__dict__)
-        self.accumulating_refit = True
-        try:
-            fitted = self._fit_record()
-        finally:
-            self.accumulating_refit = False
-        if fitted and self._gain_relative_std() <= held_std:
+        if self._fit_accumulated(held_std):
             self.n_refits += 1
             self._fitted(origin, length)
         else:
