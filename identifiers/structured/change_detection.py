@@ -69,10 +69,10 @@ CALM = 3.0
 #: An alarm is confirmed when the held model's misfit of the data after it, above
 #: the noise floor, is more than this multiple of a refit's
 #: (:func:`misfit_confirms_change`). Measured on the drive-scheduled fit's 30 s
-#: refits after its CUSUM's alarms (open loop, seeds 0-9): after a docking
-#: 5.0-135 at 40 dB and 2.5-490 noise-free; on a plant that did not change,
-#: noise-free, 1.04-1.68 (and 2.6-15 on one record whose warm-up fit had
-#: missed: there the refit is right to replace it); no alarm at 40 dB.
+#: refits after its CUSUM's alarms (open loop, seeds 0-9), against the held model
+#: refined on its whole record: after a docking 13.6-1142 (the first) and 2.45-386
+#: (the second) at 40 dB, 92.5-494 and 2.67-224 noise-free; false alarms before a
+#: docking 1.02-1.07; on paddle rotation noise-free 1.04-2.3.
 CONFIRM_FACTOR = 2.0
 
 

@@ -57,8 +57,8 @@ __all__ = ["CHANGE_DRIFT", "CHANGE_THRESHOLD", "WarmupFit"]
 #: loop, the drive-scheduled fit finds both dockings of the docking scenario (the
 #: defaults, which restarted after each accumulating refit, missed the second); on
 #: noise-free records of a plant that does not change it raises alarms on 7 of 10,
-#: a refit confirmed them on one, whose gain stayed 0.06 % off
-#: (docs/results/identification.md).
+#: a refit confirmed them on one, whose gain stayed 0.06 % off (measured with the
+#: held model as it was for the model of no change; docs/results/identification.md).
 CHANGE_THRESHOLD = 20.0
 CHANGE_DRIFT = 0.25
 
