@@ -157,6 +157,9 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
     (True, 0.5)
     """
 
+    #: Alarms are confirmed by a refit against ``_held_misfit`` (:class:`WarmupFit`).
+    judges_changes = True
+
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *,
                  turning: Sequence[bool] | None = None,
                  sensor_appendage: Sequence[int] | None = None,
@@ -325,8 +328,6 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             return True
         predicted = RigidGainEstimate(self.held_fit.model.gain(float(angle[-1])), cov)
         return predicted.relative_std() <= SCREEN_MARGIN * held_std
-
-    judges_changes = True
 
     def _held_misfit(self) -> float | None:
         """The held model's misfit of the refit's record (``held_misfit``, from there)."""
