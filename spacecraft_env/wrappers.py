@@ -92,11 +92,17 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     env : gymnasium.Env
         A spacecraft environment, or a wrapper of one that keeps its observation
         or appends channels after it.
+    levels : mapping of str to float, optional
+        Levels (SI units: rad, rad/s, m) that replace the nominal ones for the
+        groups named, e.g. ``{"deflection": 0.1}`` for deflections in units of
+        10 cm (default: the nominal levels for every group).
 
     Raises
     ------
     ValueError
-        If the observation is shorter than the environment's layout.
+        If the observation is shorter than the environment's layout, or a
+        level names a group the layout does not hold or is not a finite
+        positive number.
 
     Examples
     --------
@@ -110,10 +116,21 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     ((6,), dtype('float32'))
     """
 
-    def __init__(self, env: gym.Env) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self)
+    def __init__(self, env: gym.Env, levels: dict[str, float] | None = None) -> None:
+        levels = dict(levels or {})
+        gym.utils.RecordConstructorArgs.__init__(self, levels=levels or None)
         gym.ObservationWrapper.__init__(self, env)
-        scales = np.asarray(env.unwrapped.observation_layout.scales(), dtype=np.float64)
+        layout = env.unwrapped.observation_layout
+        scales = np.asarray(layout.scales(), dtype=np.float64)
+        for group, level in levels.items():
+            if group not in layout.names:
+                raise ValueError(f"levels names {group!r}, not a group of the env's layout "
+                                 f"{layout.names}")
+            if isinstance(level, bool) or not (isinstance(level, int | float | np.floating)
+                                               and 0.0 < level < np.inf):
+                raise ValueError(f"levels[{group!r}] must be a finite positive number "
+                                 f"(SI units), got {level!r}")
+            scales[layout.indices(group)] = float(level)
         space = env.observation_space
         if len(space.shape) != 1 or space.shape[0] < scales.size:
             raise ValueError(f"NominalUnits needs the environment's own observation (of "

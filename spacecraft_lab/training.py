@@ -46,6 +46,9 @@ products with the rigid-body gain's channels (:data:`SCHEDULE_CHANNELS`,
 :class:`spacecraft_env.ObservationProducts`): ARS's linear policy on it is a PD
 correction whose gains move with the plant's gain, the policy
 :mod:`spacecraft_lab.adaptation` flies with the true, estimated and nominal vectors.
+``residual-scheduled-averaged-deflection`` shows it the tip deflections too, averaged
+the same way, in units of :data:`AVERAGED_DEFLECTION_LEVEL`: a linear correction that
+can feed back the modes a static correction of the attitude and rate cannot damp.
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -113,8 +116,9 @@ from spacecraft_lab.random_search import paired_ars
 from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
-__all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_FEATURES", "AVERAGED_RESIDUAL_SCALE",
-           "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES", "HYPERPARAMETERS",
+__all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_DEFLECTION_LEVEL", "AVERAGED_FEATURES",
+           "AVERAGED_RESIDUAL_SCALE", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
+           "HYPERPARAMETERS",
            "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT",
            "RESIDUAL_SCALE", "SCHEDULE_CHANNELS", "NormalizedPolicy", "ZeroTorque",
            "algorithm_class", "fast_adaptive_lqg", "residual_scale", "run_training"]
@@ -134,7 +138,8 @@ FEATURES = ("none", "attitude-error", "attitude-error-averaged", "identified", "
             "residual-fixed-physical", "residual-scheduled", "residual-scheduled-observed",
             "residual-scheduled-physical", "residual-scheduled-privileged",
             "residual-fixed-privileged", "residual-fixed-averaged",
-            "residual-scheduled-averaged", "residual-scheduled-averaged-privileged")
+            "residual-scheduled-averaged", "residual-scheduled-averaged-privileged",
+            "residual-scheduled-averaged-deflection")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -172,13 +177,20 @@ _RESIDUAL = {"residual-adaptive": fast_adaptive_lqg, "residual-fixed": FixedLQG,
              "residual-scheduled-privileged": ScheduledLQG,
              "residual-fixed-privileged": FixedLQG, "residual-fixed-averaged": FixedLQG,
              "residual-scheduled-averaged": ScheduledLQG,
-             "residual-scheduled-averaged-privileged": ScheduledLQG}
+             "residual-scheduled-averaged-privileged": ScheduledLQG,
+             "residual-scheduled-averaged-deflection": ScheduledLQG}
 #: Residual settings whose agent sees what the linear agent without a base sees (the
 #: attitude error and the rate in nominal units, each the mean of the samples since its
 #: last decision) while its base reads the env's whole observation: a linear policy on
 #: it (``--algo ars``) is a PD correction of the base law.
 _AVERAGED_RESIDUAL = frozenset({"residual-fixed-averaged", "residual-scheduled-averaged",
-                                "residual-scheduled-averaged-privileged"})
+                                "residual-scheduled-averaged-privileged",
+                                "residual-scheduled-averaged-deflection"})
+#: The unit of the tip deflections an averaged residual with them observed sees
+#: (``residual-scheduled-averaged-deflection``), m: 10 cm, so ARS's perturbation (0.05 of
+#: full torque per unit) is 0.05 N m per cm of deflection, where the nominal 1 cm would
+#: make it 0.5 N m per cm, enough to tumble the base on the slew's 2 cm (measured).
+AVERAGED_DEFLECTION_LEVEL = 0.1
 #: The parameter channels that schedule the gains of an averaged residual with the
 #: plant's parameters observed (``residual-scheduled-averaged-privileged``): the
 #: rigid-body gain's log diagonal, the loop gain a law designed for the nominal
@@ -391,7 +403,12 @@ def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
     if features in _AVERAGED_RESIDUAL:
         # the attitude error and the rate in nominal units, each the mean of the
         # samples since the agent's last decision
-        env = ObservationGroups(NominalUnits(env), ("attitude_error", "rate"))
+        deflection = features.endswith("-deflection")
+        env = ObservationGroups(
+            NominalUnits(env, levels={"deflection": AVERAGED_DEFLECTION_LEVEL} if deflection
+                         else None),
+            ("attitude_error", "rate", "deflection") if deflection
+            else ("attitude_error", "rate"))
         env = ObservationAverage(env, ACTION_REPEAT)
         if features.endswith("-privileged"):
             # the agent's linear law scheduled on the parameters: its gains move with them

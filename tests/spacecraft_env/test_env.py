@@ -472,6 +472,25 @@ def test_nominal_units_divide_each_channel_by_its_groups_level():
     assert pickle.loads(pickle.dumps(env)).scales.tolist() == env.scales.tolist()
 
 
+def test_nominal_units_take_levels_that_replace_a_groups_nominal_one():
+    """``levels={"deflection": 0.1}``: the deflections in 10 cm units, the rest nominal."""
+    outputs = ("attitude_error", "rate", "deflection")
+    raw = gym.make("FlexibleSpacecraftFamily-v2", task="slew", outputs=outputs)
+    env = NominalUnits(gym.make("FlexibleSpacecraftFamily-v2", task="slew", outputs=outputs),
+                       levels={"deflection": 0.1})
+    obs_raw, _ = raw.reset(seed=3)
+    obs, _ = env.reset(seed=3)
+    n_defl = obs.size - 6
+    level = np.array([np.deg2rad(1.0)] * 3 + [np.deg2rad(0.1)] * 3 + [0.1] * n_defl)
+    np.testing.assert_allclose(obs, obs_raw / level, rtol=1e-6)
+    assert pickle.loads(pickle.dumps(env)).scales.tolist() == env.scales.tolist()
+    for levels, message in (({"torque": 1.0}, "not a group"), ({"rate": 0.0}, "finite positive"),
+                            ({"rate": np.inf}, "finite positive"),
+                            ({"rate": True}, "finite positive")):
+        with pytest.raises(ValueError, match=message):
+            NominalUnits(raw, levels=levels)
+
+
 def test_nominal_units_refuse_an_observation_shorter_than_the_envs_own():
     fewer = ObservationGroups(gym.make("FlexibleSpacecraftFamily-v2"), ("rate",))
     with pytest.raises(ValueError, match="NominalUnits needs the environment's own"):
