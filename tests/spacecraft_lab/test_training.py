@@ -406,6 +406,31 @@ def test_the_scheduled_averaged_residual_sees_its_state_times_the_parameters():
     assert silent["cost_after_100s_per_seed"] == base["cost_after_100s_per_seed"]
 
 
+def test_the_averaged_residual_with_deflections_sees_them_in_tenths_of_a_metre():
+    """``residual-scheduled-averaged-deflection``: the averaged attitude error and rate in
+    nominal units, then the tip deflections averaged the same way in units of
+    ``AVERAGED_DEFLECTION_LEVEL`` (10 cm); a silent agent flies its base."""
+    from spacecraft_lab.training import AVERAGED_DEFLECTION_LEVEL, ZeroTorque, _evaluate
+
+    kwargs = {"task": "slew", "reward": "cost", "max_episode_steps": 1100}
+    features = "residual-scheduled-averaged-deflection"
+    env = _make_env("family", features, kwargs)
+    plain = _make_env("family", "residual-scheduled-averaged", kwargs)
+    raw = gym.make(env_id("family"), **kwargs, outputs=("deflection",))
+    assert AVERAGED_DEFLECTION_LEVEL == 0.1
+    assert env.observation_space.shape == (6 + raw.observation_space.shape[0],)
+    action = np.zeros(3, dtype=np.float32)
+    obs, x, y = env.reset(seed=5)[0], plain.reset(seed=5)[0], raw.reset(seed=5)[0]
+    np.testing.assert_allclose(obs[:6], x, rtol=1e-5)
+    np.testing.assert_allclose(obs[6:], y / AVERAGED_DEFLECTION_LEVEL, rtol=1e-5)
+    # a decision later: the attitude error and rate are still the plain setting's
+    np.testing.assert_allclose(env.step(action)[0][:6], plain.step(action)[0], rtol=1e-5)
+    seeds = (1000,)
+    silent = _evaluate(ZeroTorque(), "family", features, kwargs, seeds=seeds)
+    base = _evaluate(ZeroTorque(), "family", "residual-scheduled-averaged", kwargs, seeds=seeds)
+    assert silent["cost_after_100s_per_seed"] == base["cost_after_100s_per_seed"]
+
+
 def test_an_averaged_setting_decides_once_per_averaging_window(tmp_path):
     pytest.importorskip("sb3_contrib")
     for features in ("attitude-error-averaged", "residual-fixed-averaged"):
