@@ -118,10 +118,10 @@ from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
 __all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_DEFLECTION_LEVEL", "AVERAGED_FEATURES",
            "AVERAGED_RESIDUAL_SCALE", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
-           "HYPERPARAMETERS",
-           "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS", "RESIDUAL_REPEAT",
-           "RESIDUAL_SCALE", "SCHEDULE_CHANNELS", "NormalizedPolicy", "ZeroTorque",
-           "algorithm_class", "fast_adaptive_lqg", "residual_scale", "run_training"]
+           "HYPERPARAMETERS", "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS",
+           "RESIDUAL_REPEAT", "RESIDUAL_SCALE", "SCHEDULE_CHANNELS", "NormalizedPolicy",
+           "ZeroTorque", "algorithm_class", "fast_adaptive_lqg", "residual_scale",
+           "run_training"]
 
 
 #: stable-baselines3 algorithms the job trains: PPO and SAC (MLP policies) and augmented
