@@ -49,6 +49,9 @@ correction whose gains move with the plant's gain, the policy
 ``residual-scheduled-averaged-deflection`` shows it the tip deflections too, averaged
 the same way, in units of :data:`AVERAGED_DEFLECTION_LEVEL`: a linear correction that
 can feed back the modes a static correction of the attitude and rate cannot damp.
+``residual-adaptive-averaged`` is the same averaged correction on the adaptive LQG
+(:func:`fast_adaptive_lqg`): a base whose design follows each draw's identified
+rigid gain and modes.
 
 Every ``eval_every`` env steps, and once at the end, the current policy is
 evaluated through the same harness as the controllers
@@ -139,7 +142,7 @@ FEATURES = ("none", "attitude-error", "attitude-error-averaged", "identified", "
             "residual-scheduled-physical", "residual-scheduled-privileged",
             "residual-fixed-privileged", "residual-fixed-averaged",
             "residual-scheduled-averaged", "residual-scheduled-averaged-privileged",
-            "residual-scheduled-averaged-deflection")
+            "residual-scheduled-averaged-deflection", "residual-adaptive-averaged")
 #: ``IdentifiedModelFeatures`` keywords of each identified-features setting.
 _IDENTIFIED = {
     "identified": {"keep_identifier": False, "include_state": True},
@@ -178,14 +181,16 @@ _RESIDUAL = {"residual-adaptive": fast_adaptive_lqg, "residual-fixed": FixedLQG,
              "residual-fixed-privileged": FixedLQG, "residual-fixed-averaged": FixedLQG,
              "residual-scheduled-averaged": ScheduledLQG,
              "residual-scheduled-averaged-privileged": ScheduledLQG,
-             "residual-scheduled-averaged-deflection": ScheduledLQG}
+             "residual-scheduled-averaged-deflection": ScheduledLQG,
+             "residual-adaptive-averaged": fast_adaptive_lqg}
 #: Residual settings whose agent sees what the linear agent without a base sees (the
 #: attitude error and the rate in nominal units, each the mean of the samples since its
 #: last decision) while its base reads the env's whole observation: a linear policy on
 #: it (``--algo ars``) is a PD correction of the base law.
 _AVERAGED_RESIDUAL = frozenset({"residual-fixed-averaged", "residual-scheduled-averaged",
                                 "residual-scheduled-averaged-privileged",
-                                "residual-scheduled-averaged-deflection"})
+                                "residual-scheduled-averaged-deflection",
+                                "residual-adaptive-averaged"})
 #: The unit of the tip deflections an averaged residual with them observed sees
 #: (``residual-scheduled-averaged-deflection``), m: 10 cm, so ARS's perturbation (0.05 of
 #: full torque per unit) is 0.05 N m per cm of deflection, where the nominal 1 cm would

@@ -431,6 +431,25 @@ def test_the_averaged_residual_with_deflections_sees_them_in_tenths_of_a_metre()
     assert silent["cost_after_100s_per_seed"] == base["cost_after_100s_per_seed"]
 
 
+def test_the_averaged_residual_on_the_adaptive_lqg_flies_its_base_when_silent():
+    """``residual-adaptive-averaged``: the averaged correction on the adaptive LQG of the
+    agents (:func:`fast_adaptive_lqg`, its identifier learning in the loop); the agent sees
+    the averaged attitude error and rate, and a silent agent flies that base exactly."""
+    from spacecraft_lab.training import ZeroTorque, _evaluate, fast_adaptive_lqg
+
+    kwargs = {"task": "slew", "reward": "cost", "max_episode_steps": 1100}
+    features = "residual-adaptive-averaged"
+    env = _make_env("family", features, kwargs)
+    plain = _make_env("family", "residual-scheduled-averaged", kwargs)
+    assert env.observation_space.shape == plain.observation_space.shape == (6,)
+    np.testing.assert_allclose(env.reset(seed=5)[0], plain.reset(seed=5)[0], rtol=1e-5)
+    seeds = (1000,)
+    silent = _evaluate(ZeroTorque(), "family", features, kwargs, seeds=seeds)
+    base = _evaluate(fast_adaptive_lqg, "family", "none", kwargs, seeds=seeds)
+    np.testing.assert_allclose(silent["cost_after_100s_per_seed"],
+                               base["cost_after_100s_per_seed"], rtol=1e-9)
+
+
 def test_an_averaged_setting_decides_once_per_averaging_window(tmp_path):
     pytest.importorskip("sb3_contrib")
     for features in ("attitude-error-averaged", "residual-fixed-averaged"):
