@@ -15,7 +15,16 @@ Runs the default (rigid-flexible) identifier over the same 2500-sample record as
   modal tracker, the change test, the export, and the batch mode searches and
   rebuilds (with their replays) amortized over the record.
 
-Usage: ``python benchmarks/bench_identifier_parts.py [--repeats 5] [--json out.json]``
+With ``--behaviours`` it prints instead what each of the identifier's behaviours
+costs: the default's update beside variants that each switch one off (the re-searches
+of the modes after the warm-up's, the modal tracker, the change test, an export and a
+refinement every 20 samples instead of 10) and beside the closed-loop settings
+(``identifiers.CLOSED_LOOP_SETTINGS``), each the best of ``--repeats`` rounds that
+time the bare RLS and every variant in turn, so that a slow stretch of the machine
+weighs on all of them alike.
+
+Usage: ``python benchmarks/bench_identifier_parts.py [--repeats 5] [--behaviours]
+[--json out.json]``
 """
 
 from __future__ import annotations
@@ -35,7 +44,12 @@ import identifiers.core.kalman as kalman
 import identifiers.structured.change_detection as change_detection
 import identifiers.structured.modal_tracker as modal_tracker
 import identifiers.structured.rigid_flexible as rigid_flexible
-from identifiers import add_measurement_noise, identification_inputs
+from identifiers import (
+    CLOSED_LOOP_SETTINGS,
+    add_measurement_noise,
+    default_identifier,
+    identification_inputs,
+)
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters
 from spacecraft_lab.identification import make_identifier
@@ -49,6 +63,34 @@ def record(n: int = 22) -> tuple[FlexibleSpacecraftModel, np.ndarray, np.ndarray
     rng = np.random.default_rng(0)
     u = identification_inputs(N_SAMPLES, rng)
     return truth, u, add_measurement_noise(truth.simulate(u)[1], 40.0, rng)
+
+
+#: The variants of ``--behaviours``: label -> overrides of the default's settings.
+BEHAVIOURS = {
+    "default": {},
+    "no re-search after the warm-up's": {"rediscover": None},
+    "no modal tracker": {"track_modes": False},
+    "no change test": {"detect_changes": False},
+    "export and refinement every 20 samples": {"refresh": 20},
+    "closed-loop settings": dict(CLOSED_LOOP_SETTINGS),
+}
+
+
+def behaviours(truth, u, y, repeats: int) -> tuple[float, dict[str, float]]:
+    """The bare RLS's and each variant's seconds per record ``(u, y)``, best of ``repeats``
+    rounds."""
+    bare, best = np.inf, dict.fromkeys(BEHAVIOURS, np.inf)
+    options = {"n": truth.n, "dt": truth.dt}
+    for _ in range(repeats):
+        with single_threaded_blas:
+            bare = min(bare, bare_rls_seconds(195, 10, n_samples=len(u), repeats=1))
+            for label, overrides in BEHAVIOURS.items():
+                ident = default_identifier(truth.output_layout, **options, **overrides)
+                start = time.perf_counter()
+                for k in range(len(u)):
+                    ident.update(u[k], y[k])
+                best[label] = min(best[label], time.perf_counter() - start)
+    return bare, best
 
 
 def plain_seconds(truth, u, y, repeats: int) -> float:
@@ -161,9 +203,26 @@ def parts(truth, u, y) -> list[tuple[str, float]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--behaviours", action="store_true",
+                        help="what each behaviour costs instead of the per-part table")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     truth, u, y = record()
+    if args.behaviours:
+        bare, best = behaviours(truth, u, y, args.repeats)
+        print(f"us per update, best of {args.repeats} rounds; bare RLS (195 regressors, "
+              f"10 outputs) {1e6 * bare / N_SAMPLES:.1f} us; bars: 5x the bare RLS, 1000x "
+              "real time")
+        width = max(map(len, best))
+        print(f"  {'variant':<{width}}  {'us':>7}  {'/ bare':>6}  {'x real time':>11}")
+        for label, seconds in best.items():
+            print(f"  {label:<{width}}  {1e6 * seconds / N_SAMPLES:7.1f}  "
+                  f"{seconds / bare:6.2f}  {250 / seconds:11.0f}")
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"bare_us": 1e6 * bare / N_SAMPLES,
+                           "us": {k: 1e6 * v / N_SAMPLES for k, v in best.items()}}, fh, indent=2)
+        return
     plain = plain_seconds(truth, u, y, args.repeats)
     bare = bare_rls_seconds(195, 10) / N_SAMPLES
     table = parts(truth, u, y)

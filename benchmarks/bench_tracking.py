@@ -19,12 +19,14 @@ condition, printed side by side, median [worst] over seeds:
 
 Usage: ``python benchmarks/bench_tracking.py [--seeds 3] [--first-seed 0]
 [--scenarios ...] [--conditions 40:1 none:1 ...] [--identifier default|scheduled]
-[--hold-through-changes] [--coupling-drift D] [--drift-reference V] [--workers N]
-[--json out.json]``
+[--hold-through-changes] [--coupling-drift D] [--drift-reference V]
+[--rediscover N|none] [--workers N] [--json out.json]``
 (a condition is ``SNR:RMS``, SNR in dB of the env's nominal levels or ``none``, RMS in
 N m; ``--drift-reference`` sets the default identifier's ``drift_reference``, the noise
 level at which its drifts are stated; ``--coupling-drift`` overrides its modal couplings' random
-walk, for the ablation in docs/results/identification.md).
+walk, for the ablation in docs/results/identification.md; ``--rediscover`` its re-search
+period in samples, ``none`` for no re-search after the warm-up's, for the cost ablation in
+docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -181,6 +183,8 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--coupling-drift", type=float, default=None)
     parser.add_argument("--drift-reference", type=float, default=None)
+    parser.add_argument("--rediscover", default=None,
+                        help="the default identifier's re-search period, samples, or 'none'")
     parser.add_argument("--scenarios", nargs="+", default=list(TRACKED))
     parser.add_argument("--conditions", nargs="+",
                         default=["20:1", "40:1", "60:1", "none:1", "40:0.1"])
@@ -196,11 +200,13 @@ def main() -> None:
     options = {} if args.coupling_drift is None else {"coupling_drift": args.coupling_drift}
     if args.drift_reference is not None:
         options["drift_reference"] = args.drift_reference
+    if args.rediscover is not None:
+        options["rediscover"] = None if args.rediscover == "none" else int(args.rediscover)
     if args.hold_through_changes:
         options["refit_on_change"] = False
     if options and (args.identifier == "default") == args.hold_through_changes:
-        parser.error("--coupling-drift and --drift-reference are the default identifier's "
-                     "options, --hold-through-changes the scheduled one's")
+        parser.error("--coupling-drift, --drift-reference and --rediscover are the default "
+                     "identifier's options, --hold-through-changes the scheduled one's")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     out = {}
     print("10 s-ahead VAF (%) attitude / rate / deflection from 150 s, median [worst] over "
