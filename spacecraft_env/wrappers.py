@@ -21,6 +21,7 @@ reads the whole observation) can see the attitude error and the rate alone.
 
 from __future__ import annotations
 
+import numbers
 from collections import deque
 from typing import Any
 
@@ -126,8 +127,8 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             if group not in layout.names:
                 raise ValueError(f"levels names {group!r}, not a group of the env's layout "
                                  f"{layout.names}")
-            if isinstance(level, bool) or not (isinstance(level, int | float | np.floating)
-                                               and 0.0 < level < np.inf):
+            if isinstance(level, bool | np.bool_) or not (isinstance(level, numbers.Real)
+                                                          and 0.0 < level < np.inf):
                 raise ValueError(f"levels[{group!r}] must be a finite positive number "
                                  f"(SI units), got {level!r}")
             scales[layout.indices(group)] = float(level)

@@ -484,9 +484,13 @@ def test_nominal_units_take_levels_that_replace_a_groups_nominal_one():
     level = np.array([np.deg2rad(1.0)] * 3 + [np.deg2rad(0.1)] * 3 + [0.1] * n_defl)
     np.testing.assert_allclose(obs, obs_raw / level, rtol=1e-6)
     assert pickle.loads(pickle.dumps(env)).scales.tolist() == env.scales.tolist()
+    for level in (np.float32(0.1), np.int64(1), 1):       # any real number, NumPy's too
+        assert NominalUnits(raw, levels={"deflection": level}).scales[-1] == float(level)
     for levels, message in (({"torque": 1.0}, "not a group"), ({"rate": 0.0}, "finite positive"),
                             ({"rate": np.inf}, "finite positive"),
-                            ({"rate": True}, "finite positive")):
+                            ({"rate": True}, "finite positive"),
+                            ({"rate": np.True_}, "finite positive"),
+                            ({"rate": "0.1"}, "finite positive")):
         with pytest.raises(ValueError, match=message):
             NominalUnits(raw, levels=levels)
 
