@@ -795,11 +795,15 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
             # dumped now, at this env step: recorded values would otherwise wait for
             # the next rollout's dump (and only the last of several would survive)
             self.logger.dump(step=env_steps)
-            cost = score["cost_after_100s"]
-            if out is not None and (self.best is None or cost < self.best["cost_after_100s"]):
-                # the best checkpoint by the evaluation cost (chosen on the evaluation
-                # episodes themselves: an optimistic pick, said so in metrics.json)
-                self.best = {"timesteps": env_steps, "cost_after_100s": cost}
+            cost = score["cost_after_100s_mean"]
+            if out is not None and (self.best is None
+                                    or cost < self.best["cost_after_100s_mean"]):
+                # the best checkpoint by the mean episode's cost, the expectation the
+                # agent and the LQGs minimize (the median would pass over a checkpoint's
+                # rare crashes), chosen on the evaluation episodes themselves: an
+                # optimistic pick, said so in metrics.json
+                self.best = {"timesteps": env_steps, "cost_after_100s_mean": cost,
+                             "cost_after_100s": score["cost_after_100s"]}
                 model.save(out / f"{name}_best.zip")
                 venv.save(str(out / f"{name}_best_vecnormalize.pkl"))
             return score

@@ -53,6 +53,11 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     run = m["runs"][0]
     assert run["final"] == {k: v for k, v in run["curve"][-1].items() if k != "timesteps"}
     assert m["eval_seeds"] == [1000, 1001]
+    # the best checkpoint: the curve's point of least mean cost (what the agent minimizes)
+    best = min(run["curve"], key=lambda point: point["cost_after_100s_mean"])
+    assert run["best_checkpoint"] == {key: best[key] for key in (
+        "timesteps", "cost_after_100s_mean", "cost_after_100s")}
+    assert (tmp_path / "ppo-none-seed0_best.zip").exists()
     # and it is the saved model's score: the evaluation due at the last rollout's end
     # waits for that rollout's update (the curve has one point per evaluation step)
     from spacecraft_lab.agents import load_agent
