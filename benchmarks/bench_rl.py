@@ -10,8 +10,11 @@ per second on
   identifier runs every step),
 * the same with :class:`controllers.OracleModelFeatures` (truth features),
 * the task family with no features, with :class:`controllers.PhysicalFeatures`
-  (the identifier's physical estimates, the default identifier every step)
-  and with :class:`controllers.PrivilegedFeatures` (the same from the truth).
+  (the identifier's physical estimates, the default identifier every step),
+  the same from the identifier the agents' adaptive LQG flies
+  (:func:`controllers.fast_identifier`, the closed-loop settings: no re-search,
+  no change test) and with :class:`controllers.PrivilegedFeatures` (the same
+  from the truth).
 
 and prints every rate beside the no-feature rate and Pendulum's.
 
@@ -34,8 +37,16 @@ from controllers import (
     OracleModelFeatures,
     PhysicalFeatures,
     PrivilegedFeatures,
+    fast_identifier,
 )
 from spacecraft_conventions import single_threaded_blas
+
+
+def _loop_features(env: gym.Env) -> PhysicalFeatures:
+    """The physical features from the identifier the agents' adaptive LQG flies
+    (:func:`controllers.fast_identifier`: the default's closed-loop settings)."""
+    return PhysicalFeatures(env, identifier=fast_identifier(env))
+
 
 CASES = {
     "Pendulum-v1": lambda: gym.make("Pendulum-v1"),
@@ -46,6 +57,8 @@ CASES = {
         gym.make("FlexibleSpacecraftDocking-v2", task="slew")),
     "family, no features": lambda: gym.make("FlexibleSpacecraftFamily-v2", task="slew"),
     "family, physical features": lambda: PhysicalFeatures(
+        gym.make("FlexibleSpacecraftFamily-v2", task="slew")),
+    "family, physical features, loop identifier": lambda: _loop_features(
         gym.make("FlexibleSpacecraftFamily-v2", task="slew")),
     "family, privileged features": lambda: PrivilegedFeatures(
         gym.make("FlexibleSpacecraftFamily-v2", task="slew")),
@@ -72,10 +85,10 @@ def main() -> None:
     pend = rates["Pendulum-v1"]
     print(f"PPO training env steps/s ({args.steps} steps, one env, torch on one thread); "
           "'/ no features': against the same task without features")
-    print(f"{'case':<32}{'steps/s':>10}{'/ no features':>15}{'/ Pendulum':>12}")
+    print(f"{'case':<44}{'steps/s':>10}{'/ no features':>15}{'/ Pendulum':>12}")
     for name, rate in rates.items():
         plain = rates.get(f"{name.split(',')[0]}, no features", rate)
-        print(f"{name:<32}{rate:>10,.0f}{rate / plain:>15.2f}{rate / pend:>12.2f}")
+        print(f"{name:<44}{rate:>10,.0f}{rate / plain:>15.2f}{rate / pend:>12.2f}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rates, fh, indent=2)
