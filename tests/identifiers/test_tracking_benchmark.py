@@ -76,7 +76,7 @@ def test_the_re_search_ablation_reaches_the_default_identifier(load_benchmark, m
 def test_each_behaviour_of_the_cost_ablation_is_an_option_of_the_default(load_benchmark,
                                                                          monkeypatch):
     """benchmarks/bench_identifier_parts.py --behaviours: every variant builds and runs
-    (a 60 s record, one round), each timed beside the bare RLS of the same record."""
+    (a 60 s record, one round) and is timed, beside the bare RLS of the same record."""
     # the script imports its sibling bench_identifiers, as when run from benchmarks/
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
     bench = load_benchmark("bench_identifier_parts")
@@ -84,4 +84,5 @@ def test_each_behaviour_of_the_cost_ablation_is_an_option_of_the_default(load_be
     bare, best = bench.behaviours(truth, u[:600], y[:600], repeats=1)
     assert set(best) == set(bench.BEHAVIOURS) and len(best) == 6
     assert bench.BEHAVIOURS["no re-search after the warm-up's"] == {"rediscover": None}
-    assert 0 < bare < min(best.values()) and all(np.isfinite(list(best.values())))
+    # times only (no assertion on them: a cold numba cache or a busy machine moves them)
+    assert bare > 0 and all(0 < t < np.inf for t in best.values())
