@@ -6,8 +6,11 @@
 * Baselines (:mod:`controllers.baselines`): :class:`PD`, :class:`FixedLQG`
   (nominal design), :class:`RobustLQG` (rigid-body design behind notches),
   :class:`ScheduledLQG` (on the measured paddle angle), :class:`OracleLQG`
-  (true model, Kalman filter: the fair reference) and :class:`OracleLQR`
-  (true model and state: a bound).
+  (true model, Kalman filter, the adaptive law's reference) and :class:`OracleLQR`
+  (true model and state).
+* :class:`ClairvoyantLQG` (:mod:`controllers.ceiling`): the ceiling of the common
+  cost, the finite-horizon LQG on the true time-varying plant with the true noise
+  statistics; with ``start`` (:func:`adaptive_start`) the same-start ceiling.
 * :class:`PolicyController`: any SB3 policy behind the same interface.
 * :func:`run_episode`, :func:`episode_metrics`, :func:`compare`: the
   closed-loop harness.
@@ -44,6 +47,7 @@ from controllers.baselines import (
     TrueModelIdentifier,
     nominal_model,
 )
+from controllers.ceiling import ClairvoyantLQG, ExcitedStart, adaptive_start, finite_horizon_lqr
 from controllers.excitation import BinaryExcitation
 from controllers.features import (
     IdentifiedModelFeatures,
@@ -86,9 +90,11 @@ __all__ = [
     "AdaptiveLQG",
     "BaseRelativeReward",
     "BinaryExcitation",
+    "ClairvoyantLQG",
     "ComparisonInterrupted",
     "Controller",
     "EstimatedFeatures",
+    "ExcitedStart",
     "FallbackWarning",
     "FixedLQG",
     "GainAcceptance",
@@ -111,6 +117,7 @@ __all__ = [
     "Trajectory",
     "TrueModelIdentifier",
     "__version__",
+    "adaptive_start",
     "check_weights",
     "closed_loop_identifier",
     "compare",
@@ -123,6 +130,7 @@ __all__ = [
     "equilibrium_state",
     "fallback_causes",
     "fast_identifier",
+    "finite_horizon_lqr",
     "input_disk_margin",
     "nominal_model",
     "output_weight",

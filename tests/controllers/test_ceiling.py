@@ -1,0 +1,212 @@
+"""The ceiling: the finite-horizon Riccati recursion against closed forms, and the
+clairvoyant LQG against every controller of the package on short episodes."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from controllers import (
+    PD,
+    AdaptiveLQG,
+    ClairvoyantLQG,
+    FixedLQG,
+    OracleLQG,
+    OracleLQR,
+    RobustLQG,
+    ScheduledLQG,
+    adaptive_start,
+    dlqr,
+    finite_horizon_lqr,
+    run_episode,
+    stage_costs,
+)
+from spacecraft_env import ENV_IDS, env_id
+
+
+def _brute_force(a, b, c, q, q_lin, r, x0):
+    """The optimal inputs and cost of the affine LQ problem by stacking it into one
+    least-squares problem in the inputs (the closed form for a short horizon)."""
+    horizon, n, m = b.shape
+    # x_{k+1} = Phi_k x0 + Gamma_k U + d_k
+    phi = np.eye(n)
+    gammas, drifts, phis = [], [], []
+    gamma = np.zeros((n, horizon * m))
+    drift = np.zeros(n)
+    for k in range(horizon):
+        phi = a[k] @ phi
+        gamma = a[k] @ gamma
+        gamma[:, k * m:(k + 1) * m] += b[k]
+        drift = a[k] @ drift + c[k]
+        phis.append(phi.copy())
+        gammas.append(gamma.copy())
+        drifts.append(drift.copy())
+    h = np.kron(np.eye(horizon), r)
+    g = np.zeros(horizon * m)
+    const = 0.0
+    for phi, gamma, drift in zip(phis, gammas, drifts, strict=True):
+        free = phi @ x0 + drift
+        h = h + gamma.T @ q @ gamma
+        g = g + gamma.T @ (q @ free - q_lin)
+        const += free @ q @ free - 2 * q_lin @ free
+    u = -np.linalg.solve(h, g)
+    return u.reshape(horizon, m), const + g @ u
+
+
+def test_finite_horizon_lqr_is_the_optimum_of_the_stacked_problem(rng):
+    horizon, n, m = 7, 4, 2
+    a = rng.normal(size=(horizon, n, n)) * 0.6
+    b = rng.normal(size=(horizon, n, m))
+    c = rng.normal(size=(horizon, n))
+    root = rng.normal(size=(n, n))
+    q = root @ root.T
+    q_lin = rng.normal(size=n)
+    r = np.diag([0.5, 2.0])
+    x0 = rng.normal(size=n)
+    gains, offsets, p0, p0_lin, kappa0 = finite_horizon_lqr(a, b, c, q, q_lin, r)
+    u_best, cost_best = _brute_force(a, b, c, q, q_lin, r, x0)
+    # the feedback law flown from x0 gives the stacked problem's inputs and cost
+    x, u_law = x0.copy(), []
+    for k in range(horizon):
+        u_law.append(-gains[k] @ x + offsets[k])
+        x = a[k] @ x + b[k] @ u_law[-1] + c[k]
+    np.testing.assert_allclose(np.array(u_law), u_best, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0, cost_best, rtol=1e-9)
+
+
+def test_a_long_horizon_gives_the_stationary_lqr_gain_at_its_start():
+    dt = 0.1
+    a = np.array([[1.0, dt], [0.0, 1.0]])
+    b = np.array([[0.5 * dt * dt], [dt]])
+    q, r = np.diag([1.0, 0.1]), np.array([[0.3]])
+    horizon = 2000
+    gains, *_ = finite_horizon_lqr(np.broadcast_to(a, (horizon, 2, 2)),
+                                   np.broadcast_to(b, (horizon, 2, 1)),
+                                   np.zeros((horizon, 2)), q, np.zeros(2), r)
+    stationary, _ = dlqr(a, b, q, r)
+    np.testing.assert_allclose(gains[0], stationary, rtol=1e-8)
+    # the last step's gain looks one step ahead only: H^-1 B^T Q A
+    np.testing.assert_allclose(gains[-1], np.linalg.solve(r + b.T @ q @ b, b.T @ q @ a))
+
+
+def test_finite_horizon_lqr_rejects_bad_shapes_and_values():
+    with pytest.raises(ValueError, match=r"a must have shape \(N, n, n\)"):
+        finite_horizon_lqr(np.ones((2, 2)), np.ones((1, 2, 1)), np.zeros((1, 2)),
+                           np.eye(2), np.zeros(2), np.eye(1))
+    with pytest.raises(ValueError, match="c must be"):
+        finite_horizon_lqr(np.ones((1, 2, 2)), np.ones((1, 2, 1)), np.zeros((2, 2)),
+                           np.eye(2), np.zeros(2), np.eye(1))
+    with pytest.raises(ValueError, match="finite"):
+        finite_horizon_lqr(np.full((1, 2, 2), np.nan), np.ones((1, 2, 1)), np.zeros((1, 2)),
+                           np.eye(2), np.zeros(2), np.eye(1))
+
+
+def _cost(env, controller, seed):
+    traj = run_episode(env, controller, seed=seed)
+    if traj.terminated:
+        return np.inf
+    return float(stage_costs(traj, env.unwrapped.model)[:, :4].sum(axis=1).mean())
+
+
+#: Every fixed controller of the package (the adaptive loop's short-episode check is below).
+FIXED = {"PD": PD, "fixed LQG": FixedLQG, "robust LQG": RobustLQG,
+         "scheduled LQG": ScheduledLQG, "oracle LQG": OracleLQG,
+         "full-state oracle": OracleLQR}
+
+
+@pytest.mark.parametrize("task", ["slew", "regulation"])
+@pytest.mark.parametrize("scenario", sorted(ENV_IDS.values()))
+def test_no_controller_beats_the_ceiling(scenario, task):
+    """Short episodes (40 s) of every registered scenario and both tasks: no controller's
+    whole-episode cost is more than 2 % below the ceiling's, on two seeds. (The 10-seed,
+    full-length check is ``benchmarks/bench_ceiling.py`` and its slow test.)"""
+    for seed in (0, 1):
+        env = gym.make(env_id(scenario), task=task, max_episode_steps=400)
+        ceiling = _cost(env, ClairvoyantLQG(env), seed)
+        assert np.isfinite(ceiling) and ceiling > 0
+        for name, make in FIXED.items():
+            cost = _cost(env, make(env), seed)
+            assert cost >= 0.98 * ceiling, (name, seed, cost / ceiling)
+        env.close()
+
+
+def test_the_adaptive_loop_and_its_same_start_ceiling_stay_above_the_ceiling():
+    """The adaptive loop past its warm-up (fit included), the same-start ceiling behind
+    the same start, and the ceiling: ordered as they must be."""
+    env = gym.make(env_id("constant"), task="slew", max_episode_steps=420)
+    ceiling = _cost(env, ClairvoyantLQG(env), 3)
+    same_start = _cost(env, ClairvoyantLQG(env, start=adaptive_start(env), start_steps=300), 3)
+    adaptive = _cost(env, AdaptiveLQG(env), 3)
+    assert ceiling < same_start <= 1.02 * adaptive
+    env.close()
+
+
+def test_the_ceiling_knows_the_noise_it_flies_in():
+    """Noise-free from the slew's known start (at rest at zero), the ceiling's filter is
+    exact: the plan flown is the plan's optimum (its cost equals the value function's
+    prediction from the initial state)."""
+    env = gym.make(env_id("docking"), task="slew", snr_db=None, max_torque=100.0,
+                   max_episode_steps=1900)
+    ctrl = ClairvoyantLQG(env)
+    traj = run_episode(env, ctrl, seed=2)
+    model = env.unwrapped.model
+    costs = stage_costs(traj, model)[:, :4].sum(axis=1)
+    assert np.abs(traj.actions).max() < 0.999           # no saturation: the linear plant
+    # the same plan evaluated in closed form from the initial state
+    x0 = traj.states[0]
+    n = model.n
+    steps = len(traj.time)
+    a = np.empty((steps, n, n))
+    b = np.empty((steps, n, 3))
+    c = np.empty((steps, n))
+    for k in range(steps):
+        a[k], bd, c[k] = ctrl._transition(k)
+        b[k] = bd
+    from spacecraft_conventions import output_cost_weights
+    w = output_cost_weights(model.output_layout, ctrl.weights)
+    q = model.C.T @ np.diag(w) @ model.C
+    r_out = np.zeros(model.C.shape[0])
+    r_out[model.output_layout.slice("attitude")] = traj.reference[0]
+    q_lin = model.C.T @ (w * r_out)
+    _, _, p0, p0_lin, kappa0 = finite_horizon_lqr(a, b, c, q, q_lin, ctrl.weights.torque
+                                                  * np.eye(3))
+    predicted = x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0 + steps * r_out @ (w * r_out)
+    np.testing.assert_allclose(costs.sum(), predicted, rtol=1e-6)
+    assert traj.events and traj.time[-1] > max(traj.events)       # through both dockings
+    env.close()
+
+
+def test_the_ceiling_plans_through_a_delay_and_a_disturbance():
+    """An actuator delay and a constant disturbance torque are in the plan: the ceiling
+    stays below the oracle LQG, which knows neither in advance."""
+    env = gym.make(env_id("constant"), task="slew", actuator_delay_steps=3,
+                   disturbance_torque=[0.02, -0.01, 0.0], max_episode_steps=400)
+    assert _cost(env, ClairvoyantLQG(env), 0) < _cost(env, OracleLQG(env), 0)
+    env.close()
+
+
+def test_the_ceiling_is_deterministic_and_pickles():
+    env = gym.make(env_id("paddle_rotation"), max_episode_steps=50)
+    ctrl = ClairvoyantLQG(env)
+    first = run_episode(env, ctrl, seed=4)
+    again = run_episode(env, pickle.loads(pickle.dumps(ctrl)), seed=4)
+    np.testing.assert_allclose(first.torque, again.torque, rtol=1e-12, atol=1e-15)
+    env.close()
+
+
+def test_the_ceiling_validates_its_arguments():
+    env = gym.make(env_id("constant"), max_episode_steps=50)
+    with pytest.raises(ValueError, match="horizon_steps must be an integer >= 1"):
+        ClairvoyantLQG(env, horizon_steps=0)
+    with pytest.raises(ValueError, match="start_steps must be an integer >= 0"):
+        ClairvoyantLQG(env, start=PD(env), start_steps=-1)
+    with pytest.raises(TypeError, match="start must be a controller"):
+        ClairvoyantLQG(env, start=object(), start_steps=3)
+    ctrl = ClairvoyantLQG(env)
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match="needs the env's info dict"):
+        ctrl.act(obs)
+    env.close()
