@@ -66,6 +66,7 @@ from controllers.harness import (
     stage_costs,
 )
 from controllers.loop_identifiers import (
+    LOOP_FIT_TIMING,
     closed_loop_identifier,
     fast_identifier,
     scheduled_identifier,
@@ -85,6 +86,7 @@ from controllers.riccati import RiccatiTracker, check_weights, dlqr, doubling_da
 from spacecraft_conventions import __version__
 
 __all__ = [
+    "LOOP_FIT_TIMING",
     "PD",
     "AdaptationModule",
     "AdaptiveLQG",

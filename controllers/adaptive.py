@@ -58,8 +58,10 @@ Every control step k (docs/design/control.md):
 re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
 failed designs and non-finite observations, the steps (and fallback steps)
 from :data:`~controllers.harness.JUDGED_FROM_S` with the cause of each of those
-fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), and
-reports the excitation's RMS torque.
+fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), the
+identifier's fits (``fits``: its ``fit_log``, each fit's latency, CPU time and
+outcome, for identifiers that fit off the control path), and reports the
+excitation's RMS torque.
 """
 
 from __future__ import annotations
@@ -253,12 +255,19 @@ class AdaptiveLQG(_LQGController):
     >>> ctrl = AdaptiveLQG(env)
     >>> type(ctrl.identifier).__name__           # closed_loop_identifier(env)
     'ScheduledPhysicalIdentifier'
-    >>> traj = run_episode(env, ctrl, seed=0, max_steps=320)
+    >>> traj = run_episode(env, ctrl, seed=0, max_steps=420)
     >>> ctrl.identifier.warmup, ctrl.identifier.model is not None
     (300, True)
     >>> stats = traj.controller_stats
     >>> stats["steps"], stats["fallback_steps"] >= ctrl.identifier.warmup
-    (320, True)
+    (420, True)
+
+    The fit ran off the control path; its model flew from 10 s after it fell due
+    (:data:`~controllers.LOOP_FIT_TIMING`), recorded with its CPU time:
+
+    >>> fit = stats["fits"][0]
+    >>> fit["action"], fit["sample"], fit["adopted"], fit["outcome"]
+    ('first_fit', 300, 400, 'adopted')
     >>> env.close()
     """
 
@@ -364,6 +373,9 @@ class AdaptiveLQG(_LQGController):
                                       "excited_steps": 0, "switches": 0,
                                       "steps_after_60s": 0, "fallback_steps_after_60s": 0,
                                       "fallback_by_after_60s": {}}
+        # the identifier's fits (off the control path: when each fell due, when its
+        # model flew, its CPU time and outcome), for identifiers that fit
+        self.stats["fits"] = getattr(self.identifier, "fit_log", [])
         self._reason: str | None = None
 
     # ------------------------------------------------------------ pieces

@@ -49,6 +49,7 @@ The package has two families over a small core, and imports run one way
 Everything public is importable from ``identifiers`` itself.
 """
 
+from identifiers.core.background import FIT_OUTCOMES, FitTiming
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
@@ -103,10 +104,12 @@ from spacecraft_conventions import __version__
 __all__ = [
     "CLOSED_LOOP_SETTINGS",
     "DEFAULT_SETTINGS",
+    "FIT_OUTCOMES",
     "HORIZONS",
     "STRUCTURED_CLOSED_LOOP_SETTINGS",
     "ChangeEvent",
     "ClassicalRPBSID",
+    "FitTiming",
     "IdentifierHealth",
     "IdentifierHealthWarning",
     "ImprovedRPBSID",

@@ -34,7 +34,9 @@ __all__ = ["KEPT_ON_ROLLBACK", "HealthGuard"]
 KEPT_ON_ROLLBACK = ("n_samples", "n_skipped", "n_outliers", "n_idle", "n_rollbacks",
                      "n_restarts", "n_rescales",
                      "_last_fault", "_fault_samples", "_good", "_k", "_healthy", "_warned",
-                     "_monitor", "_range_skips", "_warned_faults")
+                     "_monitor", "_range_skips", "_warned_faults",
+                     # a fit running in the background goes on across a rollback
+                     "_job", "_clock", "fit_log", "_fit_timing")
 
 
 class HealthGuard:

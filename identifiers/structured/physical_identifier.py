@@ -107,7 +107,7 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
             return False
         self.held_fit = fit
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
-        self._q = self._process_noise(b)
+        self._q = self._held_process_noise(b)
         # the filter's measurement noise: the fit's residual per output
         attitude, rate, q = simulate(fit.model, u * su, self.dt, fit.initial_state)
         fitted = np.zeros_like(y)

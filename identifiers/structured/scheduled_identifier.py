@@ -2,9 +2,8 @@
 
 :class:`ScheduledPhysicalIdentifier` records the first ``warmup`` samples with
 the drive angle of each (:meth:`~ScheduledPhysicalIdentifier.set_schedule`),
-fits a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
-to them by output error
-(:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
+fits a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel` to
+them by output error (:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
 then on exports that model evaluated at the latest angle, with a Kalman filter
 on it for the state. The drive's rotation is followed through the angle. By
 default (``accumulate``) the fit is redone, from the held model, each time the
@@ -159,6 +158,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
 
     #: Alarms are confirmed by a refit against ``_held_misfit`` (:class:`WarmupFit`).
     judges_changes = True
+    _CONTEXT = ("angle",)
 
     def __init__(self, layout: OutputLayout = STANDARD_OUTPUTS, *,
                  turning: Sequence[bool] | None = None,
@@ -305,7 +305,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
             return False
         self._mats = (a, b, c, np.zeros((c.shape[0], 3)), None)
         self._mats_angle = angle
-        self._q = self._process_noise(b)
+        self._q = self._held_process_noise(b)
         return True
 
     def _record_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -64,6 +64,12 @@ class ModelFilter:
     def _state_vector(self) -> np.ndarray | None:
         return None if self._kf is None else self._kf.x
 
+    def _held_process_noise(self, b: np.ndarray) -> np.ndarray:
+        """The filter's process covariance for the normalized input matrix ``b``: an
+        unmodelled torque of ``process_torque`` per axis (N m, the host's)."""
+        return (self.process_torque / self._su.mean()) ** 2 * (b @ b.T) \
+            + 1e-12 * np.eye(self.n)
+
     def _after_rollback(self) -> None:
         # the restored filter state is up to a check period old: let it re-converge
         if self._kf is not None:

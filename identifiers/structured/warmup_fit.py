@@ -22,15 +22,11 @@ Each alarm is reported in :attr:`WarmupFit.events`, its ``confirmed`` flag set b
 the outcome. So the fit is renewed where the data say the plant moved, not on a
 clock.
 
-A host with ``accumulate`` set lets the information grow instead of holding
-the warm-up's fit: it keeps the last ``max_record`` samples and fits them
-again, the held model refined first, each time as many samples have come
-since the last fit as that fit used (the record doubles: 30 s, 60 s, 120 s,
-...), then every ``max_record`` samples once the record is full. A refit that
-knows the rigid-body gain less well than the held fit (a record that no
-longer holds the warm-up's excitation) is kept out, so information is not
-lost. A fit's cost grows with its record, so the refits cost about two fits
-of the longest record in all until the record is full.
+A host with ``accumulate`` set lets the information grow: it keeps the last
+``max_record`` samples and fits them again, the held model refined first, each
+time as many samples have come since the last fit as that fit used (30 s, 60 s,
+120 s, ...), then every ``max_record`` samples. A refit that knows the rigid-body
+gain less well than the held fit is kept out, so information is not lost.
 """
 
 from __future__ import annotations
@@ -41,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from identifiers.core.background import BackgroundFits
 from identifiers.core.kalman import KalmanPredictor
 from identifiers.structured.change_detection import (
     ChangeEvent,
@@ -62,7 +59,7 @@ CHANGE_THRESHOLD = 20.0
 CHANGE_DRIFT = 0.25
 
 
-class WarmupFit(ModelFilter):
+class WarmupFit(BackgroundFits, ModelFilter):
     """Mixin: the record, the fit's hold and the filter on it.
 
     The host provides ``process_torque`` (N m per axis), ``refit_on_change``
@@ -75,7 +72,9 @@ class WarmupFit(ModelFilter):
     :attr:`refit_start` holds the filter's state at the record's first sample
     (a start for the refit); it is None otherwise. :attr:`accumulating_refit`
     is True while ``_fit_record`` runs for an accumulating refit (the held model's
-    record grown, no change detected), so the host may refit more cheaply.
+    record grown, no change detected), so the host may refit more cheaply. Every fit
+    runs through :class:`~identifiers.core.background.BackgroundFits` (the host's
+    ``fit_timing``: at once by default, or off the caller's thread with a latency).
     """
 
     refit_on_change: bool = False
@@ -89,6 +88,7 @@ class WarmupFit(ModelFilter):
 
     def reset(self) -> None:
         super().reset()
+        self._reset_fits()
         self.held_fit: Any = None
         self._record: list[tuple] = []
         self._retry_at = 0
@@ -132,6 +132,7 @@ class WarmupFit(ModelFilter):
         """A new record of the same plant: keep the fit, restart the state's filter
         (``x = 0`` with a vague covariance) and the change test, drop a refit's
         unfinished record; before the fit, keep recording."""
+        self._job = None                   # a fit of the old record is not wanted
         if self._kf is not None:
             self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
             # a refit's record, and the change test's calibration, belong to the old record
@@ -167,15 +168,8 @@ class WarmupFit(ModelFilter):
             if self.accumulate:
                 self._priors.append(np.full(self.n, np.nan))
             self._record.append(item or self._record_item(u, y))
-            if len(self._record) >= max(self.warmup, self._retry_at):
-                length = len(self._record)
-                if self._fit_record():
-                    self._fitted(self._count - length, length)
-                    self._watch()
-                else:
-                    # keep recording; try again once the record is half a warm-up longer
-                    self.held_fit = None
-                    self._retry_at = len(self._record) + max(self.warmup // 2, 1)
+            if len(self._record) >= max(self.warmup, self._retry_at) and not self.fit_pending:
+                self._run_fit("_first_fit")
             return
         self._follow()
         a, b, c, _, _ = self._mats
@@ -187,11 +181,12 @@ class WarmupFit(ModelFilter):
         self._since_fit += 1
         if self.refit_start is not None:
             self._record.append(item or self._record_item(u, y))
-            if len(self._record) >= self.warmup:
-                self._refit()
+            if len(self._record) >= self.warmup and not self.fit_pending:
+                self._run_fit("_refit")
             return
         if self.accumulate and self._since_fit >= min(self._fit_length, self.max_record):
-            self._refit_accumulated()
+            if not self.fit_pending:
+                self._run_fit("_refit_accumulated")
             return
         if self._detector is not None and learn and np.isfinite(y).all():
             event = self._detector.update(self._kf.innovation, self._kf.innovation_covariance)
@@ -207,6 +202,25 @@ class WarmupFit(ModelFilter):
                 # prior of it is the refit's start
                 self.refit_start = prior
                 self._record = [item or self._record_item(u, y)]
+
+    def _first_fit(self) -> None:
+        """Fit the warm-up's record; where it fails, record on and try again once the
+        record is half a warm-up longer."""
+        length = len(self._record)
+        if self._fit_record():
+            self._fitted(self._count - length, length)
+            self._watch()
+        else:
+            self.held_fit = None
+            self._fit_abandoned("_first_fit")
+
+    def _fit_abandoned(self, action: str) -> None:
+        """The held state after a fit that did not come (failed or abandoned)."""
+        if action == "_first_fit":
+            self._retry_at = len(self._record) + max(self.warmup // 2, 1)
+        else:
+            self._record, self.refit_start, self._since_fit = [], None, 0
+            self._watch(keep=action == "_refit_accumulated")
 
     def _refit(self) -> None:
         """Fit the record taken since the detected change and judge the alarm.
@@ -365,12 +379,6 @@ class WarmupFit(ModelFilter):
         elif not keep or self._detector is None:
             self._detector = InnovationCUSUM(threshold=CHANGE_THRESHOLD, drift=CHANGE_DRIFT,
                                              dt=self.dt)
-
-    def _process_noise(self, b: np.ndarray) -> np.ndarray:
-        """The filter's process covariance for the normalized input matrix ``b``: an
-        unmodelled torque of ``process_torque`` per axis."""
-        return (self.process_torque / self._su.mean()) ** 2 * (b @ b.T) \
-            + 1e-12 * np.eye(self.n)
 
     def _start_filter(self, x0: np.ndarray, u: np.ndarray, y: np.ndarray,
                       fitted: np.ndarray) -> None:
