@@ -47,7 +47,13 @@ from controllers.baselines import (
     TrueModelIdentifier,
     nominal_model,
 )
-from controllers.ceiling import ClairvoyantLQG, ExcitedStart, adaptive_start, finite_horizon_lqr
+from controllers.ceiling import (
+    ClairvoyantLQG,
+    ExcitedStart,
+    adaptive_start,
+    finite_horizon_lqr,
+    same_start_ceiling,
+)
 from controllers.excitation import BinaryExcitation
 from controllers.features import (
     IdentifiedModelFeatures,
@@ -137,6 +143,7 @@ __all__ = [
     "nominal_model",
     "output_weight",
     "run_episode",
+    "same_start_ceiling",
     "scheduled_identifier",
     "set_integral_settle",
     "spectral_radius",

@@ -541,6 +541,9 @@ class AdaptiveLQG(_LQGController):
         tol = self.uncertainty_tolerance
         excess = (self._uncertainty - tol) / tol if tol > 0 else float("inf")
         self.excitation.amplitude = self.excitation_budget * float(np.clip(excess, 0.0, 1.0))
+        if estimate is None and getattr(self.identifier, "fit_pending", False):
+            # the first fit runs on the warm-up's record: excitation now informs nothing
+            self.excitation.amplitude = 0.0
         if self._excite_until is not None and self._k >= self._excite_until:
             self.excitation.amplitude = 0.0          # its window since the last change is over
         shape = getattr(self.identifier, "input_uncertainty", None)

@@ -37,6 +37,7 @@ the ratio to it is the price of identification alone.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections import deque
 from typing import Any
@@ -48,13 +49,14 @@ from numpy.typing import ArrayLike
 from controllers.base import Controller
 from controllers.baselines import PD, _EnvController
 from controllers.excitation import BinaryExcitation
+from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
 from identifiers import KalmanPredictor
 from spacecraft_conventions import output_cost_weights, single_threaded_blas
 from spacecraft_env.registration import MAX_EPISODE_STEPS
 
 __all__ = ["NOISE_FLOOR", "ClairvoyantLQG", "ExcitedStart", "adaptive_start",
-           "finite_horizon_lqr"]
+           "finite_horizon_lqr", "same_start_ceiling"]
 
 #: Smallest sensor noise the ceiling's filter assumes, as a fraction of each channel's
 #: nominal level: the observations are float32 (a relative resolution of 6e-8 at ten
@@ -205,30 +207,54 @@ class ExcitedStart(Controller):
         return np.minimum(np.maximum(torque / self.max_torque, -1.0), 1.0).astype(np.float32)
 
 
-def adaptive_start(env: gym.Env, warmup_steps: int = 300, amplitude: float = 0.5,
-                   ) -> ExcitedStart:
-    """The start :class:`~controllers.AdaptiveLQG` flies by default: its warm-up PD with
-    the binary excitation of its identifier's warm-up (``amplitude`` N m per axis for
-    ``warmup_steps``, then none), seeded as the loop seeds it.
+def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
+    """The start :class:`~controllers.AdaptiveLQG` flies by default, and its length.
+
+    The loop's warm-up PD with the binary excitation of its identifier's warm-up
+    (:func:`~controllers.closed_loop_identifier`'s ``warmup_amplitude`` N m per axis
+    for its ``warmup`` samples, then none), seeded as the loop seeds it, until the
+    identifier's first model can fly: the warm-up plus the first fit's latency
+    (:data:`~controllers.LOOP_FIT_TIMING`; 40 s on the registered ids).
 
     Parameters
     ----------
     env : gymnasium.Env
         The environment (wrappers allowed).
-    warmup_steps : int
-        Samples of the excitation (the identifier's ``warmup``; default 300).
-    amplitude : float
-        Its amplitude per axis, N m (the identifier's ``warmup_amplitude``;
-        default 0.5).
 
     Returns
     -------
-    ExcitedStart
+    start : ExcitedStart
         PD plus the excitation, as the loop applies them.
+    steps : int
+        Steps the loop flies it at least (its first model's sample).
     """
+    identifier = closed_loop_identifier(env)
+    warmup = int(getattr(identifier, "warmup", 500))
+    amplitude = float(getattr(identifier, "warmup_amplitude", 1.0))
+    timing = getattr(identifier, "fit_timing", None)
+    latency = 0 if timing is None or timing.latency_s is None else \
+        math.ceil(round(timing.latency_s / float(env.unwrapped.model.dt), 9))
     excitation = BinaryExcitation(warmup_amplitude=amplitude, amplitude=0.0,
-                                  warmup_steps=int(warmup_steps))
-    return ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque))
+                                  warmup_steps=warmup)
+    return ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque)), warmup + latency
+
+
+def same_start_ceiling(env: gym.Env, weights: LQRWeights | None = None) -> ClairvoyantLQG:
+    """The ceiling flown behind the adaptive loop's start (:func:`adaptive_start`): the
+    optimum of the cost from the start's end among controllers that fly that start.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+    weights : LQRWeights, optional
+
+    Returns
+    -------
+    ClairvoyantLQG
+        Named "same-start ceiling".
+    """
+    start, steps = adaptive_start(env)
+    return ClairvoyantLQG(env, weights, start=start, start_steps=steps)
 
 
 class ClairvoyantLQG(_EnvController):
@@ -257,8 +283,8 @@ class ClairvoyantLQG(_EnvController):
         ``spec.max_episode_steps`` (2500 for the registered ids). An episode
         that runs longer is planned again from where the plan ends.
     start : Controller, optional
-        Flies the first ``start_steps`` steps instead (e.g. :func:`adaptive_start`):
-        the same-start ceiling. Its excitation, if it has one
+        Flies the first ``start_steps`` steps instead (e.g. :func:`adaptive_start`'s;
+        :func:`same_start_ceiling`). Its excitation, if it has one
         (``last_excitation``), is reported as this controller's.
     start_steps : int
         Steps ``start`` flies (default 0).

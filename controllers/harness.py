@@ -36,7 +36,8 @@ from spacecraft_conventions import (
 )
 
 __all__ = ["AGGREGATED", "COST_PARTS", "COST_WEIGHTS", "ENVELOPE_FLOOR", "GROWTH_LIMIT", "GROWTH_T",
-           "JUDGED_FROM_S", "SCORED_FROM_S", "SLOW_GROWTH_LIMIT", "ComparisonInterrupted",
+           "JUDGED_FROM_S", "SAME_START_S", "SCORED_FROM_S", "SLOW_GROWTH_LIMIT",
+           "ComparisonInterrupted",
            "Trajectory", "compare", "controller_shares", "episode_metrics", "fallback_causes",
            "run_episode", "stage_costs"]
 
@@ -387,6 +388,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
 
 #: Start of the scored window after warm-up, s (``attitude_rms_after_100s_deg``).
 SCORED_FROM_S = 100.0
+#: Start of the window the same-start ceiling bounds, s (``cost_after_start``): the end of
+#: the adaptive loop's start, its identifier's 30 s warm-up and the first fit's 10 s
+#: latency (:func:`controllers.adaptive_start`; docs/design/evaluation.md).
+SAME_START_S = 40.0
 #: Start of the window over which an adaptive loop's identification and design are
 #: judged (fallback share, rigid-gain error and coverage), s: its warm-up is over.
 JUDGED_FROM_S = 60.0
@@ -589,7 +594,8 @@ def _sustained_radius(traj: Trajectory, start_s: float) -> bool:
 
 
 def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
-                    stable_bound_deg: float = 1.0) -> dict[str, Any]:
+                    stable_bound_deg: float = 1.0, start_s: float = SAME_START_S
+                    ) -> dict[str, Any]:
     """Scores of one episode.
 
     Parameters
@@ -601,13 +607,22 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         Attitude-error band of the settling times, deg.
     stable_bound_deg : float
         Attitude error the last 10 % of a stable episode stays below, deg.
+    start_s : float
+        Start of the window ``cost_after_start`` averages, s (default
+        :data:`SAME_START_S`: where the same-start ceiling takes over).
 
     Returns
     -------
     dict
-        ``cost_after_100s`` (the common quadratic cost, :func:`stage_costs`,
-        averaged from :data:`SCORED_FROM_S` on: the headline, the quantity
-        every LQG here minimizes) and its parts ``cost_attitude_after_100s``,
+        ``cost`` (the common quadratic cost, :func:`stage_costs`, averaged over
+        the whole episode: the quantity every LQG here minimizes and the
+        ceiling, :class:`~controllers.ClairvoyantLQG`, bounds) and its parts
+        ``cost_attitude``, ``cost_rate``, ``cost_deflection``, ``cost_torque``
+        and ``cost_excitation``; ``cost_after_start`` (the same from
+        ``start_s`` on, the window the same-start ceiling bounds);
+        ``cost_after_100s`` (the same from :data:`SCORED_FROM_S` on: a
+        stationary window, which no flown ceiling bounds) and its parts
+        ``cost_attitude_after_100s``,
         ``cost_rate_after_100s``, ``cost_deflection_after_100s``,
         ``cost_torque_after_100s`` and ``cost_excitation_after_100s`` (the
         share of the torque term due to an excitation), all infinite for an
@@ -715,13 +730,19 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     else:
         verdict = "stable"
     late = time >= SCORED_FROM_S
+    after_start = time >= start_s
     costs = stage_costs(traj, model)
-    cost = costs[late].mean(axis=0) if late.any() else np.full(len(COST_PARTS), np.nan)
+    nan = np.full(len(COST_PARTS), np.nan)
+    cost = costs[late].mean(axis=0) if late.any() else nan
+    whole = costs.mean(axis=0) if len(costs) else nan
+    cost_after_start = costs[after_start, :4].sum(axis=1).mean() if after_start.any() \
+        else float("nan")
     crashed = verdict in ("diverged", "terminated")
     if crashed:
         # a crash costs infinity whenever it happens: averaged over the steps that exist,
         # one after 100 s would look cheaper than a loop that flew to the end
-        cost = np.full(len(COST_PARTS), np.inf)
+        cost = whole = np.full(len(COST_PARTS), np.inf)
+        cost_after_start = float("inf")
     gain_error = gain_coverage = None
     if traj.gain_error is not None and traj.frequency_time is not None:
         judged = traj.frequency_time >= JUDGED_FROM_S
@@ -737,6 +758,9 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         scored = traj.true_radius[traj.radius_time >= scored_from]
         radius_max = float(scored.max()) if scored.size else None
     return {
+        "cost": float(np.sum(whole[:4])),
+        **{f"cost_{part}": float(value) for part, value in zip(COST_PARTS, whole, strict=True)},
+        "cost_after_start": float(cost_after_start),
         "cost_after_100s": float(np.sum(cost[:4])),
         **{f"cost_{part}_after_100s": float(value)
            for part, value in zip(COST_PARTS, cost, strict=True)},
@@ -765,7 +789,9 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
 
 
 #: Scalar metrics aggregated by :func:`compare` (median and spread over seeds).
-AGGREGATED = ("cost_after_100s", "cost_attitude_after_100s", "cost_rate_after_100s",
+AGGREGATED = ("cost", "cost_attitude", "cost_rate", "cost_deflection", "cost_torque",
+              "cost_excitation", "cost_after_start", "cost_after_100s",
+              "cost_attitude_after_100s", "cost_rate_after_100s",
               "cost_deflection_after_100s", "cost_torque_after_100s",
               "cost_excitation_after_100s",
               "attitude_rms_deg", "attitude_rms_after_100s_deg", "attitude_peak_deg",

@@ -125,7 +125,7 @@ class HealthGuard:
             self._quiet = max(self._quiet, self.p + 1)
             self._after_rollback()
         else:
-            kept = {k: getattr(self, k) for k in KEPT_ON_ROLLBACK}
+            kept = {k: v for k, v in vars(self).items() if k in KEPT_ON_ROLLBACK}
             self.reset()
             vars(self).update(kept)
             self.n_restarts += 1

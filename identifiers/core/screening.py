@@ -188,7 +188,7 @@ class SampleScreening:
     def _rescale(self, range_skips: int) -> None:
         """Start again with automatic scales taken from the next ``p`` samples: the
         data left the level the first samples set by more than ``max_abs``."""
-        kept = {k: getattr(self, k) for k in KEPT_ON_ROLLBACK if k != "_monitor"}
+        kept = {k: v for k, v in vars(self).items() if k in KEPT_ON_ROLLBACK and k != "_monitor"}
         self.reset()
         vars(self).update(kept)
         self.n_rescales += 1

@@ -22,6 +22,7 @@ from controllers import (
     dlqr,
     finite_horizon_lqr,
     run_episode,
+    same_start_ceiling,
     stage_costs,
 )
 from spacecraft_env import ENV_IDS, env_id
@@ -136,11 +137,25 @@ def test_no_controller_beats_the_ceiling(scenario, task):
 def test_the_adaptive_loop_and_its_same_start_ceiling_stay_above_the_ceiling():
     """The adaptive loop past its warm-up (fit included), the same-start ceiling behind
     the same start, and the ceiling: ordered as they must be."""
-    env = gym.make(env_id("constant"), task="slew", max_episode_steps=420)
+    env = gym.make(env_id("constant"), task="slew", max_episode_steps=520)
     ceiling = _cost(env, ClairvoyantLQG(env), 3)
-    same_start = _cost(env, ClairvoyantLQG(env, start=adaptive_start(env), start_steps=300), 3)
+    same_start = _cost(env, same_start_ceiling(env), 3)
     adaptive = _cost(env, AdaptiveLQG(env), 3)
     assert ceiling < same_start <= 1.02 * adaptive
+    env.close()
+
+
+def test_the_same_start_is_the_adaptive_loops_start():
+    """The same-start ceiling flies exactly the torques the adaptive loop flies until the
+    loop's first model can fly (its identifier's warm-up and the fit's latency)."""
+    env = gym.make(env_id("paddle_rotation"), max_episode_steps=401)
+    start, steps = adaptive_start(env)
+    assert steps == 400
+    loop = run_episode(env, AdaptiveLQG(env), seed=7)
+    ceiling = run_episode(env, same_start_ceiling(env), seed=7)
+    np.testing.assert_array_equal(loop.torque[:steps], ceiling.torque[:steps])
+    assert np.abs(ceiling.excitation[:300]).max() == pytest.approx(0.5)
+    assert not ceiling.excitation[300:].any()
     env.close()
 
 
