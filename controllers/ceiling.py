@@ -53,7 +53,6 @@ from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
 from identifiers import KalmanPredictor
 from spacecraft_conventions import output_cost_weights, single_threaded_blas
-from spacecraft_env.registration import MAX_EPISODE_STEPS
 
 __all__ = ["NOISE_FLOOR", "ClairvoyantLQG", "ExcitedStart", "adaptive_start",
            "finite_horizon_lqr", "same_start_ceiling"]
@@ -310,9 +309,9 @@ class ClairvoyantLQG(_EnvController):
         spec = getattr(env, "spec", None)
         super().__init__(env)
         self.weights = weights or LQRWeights()
-        if horizon_steps is None:
+        if horizon_steps is None:           # the registered ids' 2500 without a spec
             horizon_steps = (spec.max_episode_steps if spec is not None
-                             and spec.max_episode_steps else MAX_EPISODE_STEPS)
+                             and spec.max_episode_steps else 2500)
         if isinstance(horizon_steps, bool) or not isinstance(horizon_steps, int | np.integer) \
                 or horizon_steps < 1:
             raise ValueError(f"horizon_steps must be an integer >= 1, got {horizon_steps!r}")

@@ -49,7 +49,13 @@ The package has two families over a small core, and imports run one way
 Everything public is importable from ``identifiers`` itself.
 """
 
-from identifiers.core.background import FIT_OUTCOMES, FitTiming
+from identifiers.core.background import (
+    FIT_OUTCOMES,
+    FitCancelled,
+    FitTiming,
+    cancel_fits,
+    cancellation_point,
+)
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
@@ -109,6 +115,7 @@ __all__ = [
     "STRUCTURED_CLOSED_LOOP_SETTINGS",
     "ChangeEvent",
     "ClassicalRPBSID",
+    "FitCancelled",
     "FitTiming",
     "IdentifierHealth",
     "IdentifierHealthWarning",
@@ -142,6 +149,8 @@ __all__ = [
     "WindowedPBSID",
     "__version__",
     "add_measurement_noise",
+    "cancel_fits",
+    "cancellation_point",
     "default_identifier",
     "discover_resonators",
     "fit_physical_model",

@@ -14,7 +14,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["control_brief", "control_summary", "control_table", "fallback_causes_text",
+from controllers.harness import SAME_START_S
+
+__all__ = ["CEILING", "SAME_START_CEILING", "control_brief", "control_summary", "control_table",
+           "fallback_causes_text", "flies_the_start",
            "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
            "training_metrics_problem"]
@@ -104,22 +107,41 @@ def identification_table(metrics: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def control_table(table: dict[str, dict], oracle: str | None = None,
-                  baseline: str | None = "robust LQG") -> str:
-    """Markdown table of :func:`controllers.compare` results, the common cost first.
+#: The names the comparison gives the two ceilings (:func:`controllers.ClairvoyantLQG`).
+CEILING = "ceiling"
+SAME_START_CEILING = "same-start ceiling"
 
-    Per controller: the common quadratic cost from t = 100 s (the quantity
-    every LQG here minimizes; :func:`controllers.stage_costs`), median [25th,
-    75th percentile] over seeds, its ratio to ``oracle``'s (the ceiling) and to
-    ``baseline``'s (the robust fixed design: what an adaptive loop must beat),
-    both medians of the per-seed ratios (paired seeds); the split of the
-    median cost into attitude, rate, deflection and torque, with the
-    excitation's share of the torque term; then the secondary columns:
-    verdicts, attitude RMS and vibration from 100 s, excitation RMS, the
-    identified rigid-body gain's median error and 2-sigma coverage of the
-    truth from 60 s (pooled over the seeds' samples; controllers with an
-    identifier), the share of steps the fallback flew from 60 s (after the
-    warm-up) and over the episode, and why it flew from 60 s (:func:`fallback_causes_text`).
+
+def flies_the_start(name: str) -> bool:
+    """Whether the controller ``name`` flies the adaptive loop's start (its identifier's
+    warm-up behind the PD and excitation), so the same-start ceiling bounds its cost from
+    the end of that start: the adaptive loops (names beginning "adaptive LQG")."""
+    return name.startswith("adaptive LQG") or name == SAME_START_CEILING
+
+
+def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
+                  same_start: str | None = SAME_START_CEILING,
+                  baseline: str | None = "robust LQG") -> str:
+    """Markdown table of :func:`controllers.compare` results, by the evaluation protocol.
+
+    Per controller (docs/design/evaluation.md): the common quadratic cost over
+    the whole episode (the quantity every LQG here minimizes;
+    :func:`controllers.stage_costs`), median [25th, 75th percentile] over seeds,
+    and its ratio to ``ceiling``'s (the clairvoyant LQG: no controller can
+    expect less) and to ``baseline``'s (the robust fixed design: what an
+    adaptive loop must beat); the cost from the end of the adaptive loop's
+    start (:data:`controllers.harness.SAME_START_S`) and its ratio to
+    ``same_start``'s (the ceiling flown behind that start: the price of
+    identification; shown for the controllers that fly that start,
+    :func:`flies_the_start`); the stationary window from 100 s; ratios are medians of
+    per-seed ratios (paired seeds). Then the split of the median whole-episode
+    cost into attitude, rate, deflection and torque, with the excitation's
+    share of the torque term, and the secondary columns: verdicts, attitude
+    RMS and vibration from 100 s, excitation RMS, the identified rigid-body
+    gain's median error and 2-sigma coverage of the truth from 60 s (pooled
+    over the seeds' samples; controllers with an identifier), the share of
+    steps the fallback flew from 60 s (after the warm-up) and over the
+    episode, and why it flew from 60 s (:func:`fallback_causes_text`).
     """
     def cell(row: dict, key: str, digits: int) -> str:
         return (f"{row['median'][key]:.{digits}g} "
@@ -134,23 +156,31 @@ def control_table(table: dict[str, dict], oracle: str | None = None,
             return "-"
         return f"{100 * err:.0f} %, " + ("-" if not np.isfinite(cover) else f"{100 * cover:.0f} %")
 
-    def paired(name: str, ref: str | None) -> str:
-        ratio = None if ref is None else paired_cost_ratio(table, name, ref)
+    def paired(name: str, ref: str | None, key: str) -> str:
+        ratio = None if ref is None else paired_cost_ratio(table, name, ref, key)
         return "-" if ratio is None else f"{ratio:.2f}"
 
-    head = ("| controller | cost t >= 100 s | / oracle | / robust | split: att / rate / defl "
+    def after_start(name: str) -> str:
+        # the same-start ceiling bounds only the loops that fly its start
+        return paired(name, same_start, "cost_after_start") if flies_the_start(name) else "-"
+
+    start = f"{SAME_START_S:g}"
+    head = (f"| controller | cost, whole episode | / ceiling | / robust | cost t >= {start} s "
+            "| / same-start ceiling | cost t >= 100 s | split (whole): att / rate / defl "
             "/ torque (excitation) | verdicts | attitude RMS t >= 100 s (deg) "
             "| vibration t >= 100 s (mm) | excitation RMS (N m) "
             "| gain error, coverage t >= 60 s | fallback flew t >= 60 s (all) "
             "| why it flew t >= 60 s |")
-    lines = [head, "|" + "---|" * 12]
+    lines = [head, "|" + "---|" * 15]
     for name, row in table.items():
         med = row["median"]
         verdicts = ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items())
-        split = " / ".join(f"{med[f'cost_{p}_after_100s']:.2g}"
+        split = " / ".join(f"{med[f'cost_{p}']:.2g}"
                            for p in ("attitude", "rate", "deflection", "torque")) \
-            + f" ({med['cost_excitation_after_100s']:.2g})"
-        cells = [cell(row, "cost_after_100s", 3), paired(name, oracle), paired(name, baseline),
+            + f" ({med['cost_excitation']:.2g})"
+        cells = [cell(row, "cost", 3), paired(name, ceiling, "cost"),
+                 paired(name, baseline, "cost"), cell(row, "cost_after_start", 3),
+                 after_start(name), cell(row, "cost_after_100s", 3),
                  split, verdicts, cell(row, "attitude_rms_after_100s_deg", 3),
                  cell(row, "vibration_rms_after_100s_mm", 3),
                  f"{med['excitation_rms_Nm']:.3g}", gain(row),
@@ -180,25 +210,30 @@ def fallback_causes_text(causes: dict[str, float], floor: float = 0.005) -> str:
                      if share >= floor)
 
 
-def control_brief(table: dict[str, dict], oracle: str | None = "oracle LQG",
-                  baseline: str | None = "robust LQG") -> str:
-    """The terminal's short form of :func:`control_table`: per controller the cost from
-    100 s (median over seeds), its paired ratios to ``oracle`` and ``baseline``, the
-    verdicts and the fallback's share from 60 s, aligned in plain text (the full
-    table is written to ``table.md``)."""
-    rows = [("controller", "cost t>=100 s", "/ oracle", "/ robust", "verdicts",
+def control_brief(table: dict[str, dict], ceiling: str | None = CEILING,
+                  same_start: str | None = SAME_START_CEILING) -> str:
+    """The terminal's short form of :func:`control_table`: per controller the whole
+    episode's cost (median over seeds) and its paired ratio to ``ceiling``, the cost
+    from the end of the adaptive loop's start and its ratio to ``same_start``, the
+    verdicts and the fallback's share from 60 s, aligned in plain text (the full table
+    is written to ``table.md``)."""
+    start = f"t>={SAME_START_S:g} s"
+    rows = [("controller", "cost", "/ ceiling", f"cost {start}", "/ same-start", "verdicts",
              "fallback t>=60 s")]
     for name, row in table.items():
-        ratios = [None if ref is None else paired_cost_ratio(table, name, ref)
-                  for ref in (oracle, baseline)]
         fallback = row["median"]["fallback_share_after_60s"]
-        rows.append((name, f"{row['median']['cost_after_100s']:.3g}",
-                     *("-" if r is None else f"{r:.2f}" for r in ratios),
+        ratios = [paired_cost_ratio(table, name, ref, key) if ref is not None
+                  and (key == "cost" or flies_the_start(name)) else None
+                  for ref, key in ((ceiling, "cost"), (same_start, "cost_after_start"))]
+        rows.append((name, f"{row['median']['cost']:.3g}",
+                     "-" if ratios[0] is None else f"{ratios[0]:.2f}",
+                     f"{row['median']['cost_after_start']:.3g}",
+                     "-" if ratios[1] is None else f"{ratios[1]:.2f}",
                      ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items()),
                      "-" if not np.isfinite(fallback) or not name.startswith("adaptive LQG")
                      else f"{100 * fallback:.0f} %"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) if i == 0 or i == 4 else c.rjust(w)
+    return "\n".join("  ".join(c.ljust(w) if i in (0, 5) else c.rjust(w)
                                for i, (c, w) in enumerate(zip(r, widths, strict=True))).rstrip()
                      for r in rows) + "\n"
 
@@ -391,13 +426,15 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     return "\n".join(head + rows) + "\n"
 
 
-def paired_cost_ratio(table: dict[str, dict], name: str, ref: str) -> float | None:
-    """Median over paired seeds of ``name``'s cost from 100 s over ``ref``'s (None if
-    either is missing or no seed has a finite ratio)."""
+def paired_cost_ratio(table: dict[str, dict], name: str, ref: str,
+                      key: str = "cost_after_100s") -> float | None:
+    """Median over paired seeds of ``name``'s ``key`` (a cost of
+    :func:`controllers.episode_metrics`) over ``ref``'s (None if either is missing or no
+    seed has a finite ratio)."""
     if name not in table or ref not in table:
         return None
-    a = np.array([m["cost_after_100s"] for m in table[name]["per_seed"]], dtype=float)
-    b = np.array([m["cost_after_100s"] for m in table[ref]["per_seed"]], dtype=float)
+    a = np.array([m[key] for m in table[name]["per_seed"]], dtype=float)
+    b = np.array([m[key] for m in table[ref]["per_seed"]], dtype=float)
     n = min(len(a), len(b))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = a[:n] / b[:n]
@@ -405,20 +442,26 @@ def paired_cost_ratio(table: dict[str, dict], name: str, ref: str) -> float | No
 
 
 def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> str:
-    """Plain sentences on a comparison: how the adaptive LQG did against its ceiling (the
-    oracle LQG) and the robust fixed design, in the common cost, and where to look."""
+    """Plain sentences on a comparison: how the adaptive LQG did against the ceiling over
+    the whole episode, against the same-start ceiling from the end of its start, and
+    against the robust fixed design, in the common cost, and where to look. Each figure
+    is the table's (the same rounding)."""
     lines = []
     seeds = max(row["runs"] for row in table.values())
-    adaptive, oracle, robust = "adaptive LQG", "oracle LQG", "robust LQG"
+    adaptive, robust = "adaptive LQG", "robust LQG"
     if adaptive in table:
-        to_oracle = paired_cost_ratio(table, adaptive, oracle)
-        to_robust = paired_cost_ratio(table, adaptive, robust)
+        to_ceiling = paired_cost_ratio(table, adaptive, CEILING, "cost")
+        to_start = paired_cost_ratio(table, adaptive, SAME_START_CEILING, "cost_after_start")
+        to_robust = paired_cost_ratio(table, adaptive, robust, "cost")
         parts = []
-        if to_oracle is not None:
-            parts.append(f"{to_oracle:.1f} times the oracle LQG's (the true model, the "
-                         "ceiling)")
+        if to_ceiling is not None:
+            parts.append(f"{to_ceiling:.2f} times the ceiling's over the whole episode")
+        if to_start is not None:
+            parts.append(f"{to_start:.2f} times the same-start ceiling's from "
+                         f"{SAME_START_S:g} s (the price of identification)")
         if to_robust is not None:
-            parts.append(f"{to_robust:.2f} times the robust fixed design's")
+            parts.append(f"{to_robust:.2f} times the robust fixed design's over the whole "
+                         "episode")
         verdicts = table[adaptive]["verdicts"]
         stable = verdicts.get("stable", 0)
         fallback = table[adaptive]["median"].get("fallback_share_after_60s", np.nan)
@@ -428,13 +471,13 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
                 + (f" (why, mean over seeds: {why})" if why else ""))
         if parts:
             lines.append(f"On {scenario} over {seeds} seeds, the adaptive LQG's quadratic cost "
-                         f"from 100 s was {' and '.join(parts)} (median of paired seeds; lower "
-                         f"is better); it was judged stable on {stable} of {seeds}{flew}.")
-    others = [(name, paired_cost_ratio(table, name, "robust LQG"))
+                         f"was {', '.join(parts)} (medians of paired seeds; lower is better); "
+                         f"it was judged stable on {stable} of {seeds}{flew}.")
+    others = [(name, paired_cost_ratio(table, name, "robust LQG", "cost"))
               for name in ("scheduled LQG", "fixed LQG", "PD") if name in table]
     others = [f"the {name} {r:.2f}" for name, r in others if r is not None]
     if others and "robust LQG" in table:
-        lines.append(f"Beside it, in the same cost over the robust design's: "
+        lines.append(f"Beside it, the whole episode's cost over the robust design's: "
                      f"{', '.join(others)} (the scheduled LQG knows the plant's "
                      "schedule: a reference, not a competitor).")
     fixed = table.get("fixed LQG")

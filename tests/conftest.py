@@ -36,6 +36,17 @@ def load_benchmark() -> Callable[[str], ModuleType]:
     return _load_benchmark
 
 
+@pytest.fixture(autouse=True)
+def _no_fit_outlives_its_test():
+    """Cancel the fits a test left running in the background (an adaptive loop's refit
+    that fell due near the end of its episode): their workers hold BLAS at one thread,
+    so a later test's result must not depend on them."""
+    yield
+    from identifiers import cancel_fits
+
+    cancel_fits()
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     """A seeded generator, so a test's random data never depend on test order."""

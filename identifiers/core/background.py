@@ -32,6 +32,7 @@ import math
 import queue
 import threading
 import time
+import weakref
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
@@ -43,7 +44,8 @@ from numpy.typing import ArrayLike
 from identifiers.core.health import warn_health
 from spacecraft_conventions import single_threaded_blas
 
-__all__ = ["FIT_OUTCOMES", "BackgroundFits", "FitTiming"]
+__all__ = ["FIT_OUTCOMES", "BackgroundFits", "FitCancelled", "FitTiming", "cancel_fits",
+           "cancellation_point"]
 
 #: How a fit ended (``fit_log[i]["outcome"]``): its model was taken, it raised, its CPU
 #: time exceeded the budget, or it had not returned ``timeout_s`` after its due sample.
@@ -101,6 +103,48 @@ class FitTiming:
 
 _AT_ONCE = FitTiming()
 
+#: The background fit the current thread runs (a worker's), if any.
+_current = threading.local()
+#: The fits running in this process, each with its thread.
+_running: dict[_Job, threading.Thread] = {}
+_running_lock = threading.Lock()
+#: What a worker's replay takes from its queue when its fit is cancelled.
+_STOP = object()
+
+
+class FitCancelled(Exception):
+    """A background fit whose result nobody will take (its identifier was reset or is
+    gone) stopped at a :func:`cancellation_point`."""
+
+
+def cancellation_point() -> None:
+    """Stop a background fit that has been cancelled (raises :class:`FitCancelled`).
+
+    The fitting code calls it once per model simulation (every function evaluation
+    of an output-error fit); on any thread but a fit's worker, or for a fit still
+    wanted, it only reads a thread-local attribute.
+    """
+    job = getattr(_current, "job", None)
+    if job is not None and job.cancelled:
+        raise FitCancelled
+
+
+def cancel_fits(timeout: float = 10.0) -> int:
+    """Cancel every fit running in the background in this process and wait for their
+    threads (at most ``timeout`` seconds in all); returns how many were running.
+
+    A fit's worker holds BLAS at one thread while it runs (its results do not depend
+    on timing); at the end of a program, or between tests, this ends them.
+    """
+    with _running_lock:
+        running = list(_running.items())
+    for job, _ in running:
+        job.cancel()
+    deadline = time.monotonic() + timeout
+    for _, thread in running:
+        thread.join(max(0.0, deadline - time.monotonic()))
+    return len(running)
+
 
 class _Job:
     """A fit running on a worker thread: its fork, the samples received since, its due.
@@ -115,15 +159,36 @@ class _Job:
         self.action = action
         self.sample = sample
         self.due = due
+        self.cancelled = False
         self.future: Future = Future()
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
 
     def receive(self, u: np.ndarray, y: np.ndarray, context: tuple) -> None:
         self._queue.put((u, y, context))
 
+    def cancel(self) -> None:
+        """Nobody will take the result: stop at the next cancellation point."""
+        self.cancelled = True
+        self._queue.put(_STOP)
+
+    def start(self, fork: Any, dt: float, name: str) -> None:
+        thread = threading.Thread(target=self.run, args=(fork, dt), name=name, daemon=True)
+        with _running_lock:
+            _running[self] = thread
+        thread.start()
+
     def run(self, fork: Any, dt: float) -> None:
         """The fit on ``fork``, then the replay of the samples until the due one (on the
         worker thread; the result, ``(fork, cpu_s, error)``, in :attr:`future`)."""
+        _current.job = self
+        try:
+            self._run(fork, dt)
+        finally:
+            _current.job = None
+            with _running_lock:
+                _running.pop(self, None)
+
+    def _run(self, fork: Any, dt: float) -> None:
         with single_threaded_blas:
             start = time.thread_time()
             try:
@@ -137,7 +202,10 @@ class _Job:
             fork._clock = self.due
             try:
                 for _ in range(self.due - self.sample):
-                    u, y, context = self._queue.get()
+                    item = self._queue.get()
+                    if item is _STOP:
+                        raise FitCancelled
+                    u, y, context = item
                     fork._restore_context(context)
                     fork.update(u, y)
             except Exception as exc:
@@ -193,9 +261,17 @@ class BackgroundFits:
         self.__dict__["_fit_timing"] = timing
 
     def _reset_fits(self) -> None:
+        self._cancel_fit()
         self._job: _Job | None = None
         self._clock = 0
         self.fit_log: list[dict[str, Any]] = []
+
+    def _cancel_fit(self) -> None:
+        """Drop the fit running in the background, if any (a fit of an old record)."""
+        job = self.__dict__.get("_job")
+        if job is not None:
+            job.cancel()
+        self._job = None
 
     @property
     def fit_pending(self) -> bool:
@@ -243,10 +319,11 @@ class BackgroundFits:
         due = None if timing.measured else \
             max(sample, self._clock) + math.ceil(round(timing.latency_s / self.dt, 9))
         job = _Job(action, sample, due)
-        thread = threading.Thread(target=job.run, args=(self._fork(), self.dt),
-                                  name=f"{type(self).__name__} fit", daemon=True)
+        fork = self._fork()
         self._job = job
-        thread.start()
+        # a fit whose identifier is gone is not wanted either
+        weakref.finalize(self, job.cancel)
+        job.start(fork, self.dt, f"{type(self).__name__} fit")
 
     def _due(self, job: _Job) -> bool:
         """Whether the fit's model is usable from the coming sample (measured: once the fit

@@ -29,6 +29,7 @@ import scipy.linalg
 import scipy.signal
 from numpy.typing import ArrayLike
 
+from identifiers.core.background import cancellation_point
 from identifiers.core.model import StateSpaceModel
 from identifiers.structured.modal_kernels import oscillator_zoh as mode_zoh
 from spacecraft_conventions import OutputLayout
@@ -197,6 +198,7 @@ def simulate(model: PhysicalModel, u: ArrayLike, dt: float,
     q : (T, N) ndarray
         The modal coordinates.
     """
+    cancellation_point()                  # a background fit nobody wants stops here
     u = np.asarray(u, dtype=float)
     n = model.n_modes
     x0 = np.zeros(6 + 2 * n) if x0 is None else np.asarray(x0, dtype=float)

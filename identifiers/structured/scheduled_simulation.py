@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from identifiers.core.background import cancellation_point
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 
 __all__ = ["RESOLUTION", "segments", "simulate_scheduled"]
@@ -42,6 +43,7 @@ def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.n
     """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
     discretized once per block of :func:`segments` (default), at its middle angle
     (all blocks' exponentials in one call, the recursion in one compiled pass)."""
+    cancellation_point()                  # a background fit nobody wants stops here
     bounds = _block_bounds(angle, blocks)
     states = np.empty((u.shape[0], model.order))
     if bounds.shape[0] == 0:

@@ -132,7 +132,7 @@ class WarmupFit(BackgroundFits, ModelFilter):
         """A new record of the same plant: keep the fit, restart the state's filter
         (``x = 0`` with a vague covariance) and the change test, drop a refit's
         unfinished record; before the fit, keep recording."""
-        self._job = None                   # a fit of the old record is not wanted
+        self._cancel_fit()                 # a fit of the old record is not wanted
         if self._kf is not None:
             self._kf = KalmanPredictor(self.n, initial_covariance=1.0)
             # a refit's record, and the change test's calibration, belong to the old record

@@ -150,7 +150,7 @@ def test_the_same_start_is_the_adaptive_loops_start():
     loop's first model can fly (its identifier's warm-up and the fit's latency)."""
     env = gym.make(env_id("paddle_rotation"), max_episode_steps=401)
     start, steps = adaptive_start(env)
-    assert steps == 400
+    assert steps == 400 and start.excitation.warmup_steps == 300
     loop = run_episode(env, AdaptiveLQG(env), seed=7)
     ceiling = run_episode(env, same_start_ceiling(env), seed=7)
     np.testing.assert_array_equal(loop.torque[:steps], ceiling.torque[:steps])

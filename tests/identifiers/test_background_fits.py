@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from controllers import AdaptiveLQG, run_episode, scheduled_identifier
-from identifiers import FitTiming, IdentifierHealthWarning
+from identifiers import FitTiming, IdentifierHealthWarning, cancel_fits, cancellation_point
 from spacecraft_env import env_id
 
 
@@ -86,8 +86,9 @@ def _raising() -> bool:
 
 
 def _hanging() -> bool:
-    time.sleep(3.0)
-    return False
+    while True:                           # until cancelled
+        cancellation_point()
+        time.sleep(0.01)
 
 
 @pytest.mark.parametrize(("fit", "timing", "outcome"), [
@@ -115,4 +116,18 @@ def test_a_fit_that_fails_leaves_the_loop_flying_and_says_so(fit, timing, outcom
     assert ident.model is None
     assert any(issubclass(w.category, IdentifierHealthWarning) and outcome in str(w.message)
                and "held model flies on" in str(w.message) for w in caught)
+    env.close()
+
+
+def test_a_fit_nobody_wants_is_cancelled():
+    """A reset (a new episode) or cancel_fits stops a fit running in the background."""
+    env = gym.make(env_id("paddle_rotation"), max_episode_steps=320)
+    ident = scheduled_identifier(env, fit_timing=FitTiming(latency_s=2.0))
+    ident._fit_record = _hanging
+    run_episode(env, AdaptiveLQG(env, identifier=ident), seed=0)
+    assert ident.fit_pending
+    ident.reset()
+    assert not ident.fit_pending
+    assert cancel_fits(timeout=5.0) in (0, 1)          # the reset's fit, ending
+    assert cancel_fits(timeout=0.1) == 0
     env.close()
