@@ -107,8 +107,8 @@ def main(argv: list[str] | None = None) -> int:
             print("\n".join(lines), flush=True)
             violations += [f"{scenario}, {task}: {b}" for b in bad]
             report[f"{scenario}/{task}"] = {
-                name: {"cost": per_seed(table, name, "cost").tolist(),
-                       "cost_after_start": per_seed(table, name, "cost_after_start").tolist()}
+                name: {key: per_seed(table, name, key).tolist()
+                       for key in ("cost", "cost_after_start", "cost_after_100s")}
                 for name in table}
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -79,6 +79,10 @@ class _EnvController(Controller):
 
     def __init__(self, env: gym.Env) -> None:
         env = getattr(env, "unwrapped", env)
+        if not all(hasattr(env, a) for a in ("model", "observation_layout", "max_torque")):
+            raise TypeError(f"{type(self).__name__} flies a flexible-spacecraft environment "
+                            f"(spacecraft_env, e.g. gym.make('spacecraft_env:"
+                            f"FlexibleSpacecraft-v2')); got {type(env).__name__}")
         self.env = env
         self.max_torque = float(env.max_torque)
         self.dt = float(env.model.dt)

@@ -6,6 +6,8 @@ Attitude regulation or slew of the ETS-VIII rigid-flexible model under
 
 from __future__ import annotations
 
+import difflib
+import inspect
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -34,7 +36,7 @@ from spacecraft_env.limits import PARAMETER_LIMITS, check_parameter
 from spacecraft_env.parameters import SpacecraftParameters, ets8_parameters
 from spacecraft_env.registration import MAX_EPISODE_STEPS
 from spacecraft_env.rendering import SpacecraftRenderer
-from spacecraft_env.scenarios import Scenario, make_scenario
+from spacecraft_env.scenarios import SCENARIOS, Scenario, make_scenario
 
 __all__ = ["DEFAULT_SNR_DB", "REWARDS", "FlexibleSpacecraftEnv", "RewardWeights"]
 
@@ -120,6 +122,19 @@ def _vector3(name: str, value: Any) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
     return arr
+
+
+def _unknown_keywords(unknown: dict[str, Any]) -> str:
+    """The message for keywords :class:`FlexibleSpacecraftEnv` does not take, each with
+    the closest one it does take."""
+    known = [p for p in inspect.signature(FlexibleSpacecraftEnv.__init__).parameters
+             if p not in ("self", "unknown")]
+    parts = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.5)
+        parts.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return (f"FlexibleSpacecraftEnv got unexpected keyword argument(s) {', '.join(parts)}; "
+            f"it takes {', '.join(known)}")
 
 
 class FlexibleSpacecraftEnv(gym.Env):
@@ -342,8 +357,14 @@ class FlexibleSpacecraftEnv(gym.Env):
                  disturbance_std: float = 0.0, actuator_delay_steps: int = 0,
                  torque_rate_limit: float | None = None,
                  reward: str = "cost", reward_weights: RewardWeights | None = None,
-                 max_attitude_deg: float = 20.0, render_mode: str | None = None) -> None:
+                 max_attitude_deg: float = 20.0, render_mode: str | None = None,
+                 **unknown: Any) -> None:
         super().__init__()
+        if unknown:
+            raise TypeError(_unknown_keywords(unknown))
+        if isinstance(scenario, str) and scenario != "family" and scenario not in SCENARIOS:
+            raise ValueError(f"unknown scenario {scenario!r}; expected one of "
+                             f"{sorted([*SCENARIOS, 'family'])}")
         if params is None:
             params = ets8_parameters(n_modes)
         if isinstance(scenario, str) and scenario == "family":

@@ -894,3 +894,9 @@ def test_a_kept_value_holds_while_its_inputs_are_equal_and_never_goes_stale():
     assert kept.holds((0.0, 1)) and not kept.holds((-0.0, 1)) and not kept.holds((0.0, True))
     with pytest.raises(TypeError, match="dtype object"):
         kept.holds((np.array([object()]), 1))
+
+
+@pytest.mark.parametrize("make", [PD, FixedLQG, AdaptiveLQG])
+def test_a_controller_on_another_env_says_what_it_flies(make):
+    with pytest.raises(TypeError, match=r"flies a flexible-spacecraft environment.*PendulumEnv"):
+        make(gym.make("Pendulum-v1"))

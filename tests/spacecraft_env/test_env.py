@@ -632,3 +632,10 @@ def test_observation_products_bounds_are_never_nan():
     space = ObservationProducts(Fixed(), 1, (1, 2)).observation_space
     assert not np.isnan(space.low).any() and not np.isnan(space.high).any()
     assert np.all(np.isinf(space.high)) and np.all(np.isinf(space.low))
+
+
+def test_a_mistyped_keyword_names_the_closest_one():
+    with pytest.raises(TypeError, match=r"'snr' \(did you mean 'snr_db'\?\)"):
+        gym.make("spacecraft_env:FlexibleSpacecraft-v2", snr=40)
+    with pytest.raises(ValueError, match=r"unknown scenario 'dock'.*'family'"):
+        gym.make("spacecraft_env:FlexibleSpacecraft-v2", scenario="dock")
