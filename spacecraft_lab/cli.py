@@ -399,6 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
                      default=None, help="actuator slew-rate limit, N m/s (default: none)")
     ctl.add_argument("--disturbance-torque", type=_limited("disturbance_torque"),
                      default=0.0, help="constant external torque on every axis, N m")
+    ctl.add_argument("--initial-attitude", type=_limited("initial_attitude_deg"), default=None,
+                     help="regulation: each initial attitude angle drawn in +-this, deg "
+                          "(default: the env's 2; 0: held at rest from zero attitude and rate)")
     ctl.add_argument("--integral-settle", type=_number(0.0, 1e4, unit=" s"), default=None,
                      help="seconds every attitude error must stay in the LQG integral's "
                           "band before it integrates (default: INTEGRAL_SETTLE_S, 50; 0: "
@@ -579,7 +582,8 @@ def _control(args: argparse.Namespace) -> int:
                                 snr_db=args.snr_db, max_torque=args.max_torque,
                                 actuator_delay_steps=args.actuator_delay,
                                 torque_rate_limit=args.torque_rate_limit,
-                                disturbance_torque=args.disturbance_torque)
+                                disturbance_torque=args.disturbance_torque,
+                                initial_attitude=args.initial_attitude)
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,

@@ -190,7 +190,8 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                    snr_db: float | None = DEFAULT_SNR_DB, max_torque: float | None = None,
                    actuator_delay_steps: int = 0, torque_rate_limit: float | None = None,
                    disturbance_torque: float = 0.0, mass_centre_shift: bool = False,
-                   capture_momentum: Sequence[float] | None = None) -> dict[str, Any]:
+                   capture_momentum: Sequence[float] | None = None,
+                   initial_attitude: float | None = None) -> dict[str, Any]:
     """``gym.make`` keywords for a registered scenario and its variants.
 
     Parameters
@@ -214,6 +215,9 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
         Docking only: angular momentum (N m s, body frame) each module
         brings at capture, conserved by the capture (default: the modules
         arrive co-rotating, the paper's assumption).
+    initial_attitude : float, optional
+        Regulation only: each initial attitude angle is drawn uniformly in
+        +-this, deg (default: the env's 2; 0: held at rest).
 
     Raises
     ------
@@ -236,6 +240,12 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                               "disturbance_torque": checked["disturbance_torque"]}
     if max_torque is not None:
         kwargs["max_torque"] = checked["max_torque"]
+    if initial_attitude is not None:
+        if task != "regulation":
+            raise ValueError("initial_attitude applies to the regulation task (the slew "
+                             "starts at zero)")
+        kwargs["initial_attitude_deg"] = check_parameter("initial_attitude_deg",
+                                                         initial_attitude)
     if scenario not in SCENARIOS:
         # the task family draws its own plant every episode: no scenario variants
         variants = {"module_mass": module_mass, "rotation_rate": rotation_rate,
