@@ -22,6 +22,14 @@ from spacecraft_conventions import __version__
 from spacecraft_env.dynamics import DRIVE_AXIS, FlexibleSpacecraftModel, StateSpaceMatrices
 from spacecraft_env.env import DEFAULT_SNR_DB, REWARDS, FlexibleSpacecraftEnv, RewardWeights
 from spacecraft_env.family import PlantDraw, TaskFamily
+from spacecraft_env.faults import (
+    ACTUATOR_FAULTS,
+    FAULT_KINDS,
+    SENSOR_FAULTS,
+    Fault,
+    FaultInjection,
+    parse_fault,
+)
 from spacecraft_env.limits import PARAMETER_LIMITS, Limit, check_parameter
 from spacecraft_env.parameters import (
     ANTENNA_FREQUENCIES_HZ,
@@ -52,15 +60,18 @@ from spacecraft_env.wrappers import (
 )
 
 __all__ = [
+    "ACTUATOR_FAULTS",
     "ANTENNA_FREQUENCIES_HZ",
     "DEFAULT_SNR_DB",
     "DRIVE_AXIS",
     "ENV_IDS",
+    "FAULT_KINDS",
     "MAX_EPISODE_STEPS",
     "PADDLE_FREQUENCIES_HZ",
     "PARAMETER_LIMITS",
     "REWARDS",
     "SCENARIOS",
+    "SENSOR_FAULTS",
     "ActionRepeat",
     "AppendageParameters",
     "CombinedScenario",
@@ -68,6 +79,8 @@ __all__ = [
     "ConstantScenario",
     "DockingModule",
     "DockingScenario",
+    "Fault",
+    "FaultInjection",
     "FlexibleSpacecraftEnv",
     "FlexibleSpacecraftModel",
     "Limit",
@@ -88,6 +101,7 @@ __all__ = [
     "env_id",
     "ets8_parameters",
     "make_scenario",
+    "parse_fault",
     "register_envs",
 ]
 

@@ -430,6 +430,10 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._commands: deque = deque()
         self._torque = np.zeros(3)
         self._renderer = None
+        #: The torque the wheels deliver for the commanded one (N m, (3,) -> (3,)), or
+        #: None: all of it. Set by :class:`~spacecraft_env.faults.FaultInjection`;
+        #: ``info["torque"]`` and the cost keep the commanded torque.
+        self.actuator_fault = None
 
     # ----------------------------------------------------------------- set-up
     def _build_spaces(self) -> None:
@@ -615,7 +619,9 @@ class FlexibleSpacecraftEnv(gym.Env):
             move = self.torque_rate_limit * self.model.dt
             torque = self._torque + np.clip(torque - self._torque, -move, move)
         self._torque = torque
-        total = self.actuator_gain * torque + self.disturbance_torque
+        # a wheel's fault (FaultInjection) changes what is delivered, not what is reported
+        delivered = torque if self.actuator_fault is None else self.actuator_fault(torque)
+        total = self.actuator_gain * delivered + self.disturbance_torque
         if self.disturbance_std > 0:
             total = total + self.disturbance_std * self.np_random.standard_normal(3)
         x = self._x
