@@ -61,7 +61,12 @@ from spacecraft_env import (
     env_id,
 )
 from spacecraft_lab.plots import plot_control_comparison
-from spacecraft_lab.reporting import CEILING, SAME_START_CEILING, control_table
+from spacecraft_lab.reporting import (
+    CEILING,
+    SAME_START_CEILING,
+    SAME_START_LOOPS,
+    control_table,
+)
 from spacecraft_lab.sweeps.backends import check_workers
 
 __all__ = [
@@ -147,7 +152,7 @@ PHYSICAL = "adaptive LQG, physical fit"
 #: (:func:`controllers.scheduled_identifier`): since 2026-11-28 the adaptive LQG's
 #: default identifier, so the same loop as "adaptive LQG"; kept under its own name
 #: so that the commands of the results measured before reproduce them.
-SCHEDULED_PHYSICAL = "adaptive LQG, scheduled physical fit"
+SCHEDULED_PHYSICAL = SAME_START_LOOPS[1]
 #: The adaptive law on the structured recursive identifier
 #: (:func:`controllers.fast_identifier`): the adaptive LQG's default until
 #: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.

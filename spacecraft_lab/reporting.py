@@ -16,7 +16,8 @@ import numpy as np
 
 from controllers.harness import SAME_START_S
 
-__all__ = ["CEILING", "SAME_START_CEILING", "control_brief", "control_summary", "control_table",
+__all__ = ["CEILING", "SAME_START_CEILING", "SAME_START_LOOPS", "control_brief", "control_summary",
+           "control_table",
            "fallback_causes_text", "flies_the_start",
            "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
@@ -112,11 +113,16 @@ CEILING = "ceiling"
 SAME_START_CEILING = "same-start ceiling"
 
 
+#: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
+#: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
+#: by their names in the comparison; a loop on another identifier starts otherwise.
+SAME_START_LOOPS = ("adaptive LQG", "adaptive LQG, scheduled physical fit")
+
+
 def flies_the_start(name: str) -> bool:
-    """Whether the controller ``name`` flies the adaptive loop's start (its identifier's
-    warm-up behind the PD and excitation), so the same-start ceiling bounds its cost from
-    the end of that start: the adaptive loops (names beginning "adaptive LQG")."""
-    return name.startswith("adaptive LQG") or name == SAME_START_CEILING
+    """Whether the controller ``name`` flies the default adaptive loop's start, so the
+    same-start ceiling bounds its cost from the end of that start (:data:`SAME_START_LOOPS`)."""
+    return name in SAME_START_LOOPS or name == SAME_START_CEILING
 
 
 def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
