@@ -11,8 +11,12 @@ for the cost from the end of that start over the same-start ceiling's
 script lists every one and exits with status 1. The full-state oracle reads the
 true state, more than the ceiling knows: it is shown, not checked.
 
+With ``--out FILE.json`` every per-seed cost is kept; ``--markdown FILE.json`` prints
+the table of docs/results/control.md from such a file without flying anything.
+
 Usage: ``python benchmarks/bench_ceiling.py [--seeds 10] [--scenarios ...] [--tasks ...]
-[--controllers KEY ...] [--steps N] [--workers N] [--out results/ceiling.json]``
+[--controllers KEY ...] [--steps N] [--workers N] [--out results/ceiling.json]
+[--markdown results/ceiling.json]``
 """
 
 from __future__ import annotations
@@ -71,6 +75,37 @@ def check(table: dict) -> tuple[list[str], list[str]]:
     return lines, bad
 
 
+#: The columns of the markdown table: controller, cost and the ceiling it is taken over.
+COLUMNS = (("adaptive LQG", "cost", CEILING), ("adaptive LQG", "cost_after_start",
+                                                 SAME_START_CEILING),
+           ("robust LQG", "cost", CEILING), ("PD", "cost", CEILING),
+           ("oracle LQG", "cost", CEILING))
+
+
+def markdown(report: dict) -> str:
+    """The table of a ``--out`` file: per condition the ceiling's whole-episode cost, the
+    paired median ratios of :data:`COLUMNS`, and the least per-seed ratio of any checked
+    controller to its ceiling (the check: at least 0.98)."""
+    head = ("| condition | ceiling, whole episode | adaptive LQG / ceiling | adaptive LQG from "
+            "40 s / same-start ceiling | robust LQG / ceiling | PD / ceiling "
+            "| oracle LQG / ceiling | least ratio of any controller |")
+    lines = [head, "|" + "---|" * 8]
+    for condition, table in report["conditions"].items():
+        def ratio(name: str, key: str, ref: str, tbl: dict = table) -> np.ndarray:
+            return np.array(tbl[name][key]) / np.array(tbl[ref][key])
+        cells = [f"{np.median(table[CEILING]['cost']):.4g}"]
+        cells += [f"{np.median(ratio(name, key, ref)):.3f}" if name in table else "-"
+                  for name, key, ref in COLUMNS]
+        least = min(ratio(name, "cost", CEILING).min() for name in table
+                    if name not in (CEILING, SAME_START_CEILING, *KNOWS_MORE))
+        least = min(least, *(ratio(name, "cost_after_start", SAME_START_CEILING).min()
+                             for name in table if flies_the_start(name)
+                             and name != SAME_START_CEILING))
+        lines.append(f"| {condition.replace('/', ', ')} | " + " | ".join(cells)
+                     + f" | {least:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=10)
@@ -85,7 +120,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="episode length (default: the registered 2500)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=None, help="JSON of every figure")
+    parser.add_argument("--markdown", type=Path, default=None,
+                        help="print the markdown table of a --out file and stop")
     args = parser.parse_args(argv)
+    if args.markdown is not None:
+        print(markdown(json.loads(args.markdown.read_text())), end="")
+        return 0
     factories = CONTROLLERS(LQRWeights())
     names = CONTROLLER_NAMES if args.controllers is None else \
         [CONTROLLER_KEYS[k] for k in args.controllers]
