@@ -513,6 +513,6 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
                             title=f"{scenario}{angle}, {kwargs.get('task', 'slew')}, "
                                   f"{seeds} seeds: median and interquartile band\n"
                                   + ("(dashed: events, " if model.scenario.event_times()
-                                     else "(") + "dotted: scored from 100 s)")
+                                     else "(") + "dotted: 40 s and 100 s)")
     env.close()
     return metrics
