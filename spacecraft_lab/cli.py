@@ -48,7 +48,15 @@ from typing import Any
 
 from controllers import LQRWeights
 from spacecraft_conventions import __version__, exit_now, sigterm_as_interrupt
-from spacecraft_env import DEFAULT_SNR_DB, PARAMETER_LIMITS, REWARDS, SCENARIOS
+from spacecraft_env import (
+    DEFAULT_SNR_DB,
+    FAULT_KINDS,
+    PARAMETER_LIMITS,
+    REWARDS,
+    SCENARIOS,
+    Fault,
+    parse_fault,
+)
 from spacecraft_lab.adaptation import adaptation_table, run_adaptation
 from spacecraft_lab.agents import HELD_OUT_SEEDS, SHIPPED_AGENTS, evaluate_agent, evaluation_table
 from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_for, run_control
@@ -141,6 +149,14 @@ def _limited(key: str) -> Callable[[str], float | int]:
 
 #: Longest episode or record, steps.
 _MAX_STEPS = int(PARAMETER_LIMITS["max_steps"].high)
+
+
+def _fault(text: str) -> Fault:
+    """``--fault``: a :class:`spacecraft_env.Fault` from its command-line form."""
+    try:
+        return parse_fault(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _snr(text: str) -> float | None:
@@ -406,6 +422,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="seconds every attitude error must stay in the LQG integral's "
                           "band before it integrates (default: INTEGRAL_SETTLE_S, 50; 0: "
                           "at once, as before 2026-11-26)")
+    ctl.add_argument("--fault", type=_fault, action="append", default=None,
+                     metavar="KIND,onset=S[,duration=S][,axis=I][,group=G][,value=V]",
+                     help="inject a fault (repeatable): " + ", ".join(FAULT_KINDS) + "; e.g. "
+                          "loss_of_effectiveness,onset=120,axis=0,value=0.1 or "
+                          "sensor_bias,onset=120,group=rate,axis=2,value=1.75e-4 (SI units; "
+                          "spacecraft_env.FaultInjection). The ceilings do not know it")
     ctl.add_argument("--save-trajectories", action="store_true",
                      help="also write every episode to OUT/trajectories/ (npz)")
     ctl.add_argument("--workers", type=_integer(1), default=None,
@@ -588,7 +610,7 @@ def _control(args: argparse.Namespace) -> int:
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,
                           save_trajectories=args.save_trajectories, workers=args.workers,
-                          integral_settle_s=args.integral_settle)
+                          integral_settle_s=args.integral_settle, faults=args.fault or ())
     print(control_brief(metrics["controllers"]))
     print(control_summary(metrics["controllers"], args.scenario, args.out))
     print(f"wrote {args.out}/metrics.json, results.csv, table.md (the full table), "

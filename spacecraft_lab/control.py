@@ -56,6 +56,8 @@ from spacecraft_env import (
     ConstantScenario,
     DockingModule,
     DockingScenario,
+    Fault,
+    FaultInjection,
     SolarRotationScenario,
     check_parameter,
     env_id,
@@ -382,7 +384,7 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
                 weights: LQRWeights | None = None, controllers: Sequence[str] | None = None,
                 steps: int | None = None, progress: bool = True,
                 save_trajectories: bool = False, workers: int | None = None,
-                integral_settle_s: float | None = None) -> dict:
+                integral_settle_s: float | None = None, faults: Sequence[Fault] = ()) -> dict:
     """Compare the controllers and write the artefacts.
 
     Parameters
@@ -413,6 +415,9 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         Seconds every attitude error must stay in the integral's band before
         the LQG designs integrate (default: :data:`controllers.lqg.INTEGRAL_SETTLE_S`;
         0 reproduces the integral at once of versions before 2026-11-26).
+    faults : sequence of spacecraft_env.Fault
+        Faults injected on schedule (:class:`spacecraft_env.FaultInjection`; default
+        none). The ceilings do not know them: under a fault they are no bound.
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")
@@ -434,7 +439,8 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    make_env = partial(gym.make, env_id(scenario), **kwargs)
+    faults = tuple(faults)
+    make_env = partial(_make_env, env_id(scenario), faults, kwargs)
     workers = (os.cpu_count() or 1) if workers is None else workers
     try:
         table, runs = compare(factories, make_env, list(range(seeds)), progress=progress,
@@ -465,6 +471,13 @@ COST_COLUMNS = ("cost", "cost_attitude", "cost_rate", "cost_deflection", "cost_t
                 "cost_excitation_after_100s")
 
 
+def _make_env(name: str, faults: tuple[Fault, ...], kwargs: dict[str, Any]) -> gym.Env:
+    """``gym.make(name, **kwargs)``, behind :class:`spacecraft_env.FaultInjection` when
+    ``faults`` are given (module level: picklable for the process pool)."""
+    env = gym.make(name, **kwargs)
+    return FaultInjection(env, faults) if faults else env
+
+
 def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
                    weights: LQRWeights, table: dict, runs: dict, steps: int | None,
                    make_env: Any, interrupted: int | None = None,
@@ -480,6 +493,7 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
                 f"those.\n\n{text}")
     metrics = {"scenario": scenario, "seeds": seeds, "seeds_requested": interrupted or seeds,
                "env_kwargs": {k: repr(v) for k, v in kwargs.items()},
+               "faults": [dataclasses.asdict(f) for f in getattr(env, "faults", ())],
                "weights": weights.__dict__,
                "integral_settle_s": (INTEGRAL_SETTLE_S if integral_settle_s is None
                                      else float(integral_settle_s)),

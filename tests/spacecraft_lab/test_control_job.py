@@ -155,3 +155,34 @@ def test_the_integral_settle_option_reaches_every_design_and_is_recorded(tmp_pat
     assert not (tmp_path / "bad").exists()
     with pytest.raises(SystemExit):
         build_parser().parse_args(["control", "--integral-settle", "-1"])
+
+
+#: One of every fault kind, each after the adaptive loop's first model (40 s), on its own
+#: axis or sensor group, in the command line's form.
+EVERY_FAULT = ("loss_of_effectiveness,onset=41,axis=0,value=0.1",
+               "stuck_actuator,onset=42,axis=1,value=0.2",
+               "actuator_bias,onset=43,axis=2,value=0.05",
+               "sensor_dropout,onset=44,duration=2,group=attitude",
+               "stuck_sensor,onset=46,duration=2,group=deflection,axis=1",
+               "sensor_bias,onset=48,group=rate,axis=2,value=1.75e-4",
+               "noise_burst,onset=49,duration=3,group=rate,value=1e-4")
+
+
+def test_every_fault_flies_from_the_command_without_a_crash(tmp_path, capsys):
+    """``spacecraft control --fault ...`` with every kind at once: the adaptive loop, the
+    oracle and the ceiling fly through them to the end, and metrics.json records them."""
+    out = tmp_path / "faults"
+    args = ["control", "--scenario", "paddle_rotation", "--seeds", "1", "--steps", "560",
+            "--workers", "1", "--controllers", "adaptive-lqg", "oracle-lqg", "ceiling",
+            "--out", str(out)]
+    for fault in EVERY_FAULT:
+        args += ["--fault", fault]
+    assert main(args) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert [f["kind"] for f in metrics["faults"]] == [f.split(",")[0] for f in EVERY_FAULT]
+    for name, row in metrics["controllers"].items():
+        assert row["verdicts"].get("diverged", 0) == 0, name
+        assert row["per_seed"][0]["cost"] > 0, name
+    assert "ceiling" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["control", "--fault", "gremlin,onset=3"])
