@@ -111,8 +111,18 @@ class Fault:
 
 
 def parse_fault(text: str) -> Fault:
-    """A :class:`Fault` from ``"kind,onset=S[,duration=S][,axis=I][,group=G][,value=V]"``
-    (the command line's ``--fault``), e.g. ``"loss_of_effectiveness,onset=120,axis=0,value=0.1"``.
+    """A :class:`Fault` from its command-line form (``spacecraft control --fault``).
+
+    Parameters
+    ----------
+    text : str
+        ``"kind,onset=S[,duration=S][,axis=I][,group=G][,value=V]"``, e.g.
+        ``"loss_of_effectiveness,onset=120,axis=0,value=0.1"`` (hyphens in the kind
+        are taken for underscores; times in s, values in SI units).
+
+    Returns
+    -------
+    Fault
 
     Raises
     ------

@@ -416,6 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--disturbance-torque", type=_limited("disturbance_torque"),
                      default=0.0, help="constant external torque on every axis, N m")
     ctl.add_argument("--initial-attitude", type=_limited("initial_attitude_deg"), default=None,
+                     metavar="DEG",
                      help="regulation: each initial attitude angle drawn in +-this, deg "
                           "(default: the env's 2; 0: held at rest from zero attitude and rate)")
     ctl.add_argument("--integral-settle", type=_number(0.0, 1e4, unit=" s"), default=None,
@@ -423,8 +424,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "band before it integrates (default: INTEGRAL_SETTLE_S, 50; 0: "
                           "at once, as before 2026-11-26)")
     ctl.add_argument("--fault", type=_fault, action="append", default=None,
-                     metavar="KIND,onset=S[,duration=S][,axis=I][,group=G][,value=V]",
-                     help="inject a fault (repeatable): " + ", ".join(FAULT_KINDS) + "; e.g. "
+                     metavar="SPEC",
+                     help="inject a fault (repeatable), SPEC "
+                          "'KIND,onset=S[,duration=S][,axis=I][,group=G][,value=V]', KIND "
+                          "one of " + ", ".join(FAULT_KINDS) + "; e.g. "
                           "loss_of_effectiveness,onset=120,axis=0,value=0.1 or "
                           "sensor_bias,onset=120,group=rate,axis=2,value=1.75e-4 (SI units; "
                           "spacecraft_env.FaultInjection). The ceilings do not know it")

@@ -131,10 +131,20 @@ def cancellation_point() -> None:
 
 def cancel_fits(timeout: float = 10.0) -> int:
     """Cancel every fit running in the background in this process and wait for their
-    threads (at most ``timeout`` seconds in all); returns how many were running.
+    threads.
 
     A fit's worker holds BLAS at one thread while it runs (its results do not depend
     on timing); at the end of a program, or between tests, this ends them.
+
+    Parameters
+    ----------
+    timeout : float
+        Seconds to wait for the threads in all.
+
+    Returns
+    -------
+    int
+        How many fits were running.
     """
     with _running_lock:
         running = list(_running.items())
