@@ -94,10 +94,10 @@ def test_every_documented_command_line_parses():
     assert not bad, "documented commands the CLI rejects:\n" + "\n".join(bad)
 
 
-def test_the_readme_synopsis_is_the_parsers():
+def test_the_guides_synopsis_is_the_parsers():
     from spacecraft_lab.cli import synopsis
 
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "guide.md").read_text()
     block = text[text.index("## Command line"):]
     shown = FENCE.search(block).group(2).rstrip("\n")
     assert shown == synopsis(), "regenerate with: python -c 'from spacecraft_lab.cli " \
@@ -261,3 +261,11 @@ def test_entry_point_examples_run():
         for test in tests:
             failed += runner.run(test, out=report.append).failed
     assert not failed, "".join(report)
+
+
+def test_the_readme_is_a_front_page():
+    """At most 150 lines, the two set-up commands on its first screen (24 lines)."""
+    lines = (ROOT / "README.md").read_text().splitlines()
+    assert len(lines) <= 150
+    first_screen = "\n".join(lines[:24])
+    assert "make demo" in first_screen and "make test" in first_screen
