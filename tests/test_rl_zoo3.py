@@ -1,5 +1,5 @@
 """Third-party use: rl-zoo3 trains on our registered ids with the shipped hyperparameters,
-through the README's own command."""
+through the user guide's own command (docs/guide.md)."""
 
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ CONFIGS = ROOT / "configs" / "rl_zoo3"
 
 
 def readme_command() -> list[str]:
-    """The rl-zoo3 command of the README's 'Third-party agents' section, as argv."""
-    text = (ROOT / "README.md").read_text()
+    """The rl-zoo3 command of the user guide's 'Third-party agents' section, as argv."""
+    text = (ROOT / "docs" / "guide.md").read_text()
     section = text[text.index("## Third-party agents (rl-zoo3)"):]
     block = re.search(r"```bash\n(.*?)```", section, re.S).group(1)
     return shlex.split(block.replace("\\\n", " "))
