@@ -415,6 +415,9 @@ def build_parser() -> argparse.ArgumentParser:
                      default=None, help="actuator slew-rate limit, N m/s (default: none)")
     ctl.add_argument("--disturbance-torque", type=_limited("disturbance_torque"),
                      default=0.0, help="constant external torque on every axis, N m")
+    ctl.add_argument("--disturbance-std", type=_limited("disturbance_std"), default=0.0,
+                     metavar="NM", help="white external torque on every axis, N m "
+                                        "(process noise; default 0)")
     ctl.add_argument("--initial-attitude", type=_limited("initial_attitude_deg"), default=None,
                      metavar="DEG",
                      help="regulation: each initial attitude angle drawn in +-this, deg "
@@ -608,7 +611,8 @@ def _control(args: argparse.Namespace) -> int:
                                 actuator_delay_steps=args.actuator_delay,
                                 torque_rate_limit=args.torque_rate_limit,
                                 disturbance_torque=args.disturbance_torque,
-                                initial_attitude=args.initial_attitude)
+                                initial_attitude=args.initial_attitude,
+                                disturbance_std=args.disturbance_std)
     weights = LQRWeights(torque=args.torque_weight) if args.torque_weight is not None else None
     metrics = run_control(args.scenario, args.seeds, args.out, env_kwargs=env_kwargs,
                           weights=weights, controllers=args.controllers, steps=args.steps,

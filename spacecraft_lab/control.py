@@ -198,7 +198,8 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                    actuator_delay_steps: int = 0, torque_rate_limit: float | None = None,
                    disturbance_torque: float = 0.0, mass_centre_shift: bool = False,
                    capture_momentum: Sequence[float] | None = None,
-                   initial_attitude: float | None = None) -> dict[str, Any]:
+                   initial_attitude: float | None = None,
+                   disturbance_std: float = 0.0) -> dict[str, Any]:
     """``gym.make`` keywords for a registered scenario and its variants.
 
     Parameters
@@ -225,6 +226,10 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
     initial_attitude : float, optional
         Regulation only: each initial attitude angle is drawn uniformly in
         +-this, deg (default: the env's 2; 0: held at rest).
+    disturbance_std : float
+        Standard deviation of a white external torque on every axis, N m (default 0:
+        no process noise). The ceiling's filter knows it; with it the stationary
+        cost has a floor above zero.
 
     Raises
     ------
@@ -247,6 +252,8 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
                               "disturbance_torque": checked["disturbance_torque"]}
     if max_torque is not None:
         kwargs["max_torque"] = checked["max_torque"]
+    if disturbance_std:
+        kwargs["disturbance_std"] = check_parameter("disturbance_std", disturbance_std)
     if initial_attitude is not None:
         if task != "regulation":
             raise ValueError("initial_attitude applies to the regulation task (the slew "

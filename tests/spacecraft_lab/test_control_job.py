@@ -186,3 +186,12 @@ def test_every_fault_flies_from_the_command_without_a_crash(tmp_path, capsys):
     assert "ceiling" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         build_parser().parse_args(["control", "--fault", "gremlin,onset=3"])
+
+
+def test_process_noise_and_the_resting_start_reach_the_env():
+    kwargs = env_kwargs_for("constant", task="regulation", initial_attitude=0.0,
+                            disturbance_std=0.01)
+    assert kwargs["disturbance_std"] == 0.01 and kwargs["initial_attitude_deg"] == 0.0
+    assert "disturbance_std" not in env_kwargs_for("constant")
+    with pytest.raises(ValueError, match="regulation task"):
+        env_kwargs_for("constant", task="slew", initial_attitude=1.0)
