@@ -361,8 +361,28 @@ class ClairvoyantLQG(_EnvController):
             return ad, bd, drift
         return ad @ capture[0], bd, ad @ capture[1] + drift
 
-    def _plan(self, first: int, reference: np.ndarray) -> None:
-        """The episode's plan from step ``first`` over ``horizon_steps`` steps."""
+    def problem(self, first: int, reference: ArrayLike) -> tuple[np.ndarray, ...]:
+        """The linear-quadratic problem the ceiling plans over ``horizon_steps`` steps
+        from step ``first`` for the attitude ``reference`` (rad, (3,)), in the form of
+        :func:`finite_horizon_lqr` on the true plant of the current episode.
+
+        The state is the plant's, followed by the commands still in the actuator's
+        delay line (oldest first) when the env has a delay.
+
+        Parameters
+        ----------
+        first : int
+            The plan's first step.
+        reference : (3,) array_like
+            The reference attitude, rad.
+
+        Returns
+        -------
+        a, b, c, q, q_lin, r : ndarray
+            The arguments of :func:`finite_horizon_lqr`.
+        constant : float
+            The stage cost's constant part, ``r^T W r`` per step.
+        """
         env, model = self.env, self.env.model
         n, d = model.n, int(env.actuator_delay_steps)
         na = n + 3 * d
@@ -388,10 +408,15 @@ class ClairvoyantLQG(_EnvController):
         q[:n, :n] = cq @ model.C
         q_lin = np.zeros(na)
         r_out = np.zeros(model.C.shape[0])
-        r_out[model.output_layout.slice("attitude")] = reference
+        r_out[model.output_layout.slice("attitude")] = np.asarray(reference, dtype=float)
         q_lin[:n] = cq @ r_out
         r = self.weights.torque * np.eye(3)
-        self._gains, self._offsets, *_ = finite_horizon_lqr(a, b, c, q, q_lin, r)
+        return a, b, c, q, q_lin, r, float(r_out @ (weights * r_out))
+
+    def _plan(self, first: int, reference: np.ndarray) -> None:
+        """The episode's plan from step ``first`` over ``horizon_steps`` steps."""
+        *problem, _ = self.problem(first, reference)
+        self._gains, self._offsets, *_ = finite_horizon_lqr(*problem)
         self._first = first
         self._reference_planned = np.array(reference, dtype=float)
 
