@@ -351,6 +351,7 @@ class BackgroundFits:
         try:
             fork, cpu, error = job.future.result(timeout=timing.timeout_s)
         except FutureTimeout:
+            job.cancel()                  # it stops at its next cancellation point
             fork, cpu, error = None, float("nan"), None
             entry["outcome"] = "timed out"
         else:
