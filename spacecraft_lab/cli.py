@@ -67,6 +67,7 @@ from spacecraft_lab.plots import plot_adaptation, plot_rl_comparison
 from spacecraft_lab.reporting import (
     control_brief,
     control_summary,
+    identification_brief,
     pooled_training_runs,
     rl_table,
 )
@@ -596,9 +597,10 @@ def _identify(args: argparse.Namespace) -> int:
                                  preset=args.preset, snr_db=args.snr_db, n_modes=args.modes,
                                  n_samples=args.samples, convergence_s=args.convergence,
                                  workers=args.workers)
-    print((Path(args.out) / "table.md").read_text())
-    print(f"wrote {args.out}/metrics.json, table.md, prediction.png, gain.png, modal.png, "
-          f"responses.png ({len(metrics['methods'])} rows, {args.seeds} seeds)")
+    print(identification_brief(metrics))
+    print(f"wrote {args.out}/metrics.json, table.md (the full tables), prediction.png, "
+          f"gain.png, modal.png, responses.png ({len(metrics['methods'])} rows, "
+          f"{args.seeds} seeds)")
     return 0
 
 

@@ -18,7 +18,7 @@ from controllers.harness import SAME_START_S
 
 __all__ = ["CEILING", "SAME_START_CEILING", "SAME_START_LOOPS", "control_brief", "control_summary",
            "control_table",
-           "fallback_causes_text", "flies_the_start",
+           "fallback_causes_text", "flies_the_start", "identification_brief",
            "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
            "training_metrics_problem"]
@@ -42,6 +42,60 @@ def _spread(cell: dict[str, Any] | None, scale: float = 1.0, digits: int = 1) ->
         return f"{text} [{lo:.0e}, {hi:.0e}]"
     bad = f", {cell['diverged']} diverged" if cell.get("diverged") else ""
     return f"{text} [{lo:.{digits}f}, {hi:.{digits}f}{bad}]"
+
+
+#: A VAF below this (%), or an error above the next (%), is a model that diverged: shown
+#: as such, not as a number of 100 digits.
+DIVERGED_VAF = -1000.0
+DIVERGED_ERROR_PCT = 1e4
+
+
+def _brief_cell(cell: dict[str, Any] | None, scale: float = 1.0, vaf: bool = False) -> str:
+    """A median for the terminal: "diverged" where the model did, "-" where none."""
+    if not cell or cell.get("median") is None:
+        return "diverged" if cell and cell.get("diverged") else "-"
+    value = cell["median"] * scale
+    if (vaf and value < DIVERGED_VAF) or (not vaf and abs(value) > DIVERGED_ERROR_PCT) \
+            or not np.isfinite(value):
+        return "diverged"
+    return f"{value:.1f}"
+
+
+def identification_brief(metrics: dict[str, Any], width: int = 100) -> str:
+    """The terminal's short form of :func:`identification_table`, at most ``width``
+    columns: per method (medians over seeds) the longest horizon's prediction VAF on
+    attitude, rate and deflection beside persistence's and the frozen truth's rows, the
+    rigid-body gain's error 20 s after events, the dominant mode's error, the paper's
+    test error and the run time; a diverged model reads "diverged". The full tables
+    are in ``table.md``."""
+    last = str(metrics["horizons_samples"][-1])
+    ahead = int(last) * metrics["dt"]
+    rows = [("method", "VAF att", "VAF rate", "VAF defl", "J^-1 err", "mode err",
+             "test att/rate", "time s")]
+    for name, res in metrics["methods"].items():
+        s = res["summary"]
+        vaf = s["h_step_vaf"][last]
+        test = s.get("test_error_pct")
+        if test is None:
+            test_text = "-"
+        else:
+            cells = [c["median"] for g in ("attitude", "rate") for c in test[g]]
+            test_text = ("diverged" if None in cells or max(map(abs, cells)) > DIVERGED_ERROR_PCT
+                         else f"{np.mean(cells[:3]):.1f} / {np.mean(cells[3:]):.1f}")
+        gain = s.get("gain_error_after_events", {}).get("median")
+        mode = s.get("modal_error", {}).get("median")
+        rows.append((name[:24], *(_brief_cell(vaf[g], vaf=True)
+                                  for g in ("attitude", "rate", "deflection")),
+                     _brief_cell(gain, 100), _brief_cell(mode, 100), test_text,
+                     _brief_cell(s.get("time_s"))))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths, strict=True))).rstrip()
+             for r in rows]
+    head = (f"{metrics['scenario']}, {metrics['seeds']} seeds, SNR {metrics['snr_db']} dB: "
+            f"medians; VAF {ahead:g} s ahead (%), errors (%) from "
+            f"{metrics['convergence_s']:g} s")
+    return "\n".join([head[:width], *(line[:width] for line in lines)]) + "\n"
 
 
 def identification_table(metrics: dict[str, Any]) -> str:

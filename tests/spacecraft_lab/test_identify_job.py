@@ -69,6 +69,13 @@ def test_the_figures_of_the_identify_command_show_their_point(tmp_path):
 
     assert len(fig.get_suptitle()) < 110
 
+    # the terminal's table: at most 100 columns, a row per method, no 100-digit numbers
+    from spacecraft_lab.reporting import identification_brief
+
+    brief = identification_brief(metrics).splitlines()
+    assert max(map(len, brief)) <= 100 and len(brief) == 2 + len(metrics["methods"])
+    assert not any("e+" in line for line in brief)
+
 
 def test_a_diverged_seed_counts_as_the_worst_value_in_either_direction():
     """A diverged seed (None) is the worst: +inf for a test error (lower is better), -inf
