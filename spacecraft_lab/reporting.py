@@ -55,6 +55,8 @@ def _brief_cell(cell: dict[str, Any] | None, scale: float = 1.0, vaf: bool = Fal
     if not cell or cell.get("median") is None:
         return "diverged" if cell and cell.get("diverged") else "-"
     value = cell["median"] * scale
+    if np.isnan(value):                   # nothing to score (no event in the record)
+        return "-"
     if (vaf and value < DIVERGED_VAF) or (not vaf and abs(value) > DIVERGED_ERROR_PCT) \
             or not np.isfinite(value):
         return "diverged"
