@@ -2,7 +2,7 @@
 
 Every model-based design here shares :class:`controllers.lqg.LQGLaw`, whose
 attitude integral (LQI) runs only while every attitude error is within
-:data:`~controllers.lqg.INTEGRAL_BAND`; ``settle_s`` makes it wait until the
+:data:`controllers.lqg.INTEGRAL_BAND`; ``settle_s`` makes it wait until the
 errors have stayed there that long, so the tail of a transient (a slew's
 settling, the adaptive loop's warm-up) does not charge an integral meant for a
 constant disturbance. This flies the oracle LQG (the ceiling every design is

@@ -231,7 +231,7 @@ def unit_states(a: np.ndarray, c: np.ndarray, att_rows: np.ndarray,
     -------
     X_p, X_d : (n, 3) ndarray
         Column j of ``X_p``: the zero-input equilibrium with attitude ``e_j``
-        (least squares, :func:`~controllers.lqg.equilibrium_state`); of
+        (least squares, :func:`controllers.lqg.equilibrium_state`); of
         ``X_d``: the least-norm state with rate ``e_j``, zero attitude and
         zero other outputs. They depend on the model only, not on a gain.
     """

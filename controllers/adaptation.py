@@ -1,12 +1,12 @@
 """RMA-style adaptation: the privileged parameter vector estimated from the identifier.
 
-A policy trained with :class:`~controllers.PrivilegedFeatures` (the true
+A policy trained with :class:`controllers.PrivilegedFeatures` (the true
 plant's rigid-body gain, dominant modes and paddle angle) needs that vector
 when it flies. Rapid motor adaptation's answer is an *adaptation module*: a
 regression, learnt on the policy's own rollouts, from what can be measured
 to the privileged vector. Here what can be measured is the online
 identifier's physical estimates and their uncertainty,
-:class:`~controllers.PhysicalFeatures`, in the same layout.
+:class:`controllers.PhysicalFeatures`, in the same layout.
 
 * :class:`AdaptationModule` is that regression (ridge, numpy only);
 * :class:`EstimatedFeatures` runs the identifier and puts the module's
@@ -50,7 +50,7 @@ class AdaptationModule:
     Parameters
     ----------
     n_modes : int
-        k, modes in both vectors (:func:`~controllers.features.physical_feature_names`).
+        k, modes in both vectors (:func:`controllers.features.physical_feature_names`).
     ridge : float
         Tikhonov weight per sample on the standardized inputs (>= 0).
 
@@ -114,8 +114,8 @@ class AdaptationModule:
         Parameters
         ----------
         physical, privileged : (N, size) array_like
-            :class:`~controllers.PhysicalFeatures`' and
-            :class:`~controllers.PrivilegedFeatures`' vectors.
+            :class:`controllers.PhysicalFeatures`' and
+            :class:`controllers.PrivilegedFeatures`' vectors.
 
         Returns
         -------
@@ -178,9 +178,9 @@ class AdaptationModule:
 
 class EstimatedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """The privileged vector's layout, estimated: the identifier's
-    :class:`~controllers.PhysicalFeatures` passed through an :class:`AdaptationModule`.
+    :class:`controllers.PhysicalFeatures` passed through an :class:`AdaptationModule`.
 
-    A policy trained with :class:`~controllers.PrivilegedFeatures` flies
+    A policy trained with :class:`controllers.PrivilegedFeatures` flies
     this env unchanged: the observation ends with the same channels, the
     estimate in place of the truth.
 
@@ -191,7 +191,7 @@ class EstimatedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
     module : AdaptationModule
         Fitted, for the same number of modes.
     identifier : identifiers.OnlineIdentifier, optional
-        Passed to :class:`~controllers.PhysicalFeatures` (default: its default).
+        Passed to :class:`controllers.PhysicalFeatures` (default: its default).
     every : int
         Env steps between refreshes (default 10, as both feature wrappers).
 

@@ -5,7 +5,7 @@ Every control step k (docs/design/control.md):
 1. ``x_{k|k}`` from the controller's own Kalman filter on the current
    identified ``(A, B, C)`` (``rigid_state="kalman"``, the default), with
    the noise every baseline's filter assumes
-   (:func:`~controllers.baselines.process_noise`: 0.05 N m of unmodelled
+   (:func:`controllers.baselines.process_noise`: 0.05 N m of unmodelled
    torque; the sensors' specified noise) and the applied torque in its
    time update: the filter the oracle LQG runs on the true model,
    run on the identified one. The identifier's own filter (``"filter"``)
@@ -14,10 +14,10 @@ Every control step k (docs/design/control.md):
    former default) pushes the gyro noise through the rate gain (0.05-0.07
    N m of white torque per axis). Measurements: docs/design/control.md;
 2. the gain designed on the current identified ``(A, B, C)``, with integral
-   action on the attitude error (:class:`~controllers.lqg.LQGLaw`): each
+   action on the attitude error (:class:`controllers.lqg.LQGLaw`): each
    model the identifier exports is solved exactly once and kept while the
    identifier holds it;
-3. the gain's acceptance test (:class:`~controllers.acceptance.GainAcceptance`:
+3. the gain's acceptance test (:class:`controllers.acceptance.GainAcceptance`:
    effective stiffness and damping on every axis against the robust fixed
    design's, stability with the integral, the model's recent prediction
    agreement, and the disk margin at the torque input of the loop with the
@@ -26,7 +26,7 @@ Every control step k (docs/design/control.md):
    rigid-body gain, the loop on the model must be stable for real input
    gains across the band, 10 % wider, checked at four gains). A gain that
    fails does not fly: the robust fixed design
-   (:class:`~controllers.baselines.RobustLQG`), which runs alongside all
+   (:class:`controllers.baselines.RobustLQG`), which runs alongside all
    the time, acts instead. Until the identifier has its first model (its
    warm-up) a gentle attitude PD flies instead (``warmup_controller``):
    the robust design's faster rigid-body loop flew the start's slew or
@@ -35,7 +35,7 @@ Every control step k (docs/design/control.md):
    takes the identified design off for :data:`SUPERVISOR_HOLD_S` when the measured envelope grows
    (:meth:`AdaptiveLQG._supervise`): a stale model can pass every test on
    itself;
-4. a designed excitation (:class:`~controllers.excitation.BinaryExcitation`)
+4. a designed excitation (:class:`controllers.excitation.BinaryExcitation`)
    is added only when information is needed (dual control): the warm-up's
    budget while the identifier warms up (at the identifier's
    ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an
@@ -57,7 +57,7 @@ Every control step k (docs/design/control.md):
 :attr:`AdaptiveLQG.stats` counts steps, steps flown by the fallback,
 re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
 failed designs and non-finite observations, the steps (and fallback steps)
-from :data:`~controllers.harness.JUDGED_FROM_S` with the cause of each of those
+from :data:`controllers.harness.JUDGED_FROM_S` with the cause of each of those
 fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), the
 identifier's fits (``fits``: its ``fit_log``, each fit's latency, CPU time and
 outcome, for identifiers that fit off the control path), and reports the
@@ -120,21 +120,21 @@ MARGIN_EVERY = 10
 #: deflections (in their nominal scales) over consecutive windows of this length.
 SUPERVISOR_WINDOW_S = 10.0
 #: Windows whose peaks the supervisor fits (100 s): a log-linear fit growing by more
-#: than the harness's :data:`~controllers.harness.GROWTH_LIMIT` per 100 s, with the
+#: than the harness's :data:`controllers.harness.GROWTH_LIMIT` per 100 s, with the
 #: last peak above its envelope floor, takes the identified design off for
 #: :data:`SUPERVISOR_HOLD_S`: the harness's fast-growth verdict, given by the
 #: controller from its sensors while the loop is still small (the harness's slow,
-#: significant growth, :data:`~controllers.harness.SLOW_GROWTH_LIMIT`, is not watched:
+#: significant growth, :data:`controllers.harness.SLOW_GROWTH_LIMIT`, is not watched:
 #: over 100 s of noisy measurements it would need its own validation).
 SUPERVISOR_WINDOWS = 10
 SUPERVISOR_HOLD_S = 60.0
-#: Seconds after :data:`~controllers.harness.JUDGED_FROM_S` without a single step of the
+#: Seconds after :data:`controllers.harness.JUDGED_FROM_S` without a single step of the
 #: identified design after which the loop warns (:class:`FallbackWarning`), once.
 FALLBACK_WARNING_S = 60.0
 
 
 #: Why the fallback flies a step (``stats["fallback_by_after_60s"]``): the acceptance
-#: test's reason for the step's rejected gain (:data:`~controllers.acceptance.REJECTION_REASONS`),
+#: test's reason for the step's rejected gain (:data:`controllers.acceptance.REJECTION_REASONS`),
 #: a re-design that failed ("failed design"), the supervisor's hold after a growing
 #: envelope ("growing"), the bridge after a detected change ("bridge"), an accepted
 #: gain waiting out the dwell time ("dwell"), no identified model yet ("no model") or no
@@ -173,12 +173,12 @@ class AdaptiveLQG(_LQGController):
     env : gymnasium.Env
         Environment the controller is built for (layout, torque scale).
     identifier : identifiers.OnlineIdentifier, optional
-        Default: :func:`~controllers.closed_loop_identifier`, i.e. the
-        drive-scheduled physical fit (:func:`~controllers.scheduled_identifier`)
+        Default: :func:`controllers.closed_loop_identifier`, i.e. the
+        drive-scheduled physical fit (:func:`controllers.scheduled_identifier`)
         where the env's model describes its appendages and the env observes
         the tip deflections (every registered id with its default outputs),
         else the structured recursive identifier
-        (:func:`~controllers.fast_identifier`: :func:`identifiers.default_identifier`
+        (:func:`controllers.fast_identifier`: :func:`identifiers.default_identifier`
         for the measured sensor groups with
         :data:`identifiers.CLOSED_LOOP_SETTINGS`; the default until 2026-11-28,
         about 0.5 s of computation per 250 s episode against the fit's 11-32 s).
@@ -208,7 +208,7 @@ class AdaptiveLQG(_LQGController):
         (default :class:`RobustLQG`).
     warmup_controller : Controller, optional
         Flies until the identifier has its first model (its warm-up):
-        default :class:`~controllers.baselines.PD` at its default 0.05
+        default :class:`controllers.baselines.PD` at its default 0.05
         rad/s, a decade below the first flexible mode. The robust
         design in this role left the start's manoeuvre ringing in the modes:
         the same law handed the true model after the 30 s warm-up cost
@@ -231,15 +231,15 @@ class AdaptiveLQG(_LQGController):
         solved exactly, once (a model the identifier holds keeps its design
         and its verdict); an integer: that many warm-started Riccati
         iterations per step, the behaviour before 2026-11-29
-        (:class:`~controllers.riccati.RiccatiTracker`).
+        (:class:`controllers.riccati.RiccatiTracker`).
     rigid_state : {"kalman", "filter", "measured"}
         Where the state comes from (see step 1 above): "kalman" (default)
         this controller's own Kalman filter on the identified model, with
         the noise the baselines' filters assume; "filter" the identifier's
-        own filter (:meth:`~identifiers.OnlineIdentifier.filtered_state`,
+        own filter (:meth:`identifiers.OnlineIdentifier.filtered_state`,
         tuned for prediction, not control); "measured" that filter with the
         attitude and rate states read from the sensors (needs an identifier
-        with :attr:`~identifiers.OnlineIdentifier.rigid_states`, else as
+        with :attr:`identifiers.OnlineIdentifier.rigid_states`, else as
         "filter"), which feeds the sensor noise through the rate gain.
 
     Examples
@@ -263,7 +263,7 @@ class AdaptiveLQG(_LQGController):
     (420, True)
 
     The fit ran off the control path; its model flew from 10 s after it fell due
-    (:data:`~controllers.LOOP_FIT_TIMING`), recorded with its CPU time:
+    (:data:`controllers.LOOP_FIT_TIMING`), recorded with its CPU time:
 
     >>> fit = stats["fits"][0]
     >>> fit["action"], fit["sample"], fit["adopted"], fit["outcome"]
@@ -435,7 +435,7 @@ class AdaptiveLQG(_LQGController):
                     ) -> np.ndarray | None:
         """``x_{k|k}`` from this controller's own Kalman filter on the identified model,
         with the noise the baselines' filters assume
-        (:func:`~controllers.baselines.process_noise`, the sensors' specified noise)."""
+        (:func:`controllers.baselines.process_noise`, the sensors' specified noise)."""
         a, b, c = model.A, model.B, model.C
         if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return None
@@ -590,7 +590,7 @@ class AdaptiveLQG(_LQGController):
         tip deflections (nominal scales) over :data:`SUPERVISOR_WINDOW_S`
         windows are watched while the identified design flies; when a
         log-linear fit of the last :data:`SUPERVISOR_WINDOWS` grows by more
-        than :data:`~controllers.harness.GROWTH_LIMIT` per 100 s and the
+        than :data:`controllers.harness.GROWTH_LIMIT` per 100 s and the
         last is above the harness's envelope floor, the fallback flies for
         :data:`SUPERVISOR_HOLD_S` (counted as a rejection "growing")."""
         level = np.abs(y[self._att_rows] - ref) / self._scales[self._att_rows]

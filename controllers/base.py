@@ -70,7 +70,7 @@ class Controller(ABC):
         Everything comes from the observation (a controller that needs the
         env's privileged ``info`` raises without it; an adaptive LQG whose
         identifier follows the paddle drive gets no drive angle and says so,
-        :class:`~controllers.ScheduleWarning`). A single observation
+        :class:`controllers.ScheduleWarning`). A single observation
         (1-D) is acted on by this controller. A batch ``(n_envs, obs_dim)``
         is acted on by one copy of the controller per env, as SB3's recurrent
         policies keep one hidden state per env: the copies (deep copies of

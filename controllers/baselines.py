@@ -3,7 +3,7 @@
 All read the observation layout, ``max_torque`` and the truth model from the
 environment they are built for (``env.unwrapped``), and return normalized
 torques in [-1, 1] (saturated). The LQG designs share one control law
-(:class:`~controllers.lqg.LQGLaw`: LQR with integral action on the
+(:class:`controllers.lqg.LQGLaw`: LQR with integral action on the
 attitude error) and differ in the model they design on and the state
 estimate they feed it (docs/design/control.md):
 
@@ -518,7 +518,7 @@ class OracleLQR(_EnvController):
 
     An upper bound no measured loop reaches: it reads ``info["state"]`` and
     ``info["time"]``. Each step's model is solved exactly
-    (:class:`~controllers.riccati.RiccatiTracker`).
+    (:class:`controllers.riccati.RiccatiTracker`).
 
     Parameters
     ----------
@@ -562,7 +562,7 @@ class OracleLQR(_EnvController):
 class TrueModelIdentifier:
     """An identifier that knows the truth: the same-law oracle's "identifier".
 
-    It answers the adaptive LQG's questions (:class:`~controllers.adaptive.AdaptiveLQG`)
+    It answers the adaptive LQG's questions (:class:`controllers.adaptive.AdaptiveLQG`)
     with the environment's true model at the current time (``model``, its
     Kalman filter state, an exactly known rigid-body gain), so the adaptive
     loop's own law flown on it separates what identification costs from what

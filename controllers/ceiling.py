@@ -172,7 +172,7 @@ class ExcitedStart(Controller):
     """A controller plus a designed excitation: the start of an adaptive loop.
 
     Its torque is the controller's (saturated, as it sends it) plus the
-    excitation's, saturated again: what :class:`~controllers.AdaptiveLQG`
+    excitation's, saturated again: what :class:`controllers.AdaptiveLQG`
     applies while its identifier warms up.
 
     Parameters
@@ -207,13 +207,13 @@ class ExcitedStart(Controller):
 
 
 def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
-    """The start :class:`~controllers.AdaptiveLQG` flies by default, and its length.
+    """The start :class:`controllers.AdaptiveLQG` flies by default, and its length.
 
     The loop's warm-up PD with the binary excitation of its identifier's warm-up
-    (:func:`~controllers.closed_loop_identifier`'s ``warmup_amplitude`` N m per axis
+    (:func:`controllers.closed_loop_identifier`'s ``warmup_amplitude`` N m per axis
     for its ``warmup`` samples, then none), seeded as the loop seeds it, until the
     identifier's first model can fly: the warm-up plus the first fit's latency
-    (:data:`~controllers.LOOP_FIT_TIMING`; 40 s on the registered ids).
+    (:data:`controllers.LOOP_FIT_TIMING`; 40 s on the registered ids).
 
     Parameters
     ----------

@@ -112,7 +112,7 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
         split costs several updates' worth; 10 steps are 1 s).
     keep_identifier : bool
         Carry the identifier over episode resets
-        (:meth:`~identifiers.OnlineIdentifier.restart`: modes and gains
+        (:meth:`identifiers.OnlineIdentifier.restart`: modes and gains
         kept, signals and state estimate restarted), so every episode after
         the first has features from its first step, as an identifier running
         on board through successive manoeuvres would. Default False: each
@@ -341,7 +341,7 @@ class _PhysicalFrame:
 
     def dominant_modes(self, model: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Frequencies (Hz) and damping of the true plant's ``k`` modes with the largest
-        input-output weight (:meth:`~spacecraft_env.FlexibleSpacecraftModel.modal_residues`),
+        input-output weight (:meth:`spacecraft_env.FlexibleSpacecraftModel.modal_residues`),
         in order of frequency: the modes data can reveal, and the ones an identifier
         keeps (a mode that the torques hardly excite is invisible to both)."""
         freq, zeta, weight = model.modal_residues(t)
@@ -424,7 +424,7 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
         k, tracked modes reported (default 2).
     every : int
         Env steps between refreshes of the vector (default 10: 1 s, one
-        decision of an agent under :class:`~spacecraft_env.ActionRepeat`).
+        decision of an agent under :class:`spacecraft_env.ActionRepeat`).
 
     Examples
     --------
@@ -550,7 +550,7 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
     every : int
         Env steps between refreshes of the vector (default 10, as
         :class:`PhysicalFeatures`: the same instants, so an agent under
-        :class:`~spacecraft_env.ActionRepeat` sees both at its decisions; the
+        :class:`spacecraft_env.ActionRepeat` sees both at its decisions; the
         truth's modal analysis costs as much as an identifier update).
     source : {"truth", "nominal"}
         Which plant the gain and modes describe.

@@ -436,7 +436,7 @@ def controller_shares(stats: dict[str, Any]) -> dict[str, float]:
         A controller's ``stats`` (:attr:`Trajectory.controller_stats`); the
         keys read are ``steps``, ``steps_after_60s``, ``excitation_rms_Nm``,
         ``rejected``, ``fallback_steps`` and ``fallback_steps_after_60s``
-        (as :class:`~controllers.adaptive.AdaptiveLQG` keeps them), each
+        (as :class:`controllers.adaptive.AdaptiveLQG` keeps them), each
         missing one taken as 0.
 
     Returns
@@ -555,7 +555,7 @@ def stage_costs(traj: Trajectory, model: Any,
         the true states.
     weights : CostWeights
         The cost's weights (default :data:`COST_WEIGHTS`; an
-        :class:`~controllers.lqg.LQRWeights` is one).
+        :class:`controllers.lqg.LQRWeights` is one).
 
     Returns
     -------
@@ -616,7 +616,7 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     dict
         ``cost`` (the common quadratic cost, :func:`stage_costs`, averaged over
         the whole episode: the quantity every LQG here minimizes and the
-        ceiling, :class:`~controllers.ClairvoyantLQG`, bounds) and its parts
+        ceiling, :class:`controllers.ClairvoyantLQG`, bounds) and its parts
         ``cost_attitude``, ``cost_rate``, ``cost_deflection``, ``cost_torque``
         and ``cost_excitation``; ``cost_after_start`` (the same from
         ``start_s`` on, the window the same-start ceiling bounds);

@@ -1,6 +1,6 @@
 """The identifiers an adaptive loop flies, built for an environment.
 
-:class:`~controllers.AdaptiveLQG` needs an online identifier of the plant it
+:class:`controllers.AdaptiveLQG` needs an online identifier of the plant it
 controls. Two are offered, each built from what a designer knows of the
 spacecraft without knowing its parameters (the sensors it carries, which
 appendages the paddle drive turns, which sensor sits on which appendage):
@@ -208,7 +208,7 @@ def structured_identifier(env: gym.Env, **options: Any) -> StructuredRPBSID:
 
 
 def closed_loop_identifier(env: gym.Env) -> OnlineIdentifier:
-    """The identifier :class:`~controllers.AdaptiveLQG` flies on ``env`` by default.
+    """The identifier :class:`controllers.AdaptiveLQG` flies on ``env`` by default.
 
     Parameters
     ----------

@@ -17,7 +17,7 @@ wind it up (an integral charged by a 2 deg initial error took minutes to
 discharge: 25x the attitude error after 100 s).
 
 :class:`LQGLaw` holds the weights, the Riccati solution
-(:class:`~controllers.riccati.RiccatiTracker`) and the integral state, so
+(:class:`controllers.riccati.RiccatiTracker`) and the integral state, so
 the fixed, scheduled, oracle and adaptive designs differ only in the model
 and the state estimate they feed it.
 """
@@ -66,7 +66,7 @@ class LQRWeights(CostWeights):
     Attributes
     ----------
     attitude, rate, deflection, torque : float
-        The cost's weights (:class:`~spacecraft_conventions.CostWeights`;
+        The cost's weights (:class:`spacecraft_conventions.CostWeights`;
         defaults 1, 1, 0.1 and 0.3 per (N m)^2); ``torque`` must be > 0.
     integral : float
         Weight of the squared attitude-error integral in units of 1 deg s
@@ -189,7 +189,7 @@ class LQGLaw:
     iterations : int or None
         None (default): each new model's Riccati equation solved exactly; an
         integer: that many warm-started iterations per re-design
-        (:class:`~controllers.riccati.RiccatiTracker`).
+        (:class:`controllers.riccati.RiccatiTracker`).
     band : float
         The integral runs only while every attitude error is within this, rad.
     settle_s : float
@@ -253,7 +253,7 @@ class LQGLaw:
 
     def design(self, a: np.ndarray, b: np.ndarray, c: np.ndarray,
                c_att: np.ndarray) -> np.ndarray:
-        """Gain ``[G_x, G_z]`` for the model (:class:`~controllers.riccati.RiccatiTracker`).
+        """Gain ``[G_x, G_z]`` for the model (:class:`controllers.riccati.RiccatiTracker`).
 
         Raises
         ------

@@ -1,7 +1,7 @@
 """Residual RL: an agent's action corrects a model-based controller's.
 
 :class:`ResidualControl` puts a controller (by default the self-tuning
-:class:`~controllers.adaptive.AdaptiveLQG`, which runs the online
+:class:`controllers.adaptive.AdaptiveLQG`, which runs the online
 identifier) inside the environment. At every env step the controller acts
 on the current observation and the agent's action, scaled by ``scale``, is
 added to it:
@@ -12,12 +12,12 @@ so the agent starts from the controller's performance and learns what the
 law misses, instead of learning attitude control from scratch (residual
 policy learning, Silver et al. 2018; Johannink et al. 2019). This is the
 second way the identifier serves an agent, beside
-:class:`~controllers.features.IdentifiedModelFeatures`: through the
+:class:`controllers.features.IdentifiedModelFeatures`: through the
 controller it feeds. The base controller learns from the torque the env
 reports as applied (``info["torque"]``), residual included.
 
 Wrapper order: ``ActionRepeat(ResidualControl(env), repeat)``. Inside
-:class:`~spacecraft_env.ActionRepeat` the base controller still acts every
+:class:`spacecraft_env.ActionRepeat` the base controller still acts every
 sample while the agent's correction is held for ``repeat`` samples.
 """
 
@@ -57,8 +57,8 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
         A spacecraft environment (the controller's observation layout).
     controller : Controller, optional
         The base law, built for ``env``. Default
-        :class:`~controllers.adaptive.AdaptiveLQG` on
-        :func:`~controllers.fast_identifier` (the structured recursive
+        :class:`controllers.adaptive.AdaptiveLQG` on
+        :func:`controllers.fast_identifier` (the structured recursive
         identifier: the loop's default, the drive-scheduled fit, computes
         11-32 s per 250 s episode, more than training can pay).
     scale : float

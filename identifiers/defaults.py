@@ -3,7 +3,7 @@
 Everything that needs "the identifier we recommend" (the adaptive
 controller, the RL features wrapper, the experiments) calls
 :func:`default_identifier`. Its settings are the constructor defaults of
-:class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`, written once
+:class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`, written once
 there; :data:`DEFAULT_SETTINGS` lists them for display.
 """
 
@@ -52,7 +52,7 @@ CLOSED_LOOP_SETTINGS: Mapping[str, Any] = MappingProxyType({
     "rediscover": None, "coupling_drift": 1e-7})
 
 
-#: Overrides of :class:`~identifiers.structured.structured_rpbsid.StructuredRPBSID`'s
+#: Overrides of :class:`identifiers.structured.structured_rpbsid.StructuredRPBSID`'s
 #: defaults for the same quiet loop: the warm-up of the loop's excitation, 30 s
 #: (at its open-loop 50 s the adaptive LQG on it cost 5.3x the oracle LQG on docking,
 #: at 30 s 1.75x: 6 seeds, paired medians), the Kalman filter's unmodelled torque
@@ -79,13 +79,13 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
         Sample time, s.
     **options
         Overrides of :data:`DEFAULT_SETTINGS`, i.e. any keyword of
-        :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` (e.g.
+        :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` (e.g.
         ``prior=`` a nominal structural model's modes).
 
     Returns
     -------
     OnlineIdentifier
-        A new :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`.
+        A new :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`.
 
     Examples
     --------

@@ -578,7 +578,7 @@ class FlexibleSpacecraftModel:
 
         Where the block holds no event and its ends agree on everything but
         the paddle angle, only the angle changes inside it (the
-        :meth:`~spacecraft_env.scenarios.Scenario.event_times` contract):
+        :meth:`spacecraft_env.scenarios.Scenario.event_times` contract):
         one configuration and a list of angles, without building a
         configuration per step. The interpolant's rows are the same either
         way (the same panel groups).
@@ -753,7 +753,7 @@ class _SharedDiscretization:
 
     ``exact(cfg)`` holds the exponential of each piecewise-constant
     configuration (bounded LRU); ``panels`` the angle interpolants of the
-    rotating scenarios (:class:`~spacecraft_env.discretization.AnglePanels`).
+    rotating scenarios (:class:`spacecraft_env.discretization.AnglePanels`).
     Both depend on the physics and ``dt`` only, never on the scenario's
     timing or the outputs, so every model of the same ``(params, dt)`` in the
     process shares them (:func:`_shared_discretization`), as do

@@ -84,7 +84,7 @@ class RewardWeights(CostWeights):
     Attributes
     ----------
     attitude, rate, deflection, torque : float
-        The cost's weights (:class:`~spacecraft_conventions.CostWeights`;
+        The cost's weights (:class:`spacecraft_conventions.CostWeights`;
         defaults 1, 1, 0.1 and 0.3 per (N m)^2).
     saturation : float
         Cost at which the bounded reward reaches 0 (default 300); > 0.
@@ -141,7 +141,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     """Attitude control of the time-varying ETS-VIII flexible spacecraft.
 
     The plant is the zero-order-hold sample of the rigid-flexible coupling
-    model (:class:`~spacecraft_env.dynamics.FlexibleSpacecraftModel`; exact,
+    model (:class:`spacecraft_env.dynamics.FlexibleSpacecraftModel`; exact,
     or for a turning paddle equal to the exact one to rounding) whose inertia
     and coupling follow a time-varying scenario (docking, solar paddle
     rotation).
@@ -194,7 +194,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     cost form spans six decades (a crash is charged up to about 1e6 times a
     typical stage cost), which swamps the return statistics a learning agent
     normalizes by; with the bounded form (and
-    :class:`~spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew task
+    :class:`spacecraft_env.wrappers.ActionRepeat`) PPO learns the slew task
     where it did not with the cost (docs/results/rl.md). The log form keeps the
     bounded form's survival incentive but pays an error of 0.01 deg visibly more
     than one of 0.1 deg (the bounded form pays both 1 - 1e-5 and 1 - 1e-3).
@@ -244,7 +244,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     | ``"plant"``        | dict, ``reset`` | the family env's drawn plant (2)             |
 
     (1) after clipping, scaling, the actuator delay and the rate limit; (2)
-    :meth:`Scenario.parameters` and :class:`~spacecraft_env.family.PlantDraw`,
+    :meth:`Scenario.parameters` and :class:`spacecraft_env.family.PlantDraw`,
     so a randomized draw is on record; privileged: a policy must not read them.
     A real spacecraft reads its paddle drive's encoder, so ``"paddle_angle"`` is
     not privileged.
@@ -276,7 +276,7 @@ class FlexibleSpacecraftEnv(gym.Env):
     scenario : str or Scenario
         ``"constant"``, ``"docking"``, ``"solar_rotation"``,
         ``"paddle_rotation"``, ``"docking_solar_rotation"`` or ``"family"``
-        (the adaptation task: a new plant of :class:`~spacecraft_env.family.TaskFamily`
+        (the adaptation task: a new plant of :class:`spacecraft_env.family.TaskFamily`
         every episode, see ``family``).
     family : TaskFamily, optional
         Draw the plant of every episode from this family (hub inertia, modal
@@ -431,7 +431,7 @@ class FlexibleSpacecraftEnv(gym.Env):
         self._torque = np.zeros(3)
         self._renderer = None
         #: The torque the wheels deliver for the commanded one (N m, (3,) -> (3,)), or
-        #: None: all of it. Set by :class:`~spacecraft_env.faults.FaultInjection`;
+        #: None: all of it. Set by :class:`spacecraft_env.faults.FaultInjection`;
         #: ``info["torque"]`` and the cost keep the commanded torque.
         self.actuator_fault = None
 

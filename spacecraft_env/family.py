@@ -28,7 +28,7 @@ from spacecraft_env.scenarios import CombinedScenario, DockingScenario, SolarRot
 __all__ = ["PlantDraw", "TaskFamily"]
 
 
-#: The parameter (:data:`~spacecraft_env.limits.PARAMETER_LIMITS`) each range of
+#: The parameter (:data:`spacecraft_env.limits.PARAMETER_LIMITS`) each range of
 #: :class:`TaskFamily` draws.
 _LIMIT_OF = {"inertia_scale": "inertia_scale", "stiffness_scale": "stiffness_scale",
              "actuator_gain": "actuator_gain", "module_mass_kg": "module_mass",

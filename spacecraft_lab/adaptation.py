@@ -18,7 +18,7 @@ training env with only the vector changed. For each policy it
 2. fits an :class:`controllers.AdaptationModule` on those pairs (the
    policy's own rollouts, as rapid motor adaptation learns its module);
 3. scores the same policy on the held-out episodes
-   (:data:`~spacecraft_lab.agents.HELD_OUT_SEEDS`) three times, the vector
+   (:data:`spacecraft_lab.agents.HELD_OUT_SEEDS`) three times, the vector
    from the truth, from the adaptation module
    (:class:`controllers.EstimatedFeatures`) and from the nominal plant
    (``PrivilegedFeatures(source="nominal")``), beside the oracle, scheduled
@@ -158,7 +158,7 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
         Rollouts per policy that train its adaptation module (seeds
         :data:`COLLECTION_SEED` on).
     seeds : sequence of int
-        The scored episodes (default :data:`~spacecraft_lab.agents.HELD_OUT_SEEDS`).
+        The scored episodes (default :data:`spacecraft_lab.agents.HELD_OUT_SEEDS`).
     workers : int, optional
         Processes scoring the LQG comparators (default: the cores).
     progress : bool

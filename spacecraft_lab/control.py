@@ -218,7 +218,7 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
         Passed to :class:`spacecraft_env.FlexibleSpacecraftEnv`.
     mass_centre_shift : bool
         Docking only: the modules move the system mass centre
-        (:class:`~spacecraft_env.DockingScenario`).
+        (:class:`spacecraft_env.DockingScenario`).
     capture_momentum : (3,) sequence of float, optional
         Docking only: angular momentum (N m s, body frame) each module
         brings at capture, conserved by the capture (default: the modules

@@ -316,7 +316,7 @@ class NormalizedPolicy(Controller):
     """An SB3 model trained under ``VecNormalize``, as a harness controller.
 
     ``repeat``: the model was trained under
-    :class:`~spacecraft_env.ActionRepeat`, so it decides every ``repeat``
+    :class:`spacecraft_env.ActionRepeat`, so it decides every ``repeat``
     env steps and its action is held in between, as in training.
     """
 

@@ -151,6 +151,9 @@ runpy.run_module("pdoc", run_name="__main__")
     # one page per package: its public API (``__all__``), numpydoc sections rendered
     page = (tmp_path / "controllers.html").read_text()
     assert "PhysicalFeatures" in page and "Parameters" in page
+    # cross-references render as names, not as Sphinx's "~" shorthand
+    for html in tmp_path.glob("*.html"):
+        assert "<code>~" not in html.read_text(), html.name
     # the env's Gymnasium-style sections render as tables, not as one paragraph
     env_page = (tmp_path / "spacecraft_env.html").read_text()
     section = env_page[env_page.index('id="FlexibleSpacecraftEnv"'):]

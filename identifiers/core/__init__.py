@@ -1,17 +1,17 @@
 """The identifiers' core: the streaming base class and what every method uses.
 
-:class:`OnlineIdentifier` (:mod:`~identifiers.core.online`) composed of
-:class:`SampleScreening` (:mod:`~identifiers.core.screening`: what may be
-learned from) and :class:`HealthGuard` (:mod:`~identifiers.core.rollback`:
+:class:`OnlineIdentifier` (:mod:`identifiers.core.online`) composed of
+:class:`SampleScreening` (:mod:`identifiers.core.screening`: what may be
+learned from) and :class:`HealthGuard` (:mod:`identifiers.core.rollback`:
 the estimator's own state); the one RLS primitive
-(:mod:`~identifiers.core.rls`, its compiled kernel
-:mod:`~identifiers.core.rls_kernel`); state-space models
-(:mod:`~identifiers.core.model`); the Kalman predictor
-(:mod:`~identifiers.core.kalman`); the health report
-(:mod:`~identifiers.core.health`) and the data monitor
-(:mod:`~identifiers.core.data_monitor`); running residual statistics
-(:mod:`~identifiers.core.residual_statistics`); argument checks
-(:mod:`~identifiers.core.checks`). Nothing here imports the method families.
+(:mod:`identifiers.core.rls`, its compiled kernel
+:mod:`identifiers.core.rls_kernel`); state-space models
+(:mod:`identifiers.core.model`); the Kalman predictor
+(:mod:`identifiers.core.kalman`); the health report
+(:mod:`identifiers.core.health`) and the data monitor
+(:mod:`identifiers.core.data_monitor`); running residual statistics
+(:mod:`identifiers.core.residual_statistics`); argument checks
+(:mod:`identifiers.core.checks`). Nothing here imports the method families.
 """
 
 from identifiers.core.data_monitor import DataMonitor

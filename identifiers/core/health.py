@@ -4,7 +4,7 @@ An online estimator that runs for hours meets what a test record never
 shows: an overflow in a state that drifts, a covariance that rounding has
 made indefinite, a stretch of data with no information at all. Each of
 these leaves the estimator *finite-looking but wrong*, and a model read
-from it goes stale without a word. :class:`~identifiers.core.online.OnlineIdentifier`
+from it goes stale without a word. :class:`identifiers.core.online.OnlineIdentifier`
 therefore checks its own internal state (:func:`state_problem`) at a fixed
 period, keeps a copy of the last state that passed, and when a check fails
 rolls back to that copy, counts the fault and reports it in
@@ -21,7 +21,7 @@ a model leaves inert) and the exported model matrices and state (finite). A
 finite model learnt from nothing (:func:`degenerate`: a zero A or C) is not a
 broken state but no model either: it is not exported, and the health report
 says so. What the *data* show (a stuck sensor, most samples skipped) is the
-:class:`~identifiers.core.data_monitor.DataMonitor`'s part.
+:class:`identifiers.core.data_monitor.DataMonitor`'s part.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ class IdentifierHealth:
         Restarts because the data left the level the automatic scales were
         taken at by more than ``max_abs`` (the scales are taken again).
     faults : tuple of str
-        What the data show now (:class:`~identifiers.core.data_monitor.DataMonitor`:
+        What the data show now (:class:`identifiers.core.data_monitor.DataMonitor`:
         a stuck, clipped or noisier output, most samples skipped, an input
         that stopped exciting), one message each; empty when none.
     last_fault : str or None

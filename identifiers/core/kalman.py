@@ -2,7 +2,7 @@
 
 :class:`KalmanPredictor` is a time-varying Kalman filter in predictor form
 for ``x_{k+1} = A x_k + B u_k + w_k``, ``y_k = C x_k + v_k`` with
-``w ~ N(0, Q)``, ``v ~ N(0, R)``. Each :meth:`~KalmanPredictor.update`
+``w ~ N(0, Q)``, ``v ~ N(0, R)``. Each :meth:`KalmanPredictor.update`
 takes the model of that step, so the filter follows a model that an
 identifier refines every sample; its covariance adapts with it (no
 steady-state gain to recompute when the model moves). The predictor gain

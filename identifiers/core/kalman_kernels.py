@@ -1,4 +1,4 @@
-"""The compiled kernels of :class:`~identifiers.core.kalman.KalmanPredictor`.
+"""The compiled kernels of :class:`identifiers.core.kalman.KalmanPredictor`.
 
 Each is one step of the filter's equations on C-contiguous float64 arrays,
 compiled with numba: at the sizes of this project (6-46 states) the

@@ -4,9 +4,9 @@
 inferred from the first sample, scales, the past window
 ``phi = [z_{k-1}; ...; z_{k-p}]``, warm-up, ``fit`` and ``reset``, and the
 model and state it exports. It is composed of two parts in their own
-modules: :class:`~identifiers.core.screening.SampleScreening` (what may be
+modules: :class:`identifiers.core.screening.SampleScreening` (what may be
 learned from: validation, NaN/inf, the outlier guard, re-scaling) and
-:class:`~identifiers.core.rollback.HealthGuard` (the estimator's own state:
+:class:`identifiers.core.rollback.HealthGuard` (the estimator's own state:
 health checks, rollback, restart). A method fills in the hooks
 ``_allocate``, ``_step``, ``_matrices`` and ``_current_state``.
 """
@@ -93,7 +93,7 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
     #: Attributes whose items are never changed in place (lists of sample
     #: tuples): the rollback copy shares their items instead of copying them.
     #: Each must be referenced only from its own attribute (see
-    #: :meth:`~identifiers.core.rollback.HealthGuard._snapshot`).
+    #: :meth:`identifiers.core.rollback.HealthGuard._snapshot`).
     _SHARED_ITEMS: ClassVar[tuple[str, ...]] = ("_pending",)
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.98, *, dt: float = 0.1,
@@ -144,7 +144,7 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
         reset, a data gap. An identifier that can carry its estimates over
         keeps them and restarts only what describes the old record's signals
         (past windows, filter states, the state estimate).
-        :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` does;
+        :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` does;
         this default forgets everything (:meth:`reset`), because the
         past-window methods also keep data windows and bases built from the
         old record.
@@ -320,7 +320,7 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
     @property
     def model(self) -> StateSpaceModel | None:
         """Current identified model, or None until warmed up (and, with an
-        :class:`~identifiers.core.health.IdentifierHealthWarning`, while the
+        :class:`identifiers.core.health.IdentifierHealthWarning`, while the
         estimator is restarting after a fault: see :attr:`health`)."""
         if not self._exportable():
             return None

@@ -8,7 +8,7 @@ forgetting rescale, the overflow guard, the gain, the estimate, the
 symmetric rank-1 correction of the stored upper triangle and the
 regularized-forgetting pseudo-row, in one compiled pass with no BLAS call
 (its only allocations are a few work vectors of length d). The arithmetic
-is that of :class:`~identifiers.core.rls.RecursiveLeastSquares` (whose
+is that of :class:`identifiers.core.rls.RecursiveLeastSquares` (whose
 docstring states the algorithm); only the order of the additions differs
 from a BLAS implementation, so results agree to rounding
 (``tests/identifiers/test_rls.py`` checks the pass against the dense

@@ -1,12 +1,12 @@
 """The estimator's own health: snapshots, rollback and restart.
 
 :class:`HealthGuard` is the part of
-:class:`~identifiers.core.online.OnlineIdentifier` that watches the
-internal state (every :data:`~identifiers.core.health.HEALTH_EVERY` samples
+:class:`identifiers.core.online.OnlineIdentifier` that watches the
+internal state (every :data:`identifiers.core.health.HEALTH_EVERY` samples
 and whenever the state vector is not finite), keeps a copy of the last good
 state, rolls back to it after a fault and restarts the estimator when the
 faults repeat; its report is :attr:`HealthGuard.health`
-(:class:`~identifiers.core.health.IdentifierHealth`).
+(:class:`identifiers.core.health.IdentifierHealth`).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ class HealthGuard:
 
     The host provides ``_matrices``, ``_current_state``, ``reset``, ``ready``,
     ``n_samples``, ``p``, ``dt`` and the class attributes ``_SIGNAL_STATE``
-    and ``_SHARED_ITEMS`` (see :class:`~identifiers.core.online.OnlineIdentifier`).
+    and ``_SHARED_ITEMS`` (see :class:`identifiers.core.online.OnlineIdentifier`).
     """
 
     def _reset_health(self) -> None:
@@ -66,7 +66,7 @@ class HealthGuard:
 
     def _health_problem(self) -> str | None:
         """What is wrong with the internal state now
-        (:func:`~identifiers.core.health.state_problem`)."""
+        (:func:`identifiers.core.health.state_problem`)."""
         mats = self._matrices() if self._k >= self.warmup else None
         state = self._current_state() if mats is not None else None
         return state_problem(self, mats, state)
@@ -78,7 +78,7 @@ class HealthGuard:
 
         Pickling the state costs about a quarter of a deep copy of it (0.5 against
         2 ms for the default identifier), and the snapshot is taken every
-        :data:`~identifiers.core.health.HEALTH_EVERY` samples while it is read only at
+        :data:`identifiers.core.health.HEALTH_EVERY` samples while it is read only at
         a rollback. The shared containers must be top-level attributes referenced
         nowhere else in the state (a reference elsewhere would be restored as a
         copy of its own)."""
@@ -101,7 +101,7 @@ class HealthGuard:
 
         A fault is repaired by returning to the last good copy (the samples
         since are lost; learning pauses until the past window holds only
-        samples after the rollback). More than :data:`~identifiers.core.health.MAX_ROLLBACKS`
+        samples after the rollback). More than :data:`identifiers.core.health.MAX_ROLLBACKS`
         faults within ten check periods, or a fault with no good copy,
         restart the estimator: ``health.healthy`` is then False until a
         check passes.
@@ -138,7 +138,7 @@ class HealthGuard:
     @property
     def health(self) -> IdentifierHealth:
         """The identifier's report on itself
-        (:class:`~identifiers.core.health.IdentifierHealth`)."""
+        (:class:`identifiers.core.health.IdentifierHealth`)."""
         good = None if self._good is None else self._good[0]
         faults = () if self._monitor is None else tuple(self._monitor.faults.values())
         if self._healthy and self.ready:
@@ -153,7 +153,7 @@ class HealthGuard:
             last_good_time_s=None if good is None else good * self.dt)
 
     def _exportable(self) -> bool:
-        """False (with one :class:`~identifiers.core.health.IdentifierHealthWarning`) while
+        """False (with one :class:`identifiers.core.health.IdentifierHealthWarning`) while
         the estimator is restarting after a fault; :attr:`model` and :meth:`fit` alike."""
         if not self._healthy:
             if not self._warned:

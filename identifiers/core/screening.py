@@ -1,15 +1,15 @@
 """The sample guard of every streaming identifier: what may be learned from.
 
 :class:`SampleScreening` is the part of
-:class:`~identifiers.core.online.OnlineIdentifier` that checks each sample
+:class:`identifiers.core.online.OnlineIdentifier` that checks each sample
 before the estimator sees it: shapes and types (``raise``), samples that
 carry no information (a plant at rest, a frozen sensor), NaN/inf and
 magnitudes beyond ``max_abs`` (skipped, replaced by a stand-in that keeps
 the past window aligned in time), the outlier guard (a hook each method
 fills from its own prediction error) and the automatic re-scaling when the
 data leave the level their first samples set. An identifier composes it
-with :class:`~identifiers.core.rollback.HealthGuard` (the estimator's own
-state) through :class:`~identifiers.core.online.OnlineIdentifier`.
+with :class:`identifiers.core.rollback.HealthGuard` (the estimator's own
+state) through :class:`identifiers.core.online.OnlineIdentifier`.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class SampleScreening:
 
     It needs the host's ``_init_sizes``, ``_step``, ``_fill_output``,
     ``_state_vector``, ``_check_health`` and ``reset`` (see
-    :class:`~identifiers.core.online.OnlineIdentifier`), and fills the
+    :class:`identifiers.core.online.OnlineIdentifier`), and fills the
     counters ``n_skipped``, ``n_outliers`` and ``n_idle``.
     """
 

@@ -1,6 +1,6 @@
 """The flexible part of the structure-aware RPBSID: a recursive PBSID on the tip deflections.
 
-:class:`~identifiers.structured.structured_rpbsid.StructuredRPBSID` removes the
+:class:`identifiers.structured.structured_rpbsid.StructuredRPBSID` removes the
 rigid response from the outputs and leaves the rest, ``w``, to a subspace
 method. :class:`FlexiblePart` gives that method the channels that carry only
 the flexible response, the tip deflections, with its own VARX, state and
@@ -60,7 +60,7 @@ class FlexiblePart:
     Notes
     -----
     The method normalizes its signals by their RMS over its first ``p`` samples
-    (:class:`~identifiers.core.online.OnlineIdentifier`'s default): the
+    (:class:`identifiers.core.online.OnlineIdentifier`'s default): the
     high-passed deflections are far below the sensors' nominal levels, and at
     those levels the VARX's Tikhonov floor dominated (10 s deflection VAF 74 %
     against 90 % on docking, 3 seeds).

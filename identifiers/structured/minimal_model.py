@@ -1,4 +1,4 @@
-"""What :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` gives:
+"""What :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` gives:
 the minimal innovation-form model and the estimates behind it.
 
 :class:`MinimalModelExport` turns the current gains into the exported model
@@ -23,7 +23,7 @@ __all__ = ["MinimalModelExport"]
 
 
 class MinimalModelExport:
-    """Mixin of :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
     the exported model, its state and the estimates it reports."""
 
     # ------------------------------------------------------------ the model
@@ -160,7 +160,7 @@ class MinimalModelExport:
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """The rigid-body gain ``G = J^-1`` (rad/s^2 per N m) with its calibrated
-        covariance (:class:`~identifiers.structured.rigid_gain.RigidGainEstimate`), from the rate
+        covariance (:class:`identifiers.structured.rigid_gain.RigidGainEstimate`), from the rate
         regression; None before warm-up."""
         if not self._fits or self._resvar is None:
             return None

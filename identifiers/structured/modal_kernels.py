@@ -164,7 +164,7 @@ def bank_step(u: np.ndarray, dt: float, ratio: float, pos: np.ndarray, vel: np.n
 def bank_regressor(out: np.ndarray, pos: np.ndarray, vel: np.ndarray, q: np.ndarray,
                    free: np.ndarray, since: int, dt: float) -> None:
     """Write the bank's regressor (layout of
-    :meth:`~identifiers.structured.modal_basis.ModalFilterBank.regressor`) into ``out``."""
+    :meth:`identifiers.structured.modal_basis.ModalFilterBank.regressor`) into ``out``."""
     m = q.shape[0]
     for ax in range(3):
         out[ax] = pos[ax]

@@ -1,14 +1,14 @@
-"""The modal structure of :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+"""The modal structure of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
 its modes found, rebuilt on and tracked, and the regressions physics allows.
 
 :class:`ModalRegression` finds the flexible modes in the kept record at the
 end of the warm-up and again with a back-off
-(:func:`~identifiers.structured.modal_discovery.discover_resonators`),
+(:func:`identifiers.structured.modal_discovery.discover_resonators`),
 rebuilds the estimator on them (filter bank, one RLS per sensor group over
 the regressors that group may see, the modal tracker) and replays the
-record (:class:`~identifiers.structured.record_replay.RecordReplay`), and
+record (:class:`identifiers.structured.record_replay.RecordReplay`), and
 refines the modes between searches by one variable-projection step of the
-:class:`~identifiers.structured.modal_tracker.ModalTracker`.
+:class:`identifiers.structured.modal_tracker.ModalTracker`.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def _same_modes(a: Sequence[Resonator], b: Sequence[Resonator],
 
 
 class ModalRegression(RecordReplay):
-    """Mixin of :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
     the modes (search, rebuild, tracking), the sensor groups' regressions and
     their reaction to a detected change."""
 

@@ -14,7 +14,7 @@ Two facts make this cheap enough to run every second:
 
 * **Taylor regressors.** ``phi(rho + delta) = phi(rho) + sum_j delta_j dphi/drho_j``
   to first order, and the derivative filters of
-  :class:`~identifiers.structured.modal_basis.ModalFilterBank` give ``dphi/drho`` at
+  :class:`identifiers.structured.modal_basis.ModalFilterBank` give ``dphi/drho`` at
   every sample. So the window is summarized by the exponentially weighted
   second moments of the extended regressor ``[phi; dphi]`` and the outputs,
   updated by one rank-1 step per sample, and ``V`` and its derivatives

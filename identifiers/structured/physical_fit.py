@@ -1,4 +1,4 @@
-"""Fitting a :class:`~identifiers.structured.physical_model.PhysicalModel` to a record
+"""Fitting a :class:`identifiers.structured.physical_model.PhysicalModel` to a record
 by output error (nonlinear least squares on the simulation error)."""
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ initial attitude and rate removed exactly) every output is linear in the
 rigid coefficients: ``y_f = Theta_r rho_k + (the rest)``, with ``rho_k``
 the high-passed torques integrated once and twice and the initial
 conditions' high-passed constant and ramp (:class:`RigidBlock`).
-:class:`~identifiers.structured.structured_rpbsid.StructuredRPBSID` regresses
+:class:`identifiers.structured.structured_rpbsid.StructuredRPBSID` regresses
 on them beside a subspace method's past window.
 """
 

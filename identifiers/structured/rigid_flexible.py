@@ -24,12 +24,12 @@ known and is composed of separate parts, each in its own module:
    docs/design/identification.md) this is the exact conditional mean for
    that parameter model, and its covariance, scaled by the measured residual
    variance, is the calibrated uncertainty of the rigid-body gain
-   (:class:`~identifiers.structured.rigid_gain.RigidGainEstimate`, :attr:`rigid_gain`).
+   (:class:`identifiers.structured.rigid_gain.RigidGainEstimate`, :attr:`rigid_gain`).
 3. **The modes** are *found* by a batch search (:mod:`identifiers.structured.modal_discovery`)
    at the end of the warm-up and again, with a back-off, on the longer
    record kept since (modes 2 % apart need hundreds of seconds to
    separate), and *tracked* in between every ``refresh`` samples by variable
-   projection on a forgetting window (:class:`~identifiers.structured.modal_tracker.ModalTracker`):
+   projection on a forgetting window (:class:`identifiers.structured.modal_tracker.ModalTracker`):
    frequencies and damping move a little every second, the filter bank with
    them (its states corrected to first order), without a rebuild.
 4. **Changes** (:mod:`identifiers.structured.change_detection`): a generalized
@@ -42,11 +42,11 @@ known and is composed of separate parts, each in its own module:
    innovations; its predictor gain is the model's ``K``.
 
 The class is composed of three parts, each in its own module:
-:class:`~identifiers.structured.modal_regression.ModalRegression` (items
+:class:`identifiers.structured.modal_regression.ModalRegression` (items
 1-4: the modes found, rebuilt on and tracked, the sensor groups'
 regressions and the reaction to a change),
-:class:`~identifiers.structured.state_filter.StateFilter` (item 5) and
-:class:`~identifiers.structured.minimal_model.MinimalModelExport` (the
+:class:`identifiers.structured.state_filter.StateFilter` (item 5) and
+:class:`identifiers.structured.minimal_model.MinimalModelExport` (the
 minimal innovation-form model exported every ``refresh`` samples, order
 ``n``, state ``[psi (3); omega (3); one complex mode per resonator rank as
 2 real states]``, and the estimates it reports); this module holds the
@@ -104,7 +104,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         Random-walk variance per sample of the rigid-body gains, the modal
         couplings and the initial-condition terms, in units of the output
         noise variance (unit-RMS regressors): how fast each may change (see
-        :class:`~identifiers.core.rls.RecursiveLeastSquares`, ``drift``). The rigid
+        :class:`identifiers.core.rls.RecursiveLeastSquares`, ``drift``). The rigid
         gains change at once at a docking and through the paddles' geometry;
         the couplings turn with the paddles. Default couplings' drift 1e-4
         (1e-7 until 2026-11-29, which held them fixed while the paddles turned:
@@ -140,7 +140,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         Run the change detector and react to its alarms.
     change_threshold : float
         Alarm level of the change test, a multiple of its degrees of freedom
-        (see :class:`~identifiers.structured.change_detection.RegressionGLR`).
+        (see :class:`identifiers.structured.change_detection.RegressionGLR`).
     discount : float
         Factor by which the covariance of the gains grows at a detected
         change (old information discounted that much).
@@ -156,7 +156,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         of the modes (the Kalman filter runs every sample).
     track_modes : bool
         Track the modal frequencies and damping every ``refresh`` samples
-        (:class:`~identifiers.structured.modal_tracker.ModalTracker`).
+        (:class:`identifiers.structured.modal_tracker.ModalTracker`).
     tracking_memory : float
         Forgetting of the tracker's window (default 0.998: 50 s).
     rediscover : int or None
@@ -177,7 +177,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
     input_scale, output_scale : array_like, optional
         Normalization; default the nominal levels of ``layout`` and 1 N m.
     max_abs : float
-        See :class:`~identifiers.core.online.OnlineIdentifier`.
+        See :class:`identifiers.core.online.OnlineIdentifier`.
 
     Attributes
     ----------
@@ -190,7 +190,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
     n_searches_rejected : int
         Times a search found other modes whose model predicted the last 50 s
         10 s ahead clearly worse than the model in use (the rebuild on them was
-        undone; :meth:`~identifiers.structured.record_replay.RecordReplay._try_modes`).
+        undone; :meth:`identifiers.structured.record_replay.RecordReplay._try_modes`).
     """
 
     # the filter bank and high-passes run on the signals (kept current by a rollback);

@@ -1,15 +1,15 @@
-"""Fitting a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel`
+"""Fitting a :class:`identifiers.structured.scheduled_model.ScheduledPhysicalModel`
 to a record of torques, outputs and drive angles by output error.
 
 Two stages. Equation-error starts
-(:mod:`~identifiers.structured.scheduled_start`): each appendage's mode and
+(:mod:`identifiers.structured.scheduled_start`): each appendage's mode and
 coupling from a linear regression of its deflection's second derivative, then
 the inertia and couplings from the hub's torque balance, on signals passed
 through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
 from each start, every parameter, the initial state and a constant disturbance
 torque included, by bounded nonlinear least squares on the weighted simulation
 error (the model re-discretized per
-:data:`~identifiers.structured.scheduled_simulation.RESOLUTION` of drive
+:data:`identifiers.structured.scheduled_simulation.RESOLUTION` of drive
 travel; the tip gains solved linearly inside every evaluation, variable
 projection), the best kept; a torque whose Wald statistic is below the
 Bayesian information criterion's penalty is dropped and the model refined

@@ -1,9 +1,9 @@
 """The drive-scheduled physical model, fitted to the warm-up, as a streaming identifier.
 
 :class:`ScheduledPhysicalIdentifier` records the first ``warmup`` samples with
-the drive angle of each (:meth:`~ScheduledPhysicalIdentifier.set_schedule`),
-fits a :class:`~identifiers.structured.scheduled_model.ScheduledPhysicalModel` to
-them by output error (:func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
+the drive angle of each (:meth:`ScheduledPhysicalIdentifier.set_schedule`),
+fits a :class:`identifiers.structured.scheduled_model.ScheduledPhysicalModel` to
+them by output error (:func:`identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
 then on exports that model evaluated at the latest angle, with a Kalman filter
 on it for the state. The drive's rotation is followed through the angle. By
 default (``accumulate``) the fit is redone, from the held model, each time the
@@ -117,7 +117,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         ``warmup``.
     screen_refits : bool
         Before an accumulating refit, judge the record at the held parameters
-        (:func:`~identifiers.structured.scheduled_information.predicted_gain_covariance`:
+        (:func:`identifiers.structured.scheduled_information.predicted_gain_covariance`:
         one Jacobian, 0.05-0.25 s) and skip the refit where the gain it predicts
         is more than :data:`SCREEN_MARGIN` times less certain than the held
         fit's, a refit the guard would keep out (``n_refits_skipped``).
@@ -131,14 +131,14 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         its basin), about 4x faster at the same closed-loop cost
         (docs/results/control.md).
     fit_options : dict, optional
-        Keywords for :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
+        Keywords for :func:`identifiers.structured.scheduled_fit.fit_scheduled_model`
         (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``,
         ``disturbance``, ``disturbance_threshold``), e.g. fewer starts for speed;
         default: its defaults (a constant disturbance torque fitted with the
         model where the record tells it from zero, and added to the torques the
         state's filter propagates).
     input_scale, output_scale, max_abs
-        See :class:`~identifiers.core.online.OnlineIdentifier`.
+        See :class:`identifiers.core.online.OnlineIdentifier`.
 
     Attributes
     ----------

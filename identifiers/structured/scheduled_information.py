@@ -5,7 +5,7 @@ rigid-body gain, judged at the held parameters. :func:`held_misfit`: how well th
 held model explains the record, its initial state refitted (what a refit after a
 detected change must beat to replace it).
 
-An accumulating refit (:class:`~identifiers.ScheduledPhysicalIdentifier`) is a
+An accumulating refit (:class:`identifiers.ScheduledPhysicalIdentifier`) is a
 nonlinear fit of seconds; on a record without the warm-up's excitation its gain
 comes out less certain than the held fit's, and it is kept out. One Jacobian of
 the output error at the held parameters on the new record (the Gauss-Newton
@@ -71,7 +71,7 @@ def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
         torque is among the parameters where it kept one.
     u, y, angle, dt, layout
         The record, as for
-        :func:`~identifiers.structured.scheduled_fit.fit_scheduled_model`
+        :func:`identifiers.structured.scheduled_fit.fit_scheduled_model`
         (default output weights).
     initial_state : (6 + 2 N,) array_like
         The held model's state at the record's first sample (physical units).
@@ -80,11 +80,11 @@ def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
     -------
     (9, 9) ndarray
         Covariance of ``J(a)^-1``'s row-major entries, (rad/s^2 per N m)^2: the
-        record's white-noise floor (:func:`~identifiers.structured.scheduled_fit.noise_floor`,
+        record's white-noise floor (:func:`identifiers.structured.scheduled_fit.noise_floor`,
         what a refit's residuals reach: 1.04-1.14x it in the closed loop)
         times ``(J^T J)^-1`` of the output error's Jacobian at the held
         parameters, mapped as
-        :meth:`~identifiers.structured.scheduled_fit.ScheduledFit.gain_covariance`.
+        :meth:`identifiers.structured.scheduled_fit.ScheduledFit.gain_covariance`.
         Against the refit's own covariance, on the closed-loop refits measured
         (docs/design/control.md): its standard deviation 0.4-2.1x the refit's.
 
@@ -114,7 +114,7 @@ def held_misfit(fit: ScheduledFit, u: ArrayLike, y: ArrayLike, angle: ArrayLike,
     initial state and constant torque refitted.
 
     The same weighted residuals as the fit's
-    :attr:`~identifiers.structured.scheduled_fit.ScheduledFit.cost` (default output
+    :attr:`identifiers.structured.scheduled_fit.ScheduledFit.cost` (default output
     weights), so the two compare on one record: a refit of the
     record from the held fit reaches at most this (it starts there with more
     freedom). The state and the torque enter the simulation linearly; a

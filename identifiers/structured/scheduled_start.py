@@ -48,7 +48,7 @@ def _filtered(x: np.ndarray, dt: float, tau: float, order: int) -> np.ndarray:
 def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
     """Packed parameters of the equation-error start at filter constant ``tau`` (s)
     for ``problem`` (the output-error problem of
-    :mod:`~identifiers.structured.scheduled_fit`: its record, layout, appendages and
+    :mod:`identifiers.structured.scheduled_fit`: its record, layout, appendages and
     ``pack``); see the module docstring."""
     n, rot = problem.n, problem.turning
     y = np.where(np.isfinite(y), y, 0.0)

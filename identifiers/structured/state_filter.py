@@ -1,13 +1,13 @@
 """The state of the structure-aware identifiers: a Kalman filter on their own model.
 
 :class:`ModelFilter` is what
-:class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` and
-:class:`~identifiers.structured.physical_identifier.PhysicalFitIdentifier`
+:class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` and
+:class:`identifiers.structured.physical_identifier.PhysicalFitIdentifier`
 share: the sensor layout's checks, the model and state they export (attitude
 and body rate first), the stand-in for a skipped output (its prediction),
 the filter's re-convergence after a rollback and ``x_{k|k}`` for a
 controller. :class:`StateFilter`, the rigid-flexible identifier's, runs the
-time-varying Kalman filter (:class:`~identifiers.core.kalman.KalmanPredictor`)
+time-varying Kalman filter (:class:`identifiers.core.kalman.KalmanPredictor`)
 whose predictor gain is
 the exported model's ``K``: the sensor noise estimated from its innovations,
 the unmodelled torque it assumes and the outlier guard on its normalized
@@ -37,8 +37,8 @@ class ModelFilter:
     """Mixin of the structure-aware identifiers: their sensor layout and a Kalman filter
     on their own model.
 
-    The host holds ``layout`` (its :class:`~spacecraft_conventions.OutputLayout`),
-    ``_kf`` (a :class:`~identifiers.core.kalman.KalmanPredictor`, None before it has
+    The host holds ``layout`` (its :class:`spacecraft_conventions.OutputLayout`),
+    ``_kf`` (a :class:`identifiers.core.kalman.KalmanPredictor`, None before it has
     a model), ``_mats`` (the normalized ``(A, B, C, D, None)``, None before a model)
     and ``_r`` (the sensors' normalized noise variances).
     """
@@ -109,7 +109,7 @@ class ModelFilter:
 
 
 class StateFilter(ModelFilter):
-    """Mixin of :class:`~identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
     its Kalman filter, the noise it assumes and estimates, and the outlier guard."""
 
     def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:

@@ -5,7 +5,7 @@ integrators (a Jordan block at ``z = 1``) from noisy data, and the paper's
 test responses tolerate almost no error there (docs/results/paper.md).
 Physics fixes that block up to the inverse inertia ``G = J^-1``, so
 :class:`StructuredRPBSID` keeps it exact
-(:class:`~identifiers.structured.rigid_block.RigidBlock`):
+(:class:`identifiers.structured.rigid_block.RigidBlock`):
 
 1. **One regression** (the paper's VARX, Eq. 20-24, extended):
    ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k`` on high-passed signals,
@@ -15,10 +15,10 @@ Physics fixes that block up to the inverse inertia ``G = J^-1``, so
    block at an alarm (a docking).
 2. **The flexible part**: a recursive PBSID on ``w = y_f - Theta_r rho``, by
    default a classical RPBSID on the tip deflections
-   (:class:`~identifiers.structured.flexible_part.FlexiblePart`), or the
+   (:class:`identifiers.structured.flexible_part.FlexiblePart`), or the
    paper's improved RPBSID (Eq. 25-55) on every row (``flexible="improved"``,
    the paper preset); its stable resonances above the high-pass's corner,
-   damped at most 0.3, are exported (:func:`~identifiers.structured.resonant.resonant_part`).
+   damped at most 0.3, are exported (:func:`identifiers.structured.resonant.resonant_part`).
 3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``,
    ``C = [C_r, C_f]``; a Kalman filter on it and the raw signals gives the
    state and ``K``.
@@ -94,7 +94,7 @@ class StructuredRPBSID(ImprovedRPBSID):
         assumes (default 10: it follows the sensors where the model disagrees).
     detect_changes : bool
         Watch the rate rows' errors with a likelihood-ratio test
-        (:class:`~identifiers.structured.change_detection.RegressionGLR`) and,
+        (:class:`identifiers.structured.change_detection.RegressionGLR`) and,
         at an alarm (a docking), multiply the rigid block's covariance by
         ``discount`` and restart its initial-condition terms.
     min_mode_hz : float, optional
@@ -115,7 +115,7 @@ class StructuredRPBSID(ImprovedRPBSID):
     **kwargs
         The improved RPBSID's (``mu``, ``nu``, ``predict``, ``regularization``,
         ``outlier_threshold``, ...), see
-        :class:`~identifiers.subspace.improved.ImprovedRPBSID`.
+        :class:`identifiers.subspace.improved.ImprovedRPBSID`.
 
     Attributes
     ----------

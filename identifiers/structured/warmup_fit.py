@@ -3,19 +3,19 @@
 :class:`WarmupFit` records the samples until the warm-up is over, calls the
 host's ``_fit_record`` (retried once the record is half a warm-up longer when it
 fails: each attempt is a nonlinear fit of seconds), then runs a Kalman filter
-on the held model (:class:`~identifiers.structured.state_filter.ModelFilter`),
+on the held model (:class:`identifiers.structured.state_filter.ModelFilter`),
 its measurement noise the fit's residual per output and its process noise an
 unmodelled torque.
 
 A host with ``refit_on_change`` set also watches the filter's innovations
-with a CUSUM test (:class:`~identifiers.structured.change_detection.InnovationCUSUM`,
+with a CUSUM test (:class:`identifiers.structured.change_detection.InnovationCUSUM`,
 alarm level :data:`CHANGE_THRESHOLD`, allowance :data:`CHANGE_DRIFT`; the test
 runs on across accumulating refits): when it fires, the held model keeps flying
 while a new record of ``warmup`` samples is taken, and the host's
 ``_fit_record`` then fits that record (it may start from the held fit). A host
 that ``judges_changes`` (``_held_misfit``) has the alarm confirmed first: the
 refit replaces the held model only where it explains the record clearly better
-(:func:`~identifiers.structured.change_detection.misfit_confirms_change`) than
+(:func:`identifiers.structured.change_detection.misfit_confirms_change`) than
 the held model refined on the whole accumulated record does; otherwise that
 refinement flies and the record stays (where the refit fails, the held model).
 Each alarm is reported in :attr:`WarmupFit.events`, its ``confirmed`` flag set by
@@ -73,7 +73,7 @@ class WarmupFit(BackgroundFits, ModelFilter):
     (a start for the refit); it is None otherwise. :attr:`accumulating_refit`
     is True while ``_fit_record`` runs for an accumulating refit (the held model's
     record grown, no change detected), so the host may refit more cheaply. Every fit
-    runs through :class:`~identifiers.core.background.BackgroundFits` (the host's
+    runs through :class:`identifiers.core.background.BackgroundFits` (the host's
     ``fit_timing``: at once by default, or off the caller's thread with a latency).
     """
 

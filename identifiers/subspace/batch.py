@@ -3,7 +3,7 @@
 VARX least squares, the weighted predictor product LK, an SVD of
 ``LK Phi`` for the state sequence, then least squares for ``[C D]`` and
 ``[A B K]`` (Chiuso 2007; van Wingerden and Verhaegen; docs/design/identification.md).
-Also the comparator that :class:`~identifiers.subspace.windowed.WindowedPBSID`
+Also the comparator that :class:`identifiers.subspace.windowed.WindowedPBSID`
 refits on a sliding window.
 """
 

@@ -33,12 +33,12 @@ class ClassicalRPBSID(PredictionStateIdentifier):
     **kwargs
         ``f`` (default ``p``, as the PBSID toolbox's ``rpbsid``), ``basis``,
         ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.subspace.recursive.PredictionStateIdentifier`.
+        :class:`identifiers.subspace.recursive.PredictionStateIdentifier`.
 
     Notes
     -----
     Building LK costs O(f^2 m^2 p (r + m)) per step; this is what
-    :class:`~identifiers.subspace.predictor.PredictorRPBSID` avoids.
+    :class:`identifiers.subspace.predictor.PredictorRPBSID` avoids.
 
     Examples
     --------

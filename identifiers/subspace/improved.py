@@ -15,7 +15,7 @@ with ``tau_k = ybar_k - H_k zbar_k`` and ``Gamma_0 = [I_n; 0]``; ``C`` and
 matrix and no SVD per step.
 
 The estimate refers to the start of the future window, p samples in the
-past; :attr:`~ImprovedRPBSID.state` propagates it to the present with the
+past; :attr:`ImprovedRPBSID.state` propagates it to the present with the
 identified predictor. Measured here, the sign step moves the state by at
 most ``mu`` per sample, as if it were a slowly drifting weight vector,
 while a real state moves with the dynamics every sample, so the state (and
@@ -48,7 +48,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
 
     The defaults are the best settings we measured for this algorithm: a
     predict step before the sign correction, a larger step, and the long
-    memory of :class:`~identifiers.subspace.recursive.RecursiveVARXIdentifier`.
+    memory of :class:`identifiers.subspace.recursive.RecursiveVARXIdentifier`.
     ``ImprovedRPBSID.paper(n)`` is the paper's algorithm with the paper's
     constants, for reproducing its tables.
 
@@ -71,7 +71,7 @@ class ImprovedRPBSID(SystemRLSIdentifier):
         sample, so it lags a state that moves with the dynamics.
     **kwargs
         ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.subspace.recursive.SystemRLSIdentifier`.
+        :class:`identifiers.subspace.recursive.SystemRLSIdentifier`.
 
     Examples
     --------

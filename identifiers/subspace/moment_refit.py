@@ -50,7 +50,7 @@ class MomentRefitRPBSID(RecursiveVARXIdentifier):
     **kwargs
         ``dt``, ``warmup``, ``regularization``, ``varx_forgetting``,
         ``varx_init`` and the scales of
-        :class:`~identifiers.subspace.recursive.RecursiveVARXIdentifier`.
+        :class:`identifiers.subspace.recursive.RecursiveVARXIdentifier`.
     """
 
     _SIGNAL_STATE = ("_phi", "_ext")

@@ -29,7 +29,7 @@ class PredictorRPBSID(PredictionStateIdentifier):
         Order, past window, forgetting factor.
     **kwargs
         ``f``, ``basis``, ``dt``, ``warmup`` and the constants of
-        :class:`~identifiers.subspace.recursive.PredictionStateIdentifier`.
+        :class:`identifiers.subspace.recursive.PredictionStateIdentifier`.
     """
 
     def _predictions(self, phi: np.ndarray) -> np.ndarray:

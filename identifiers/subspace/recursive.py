@@ -4,9 +4,9 @@
   Eq. 20-24), which every recursive PBSID method updates first;
 * :class:`SystemRLSIdentifier`: RLS for ``[C D]`` and ``[A B K]`` on a state
   sequence (Eq. 47-55), for the methods that regress on states
-  (:class:`~identifiers.subspace.improved.ImprovedRPBSID`,
-  :class:`~identifiers.subspace.predictor.PredictorRPBSID`,
-  :class:`~identifiers.subspace.classical.ClassicalRPBSID`), and
+  (:class:`identifiers.subspace.improved.ImprovedRPBSID`,
+  :class:`identifiers.subspace.predictor.PredictorRPBSID`,
+  :class:`identifiers.subspace.classical.ClassicalRPBSID`), and
   :class:`PredictionStateIdentifier`, the state ``x = W LK phi`` of the last
   two.
 """
@@ -78,7 +78,7 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     regularization : float
         Tikhonov floor of the VARX as a fraction c of its effective memory:
         ``delta = c / (1 - beta_1)`` in normalized units (see
-        :class:`~identifiers.core.rls.RecursiveLeastSquares`). A VARX with
+        :class:`identifiers.core.rls.RecursiveLeastSquares`). A VARX with
         p (r + m) regressors on an order-n plant has many weakly excited
         directions in which noise is fitted with huge cancelling
         coefficients; the floor keeps its Markov parameters sane. With 0 the

@@ -1,6 +1,6 @@
 """Sliding-window SVD-based PBSID: the batch method refitted at every step.
 
-The paper's SVD-based comparator: at each sample, :func:`~identifiers.subspace.batch.pbsid`
+The paper's SVD-based comparator: at each sample, :func:`identifiers.subspace.batch.pbsid`
 (VARX least squares, weighted LK, SVD, least squares for the system
 matrices) is run on the most recent ``window`` samples. Accurate and simple,
 but O(window p^2 (r + m)^2) per step. Each refit comes out in its own SVD
@@ -43,7 +43,7 @@ class WindowedPBSID(OnlineIdentifier):
     regularization : float
         VARX Tikhonov term as a fraction of the window length (0: plain LS).
     dt, warmup, input_scale, output_scale
-        See :class:`~identifiers.core.online.OnlineIdentifier`; warm-up defaults to
+        See :class:`identifiers.core.online.OnlineIdentifier`; warm-up defaults to
         the window length.
     """
 

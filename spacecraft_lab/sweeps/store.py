@@ -53,7 +53,7 @@ def record_problem(record: Any) -> str | None:
     an ``error`` string) or ``"ok"`` with a non-empty ``metrics`` table and
     an optional ``timings`` table of numbers. A built-in kind's metrics have
     the types its task writes (numbers or null, except those of
-    :data:`~spacecraft_lab.sweeps.tasks.METRIC_TYPES`); a custom kind's are
+    :data:`spacecraft_lab.sweeps.tasks.METRIC_TYPES`); a custom kind's are
     JSON scalars or lists of them.
     """
     if not isinstance(record, dict):
