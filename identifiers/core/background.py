@@ -181,6 +181,12 @@ class _Job:
         self.cancelled = True
         self._queue.put(_STOP)
 
+    def release(self) -> None:
+        """Forget the identifier's finalizer (the fit is taken over or dropped)."""
+        finalizer = self.__dict__.pop("finalizer", None)
+        if finalizer is not None:
+            finalizer.detach()
+
     def start(self, fork: Any, dt: float, name: str) -> None:
         thread = threading.Thread(target=self.run, args=(fork, dt), name=name, daemon=True)
         with _running_lock:
@@ -281,6 +287,7 @@ class BackgroundFits:
         job = self.__dict__.get("_job")
         if job is not None:
             job.cancel()
+            job.release()
         self._job = None
 
     @property
@@ -331,8 +338,9 @@ class BackgroundFits:
         job = _Job(action, sample, due)
         fork = self._fork()
         self._job = job
-        # a fit whose identifier is gone is not wanted either
-        weakref.finalize(self, job.cancel)
+        # a fit whose identifier is gone is not wanted either (detached once the fit is
+        # taken over or dropped, so no finished fit stays referenced)
+        job.finalizer = weakref.finalize(self, job.cancel)
         job.start(fork, self.dt, f"{type(self).__name__} fit")
 
     def _due(self, job: _Job) -> bool:
@@ -344,6 +352,7 @@ class BackgroundFits:
         """The pending fit's state takes over and catches up on the samples since (or, for
         an abandoned fit, the held state goes on)."""
         job, self._job = self._job, None
+        job.release()
         timing = self.fit_timing
         entry = {"action": job.action.strip("_"), "sample": job.sample, "due": job.due,
                  "adopted": None, "latency_s": (job.due - job.sample) * self.dt,
