@@ -131,3 +131,22 @@ def test_a_fit_nobody_wants_is_cancelled():
     assert cancel_fits(timeout=5.0) in (0, 1)          # the reset's fit, ending
     assert cancel_fits(timeout=0.1) == 0
     env.close()
+
+
+def test_no_finished_fit_stays_referenced():
+    """Across episodes of one controller, each fit taken over releases what referenced it
+    (its identifier's finalizer, which would otherwise keep the fork and its record)."""
+    import weakref
+
+    from identifiers.core.background import _Job
+
+    def fits_referenced() -> int:
+        return sum(getattr(info.func, "__self__", None).__class__ is _Job
+                   for info in weakref.finalize._registry.values())
+
+    env = gym.make(env_id("paddle_rotation"), max_episode_steps=430)
+    ctrl = AdaptiveLQG(env)
+    for seed in (0, 1):
+        run_episode(env, ctrl, seed=seed)
+        assert not ctrl.identifier.fit_pending and fits_referenced() == 0
+    env.close()
