@@ -211,3 +211,17 @@ def test_the_ceiling_validates_its_arguments():
     with pytest.raises(ValueError, match="needs the env's info dict"):
         ctrl.act(obs)
     env.close()
+
+
+def test_the_ceiling_plans_through_a_captured_momentum():
+    """Modules that bring angular momentum: the capture (an affine jump of the rates) is in
+    the plan, so the ceiling meets it prepared and stays below the controllers that do not
+    know it is coming."""
+    from spacecraft_lab.control import env_kwargs_for
+
+    kwargs = env_kwargs_for("docking", capture_momentum=(0.0, 0.0, 50.0), task="regulation")
+    env = gym.make(env_id("docking"), max_episode_steps=1900, **kwargs)
+    assert env.unwrapped.model.capture_steps()
+    ceiling = _cost(env, ClairvoyantLQG(env), 0)
+    assert ceiling < 0.9 * min(_cost(env, OracleLQG(env), 0), _cost(env, PD(env), 0))
+    env.close()
