@@ -195,3 +195,21 @@ def test_process_noise_and_the_resting_start_reach_the_env():
     assert "disturbance_std" not in env_kwargs_for("constant")
     with pytest.raises(ValueError, match="regulation task"):
         env_kwargs_for("constant", task="slew", initial_attitude=1.0)
+
+
+def test_the_terminal_table_fits_in_100_columns():
+    """The brief of the default comparison (its longest names, ten seeds' verdicts) within
+    100 columns; the full table goes to table.md."""
+    from functools import partial
+
+    import gymnasium as gym
+
+    from controllers import PD, compare
+    from spacecraft_env import env_id
+    from spacecraft_lab.reporting import control_brief
+
+    table, _ = compare({name: PD for name in CONTROLLER_NAMES},
+                       partial(gym.make, env_id("constant"), max_episode_steps=30),
+                       list(range(10)), progress=False)
+    lines = control_brief(table).splitlines()
+    assert len(lines) == 1 + len(CONTROLLER_NAMES) and max(map(len, lines)) <= 100
