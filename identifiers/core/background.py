@@ -95,6 +95,11 @@ class FitTiming:
             raise ValueError(f"FitTiming.timeout_s must be a finite number of seconds > 0, "
                              f"got {self.timeout_s!r}")
 
+    def latency_samples(self, dt: float) -> int:
+        """The fixed latency in samples of ``dt`` s, rounded up (0 for a fit at once;
+        a measured charge is known only once its fit has run)."""
+        return 0 if self.latency_s is None else math.ceil(round(self.latency_s / dt, 9))
+
     @property
     def background(self) -> bool:
         """Whether fits run on a worker thread (a latency or a measured charge)."""
@@ -175,6 +180,18 @@ class _Job:
 
     def receive(self, u: np.ndarray, y: np.ndarray, context: tuple) -> None:
         self._queue.put((u, y, context))
+
+    def remaining(self) -> list[tuple[np.ndarray, np.ndarray, tuple]]:
+        """The samples received that the worker's replay did not take (those past the due
+        one: a measured charge's fit adopted later than its due sample)."""
+        items = []
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return items
+            if item is not _STOP:
+                items.append(item)
 
     def cancel(self) -> None:
         """Nobody will take the result: stop at the next cancellation point."""
@@ -278,7 +295,6 @@ class BackgroundFits:
 
     def _reset_fits(self) -> None:
         self._cancel_fit()
-        self._job: _Job | None = None
         self._clock = 0
         self.fit_log: list[dict[str, Any]] = []
 
@@ -288,7 +304,7 @@ class BackgroundFits:
         if job is not None:
             job.cancel()
             job.release()
-        self._job = None
+        self._job: _Job | None = None
 
     @property
     def fit_pending(self) -> bool:
@@ -316,11 +332,7 @@ class BackgroundFits:
         for name in self._SHARED_ITEMS:
             for item in self.__dict__.get(name) or ():
                 memo[id(item)] = item
-        job, self._job = self._job, None
-        try:
-            return copy.deepcopy(self, memo)
-        finally:
-            self._job = job
+        return copy.deepcopy(self, memo)       # launched only while no fit runs
 
     def _run_fit(self, action: str) -> None:
         """Fit now (synchronous timing) or launch ``action`` on a fork in the background."""
@@ -334,7 +346,7 @@ class BackgroundFits:
                                  "cpu_s": time.thread_time() - start, "outcome": "adopted"})
             return
         due = None if timing.measured else \
-            max(sample, self._clock) + math.ceil(round(timing.latency_s / self.dt, 9))
+            max(sample, self._clock) + timing.latency_samples(self.dt)
         job = _Job(action, sample, due)
         fork = self._fork()
         self._job = job
@@ -381,11 +393,20 @@ class BackgroundFits:
                         f"abandoned ({entry['outcome']}: {what}); the held model flies on")
             return
         # the fork, fitted when the fit fell due and caught up since on the worker
+        # what the caller told this identifier about the coming sample (a drive angle),
+        # which the fork, caught up to the sample before, does not know yet
+        now, context = self.n_samples, self._sample_context()
         self.__dict__.clear()
         self.__dict__.update(fork.__dict__)
         self.fit_timing, self.fit_log = timing, log
-        entry["adopted"] = self.n_samples
+        entry["adopted"] = now
         log.append(entry)
+        # a measured charge can be taken later than its due sample: the samples past it
+        # are replayed here (none with a fixed latency, which is taken at its due sample)
+        for u, y, sample_context in job.remaining():
+            self._restore_context(sample_context)
+            self.update(u, y)
+        self._restore_context(context)
 
     def update(self, u: ArrayLike, y: ArrayLike) -> None:
         job = self.__dict__.get("_job")

@@ -54,6 +54,7 @@ def test_a_background_fit_is_the_fit_at_once_from_its_due_sample_on():
         for ident in (now, later):
             ident.set_schedule(angles[k])
             ident.update(u[k], y[k])
+        assert later.angle == now.angle          # the caller's angle survives a take-over
         if k + 1 == 300:
             assert now.model is not None and later.model is None and later.fit_pending
         if 300 <= k + 1 < 350:
@@ -67,6 +68,29 @@ def test_a_background_fit_is_the_fit_at_once_from_its_due_sample_on():
             entry["outcome"]) == ("first_fit", 300, 350, 350, "adopted")
     assert entry["latency_s"] == pytest.approx(5.0) and entry["cpu_s"] > 0
     assert now.fit_log[0]["latency_s"] == 0.0
+    env.close()
+
+
+def test_a_measured_charge_taken_late_catches_up_on_every_sample():
+    """A fit charged its own CPU time and taken over after its due sample (the caller
+    outran it): the samples past the due one are replayed too, so the identifier holds
+    the fit-at-once identifier's model and state."""
+    env, u, y, angles = _record(460)
+    now = scheduled_identifier(env, fit_timing=FitTiming())
+    later = scheduled_identifier(env, fit_timing=FitTiming(measured=True))
+    for k in range(450):
+        for ident in (now, later):
+            ident.set_schedule(angles[k])
+            ident.update(u[k], y[k])
+    later._job.future.result(timeout=120)          # the fit done, its charge known
+    assert later._job.due < later.n_samples        # taken later than its due sample
+    for k in range(450, 460):
+        for ident in (now, later):
+            ident.set_schedule(angles[k])
+            ident.update(u[k], y[k])
+    assert not later.fit_pending and later.fit_log[0]["outcome"] == "adopted"
+    np.testing.assert_allclose(later.model.A, now.model.A, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(later.state, now.state, rtol=1e-10, atol=1e-14)
     env.close()
 
 
