@@ -84,7 +84,7 @@ from controllers.acceptance import (
 )
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
-from controllers.excitation import BinaryExcitation
+from controllers.excitation import BinaryExcitation, warmup_excitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
@@ -289,12 +289,7 @@ class AdaptiveLQG(_LQGController):
                              f"got {rigid_state!r}")
         self.rigid_state = rigid_state
         self.identifier = identifier
-        warm = int(getattr(identifier, "warmup", 500))
-        # the warm-up's amplitude the identifier asks for, else BinaryExcitation's default
-        asked = ({"warmup_amplitude": float(identifier.warmup_amplitude)}
-                 if hasattr(identifier, "warmup_amplitude") else {})
-        self.excitation = excitation or BinaryExcitation(warmup_steps=warm, amplitude=0.0,
-                                                         **asked)
+        self.excitation = excitation or warmup_excitation(identifier)
         for name, value in (("uncertainty_tolerance", uncertainty_tolerance),
                             ("excitation_budget", excitation_budget)):
             if not (np.isfinite(value) and value >= 0):

@@ -31,13 +31,15 @@ the small-angle model's range (the env is linear, so nothing else).
 :class:`ClairvoyantLQG` with ``start`` flies another controller first (the
 adaptive loop's warm-up: its PD and excitation, :func:`adaptive_start`) and
 the clairvoyant law from ``start_steps`` on, its filter running throughout:
-the *same-start ceiling* a scoring window after t = 0 is judged against, so
-the ratio to it is the price of identification alone.
+:func:`same_start_ceiling`, the optimum of the cost from the start's end among the
+controllers that fly that start, so an adaptive loop's ratio to it over that
+window is the price of identification alone. It bounds that window only: a later
+window it does not bound, since its plan trades the whole remaining episode
+(docs/design/evaluation.md).
 """
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections import deque
 from typing import Any
@@ -48,7 +50,7 @@ from numpy.typing import ArrayLike
 
 from controllers.base import Controller
 from controllers.baselines import PD, _EnvController
-from controllers.excitation import BinaryExcitation
+from controllers.excitation import BinaryExcitation, warmup_excitation
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
 from identifiers import KalmanPredictor
@@ -228,14 +230,11 @@ def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
         Steps the loop flies it at least (its first model's sample).
     """
     identifier = closed_loop_identifier(env)
-    warmup = int(getattr(identifier, "warmup", 500))
-    amplitude = float(getattr(identifier, "warmup_amplitude", 1.0))
+    excitation = warmup_excitation(identifier)
     timing = getattr(identifier, "fit_timing", None)
-    latency = 0 if timing is None or timing.latency_s is None else \
-        math.ceil(round(timing.latency_s / float(env.unwrapped.model.dt), 9))
-    excitation = BinaryExcitation(warmup_amplitude=amplitude, amplitude=0.0,
-                                  warmup_steps=warmup)
-    return ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque)), warmup + latency
+    latency = 0 if timing is None else timing.latency_samples(float(env.unwrapped.model.dt))
+    return (ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque)),
+            excitation.warmup_steps + latency)
 
 
 def same_start_ceiling(env: gym.Env, weights: LQRWeights | None = None) -> ClairvoyantLQG:
@@ -431,7 +430,6 @@ class ClairvoyantLQG(_EnvController):
         self._reference_planned = None
         self._captures = frozenset()
         self._commands: deque = deque()
-        self._k = 0
         self.last_excitation = np.zeros(3)
         self._process_var = float(self.env.disturbance_std) ** 2
 
@@ -474,7 +472,6 @@ class ClairvoyantLQG(_EnvController):
                 self._reference_planned is not None
                 and not np.array_equal(reference, self._reference_planned)):
             self._plan(k, reference)             # past the plan, or a new reference
-        self._k = k
         if k < self.start_steps:
             action = np.asarray(self.start.act(obs, info), dtype=np.float32)
             self.last_excitation = np.asarray(getattr(self.start, "last_excitation",

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BinaryExcitation"]
+__all__ = ["BinaryExcitation", "warmup_excitation"]
 
 
 class BinaryExcitation:
@@ -91,3 +91,23 @@ class BinaryExcitation:
     def rms(self) -> float:
         """RMS excitation torque applied so far (all axes), N m."""
         return float(np.sqrt(self._energy / max(3 * self._k, 1)))
+
+
+def warmup_excitation(identifier: object) -> BinaryExcitation:
+    """The excitation an adaptive loop gives ``identifier``: its ``warmup_amplitude``
+    (N m per axis; :class:`BinaryExcitation`'s default where it states none) for its
+    ``warmup`` samples (500 where it states none), then none until the loop asks.
+
+    Parameters
+    ----------
+    identifier : object
+        An online identifier (``identifiers.OnlineIdentifier``).
+
+    Returns
+    -------
+    BinaryExcitation
+    """
+    asked = ({"warmup_amplitude": float(identifier.warmup_amplitude)}
+             if hasattr(identifier, "warmup_amplitude") else {})
+    return BinaryExcitation(warmup_steps=int(getattr(identifier, "warmup", 500)),
+                            amplitude=0.0, **asked)

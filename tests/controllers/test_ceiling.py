@@ -25,6 +25,7 @@ from controllers import (
     same_start_ceiling,
     stage_costs,
 )
+from controllers.harness import SAME_START_S
 from spacecraft_env import ENV_IDS, env_id
 
 
@@ -151,6 +152,8 @@ def test_the_same_start_is_the_adaptive_loops_start():
     env = gym.make(env_id("paddle_rotation"), max_episode_steps=401)
     start, steps = adaptive_start(env)
     assert steps == 400 and start.excitation.warmup_steps == 300
+    # the tables' window starts where the same start ends
+    assert steps * env.unwrapped.model.dt == pytest.approx(SAME_START_S)
     loop = run_episode(env, AdaptiveLQG(env), seed=7)
     ceiling = run_episode(env, same_start_ceiling(env), seed=7)
     np.testing.assert_array_equal(loop.torque[:steps], ceiling.torque[:steps])
