@@ -49,13 +49,8 @@ The package has two families over a small core, and imports run one way
 Everything public is importable from ``identifiers`` itself.
 """
 
-from identifiers.core.background import (
-    FIT_OUTCOMES,
-    FitCancelled,
-    FitTiming,
-    cancel_fits,
-    cancellation_point,
-)
+from identifiers.core.background import FIT_OUTCOMES, FitTiming
+from identifiers.core.fit_jobs import FitCancelled, cancel_fits, cancellation_point
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis

@@ -29,7 +29,7 @@ import scipy.linalg
 import scipy.signal
 from numpy.typing import ArrayLike
 
-from identifiers.core.background import cancellation_point
+from identifiers.core.fit_jobs import cancellation_point
 from identifiers.core.model import StateSpaceModel
 from identifiers.structured.modal_kernels import oscillator_zoh as mode_zoh
 from spacecraft_conventions import OutputLayout

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from identifiers.core.background import cancellation_point
+from identifiers.core.fit_jobs import cancellation_point
 from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 
 __all__ = ["RESOLUTION", "segments", "simulate_scheduled"]

@@ -162,10 +162,10 @@ def test_no_finished_fit_stays_referenced():
     (its identifier's finalizer, which would otherwise keep the fork and its record)."""
     import weakref
 
-    from identifiers.core.background import _Job
+    from identifiers.core.fit_jobs import FitJob
 
     def fits_referenced() -> int:
-        return sum(getattr(info.func, "__self__", None).__class__ is _Job
+        return sum(getattr(info.func, "__self__", None).__class__ is FitJob
                    for info in weakref.finalize._registry.values())
 
     env = gym.make(env_id("paddle_rotation"), max_episode_steps=430)
