@@ -10,7 +10,8 @@
   (true model and state).
 * :class:`ClairvoyantLQG` (:mod:`controllers.ceiling`): the ceiling of the common
   cost, the finite-horizon LQG on the true time-varying plant with the true noise
-  statistics; with ``start`` (:func:`adaptive_start`) the same-start ceiling.
+  statistics; with ``start`` (:func:`adaptive_start`) the same-start ceiling; planned
+  for the cost from 100 s only, the window ceiling (:func:`window_ceiling`).
 * :class:`PolicyController`: any SB3 policy behind the same interface.
 * :func:`run_episode`, :func:`episode_metrics`, :func:`compare`: the
   closed-loop harness.
@@ -53,6 +54,7 @@ from controllers.ceiling import (
     adaptive_start,
     finite_horizon_lqr,
     same_start_ceiling,
+    window_ceiling,
 )
 from controllers.excitation import BinaryExcitation
 from controllers.features import (
@@ -150,4 +152,5 @@ __all__ = [
     "stable_under_input_gains",
     "stage_costs",
     "structured_identifier",
+    "window_ceiling",
 ]

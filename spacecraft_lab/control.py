@@ -45,6 +45,7 @@ from controllers import (
     scheduled_identifier,
     set_integral_settle,
     structured_identifier,
+    window_ceiling,
 )
 from controllers.lqg import INTEGRAL_SETTLE_S, check_settle_time
 from identifiers import PhysicalFitIdentifier
@@ -67,6 +68,7 @@ from spacecraft_lab.reporting import (
     CEILING,
     SAME_START_CEILING,
     SAME_START_LOOPS,
+    WINDOW_CEILING,
     control_table,
 )
 from spacecraft_lab.sweeps.backends import check_workers
@@ -85,6 +87,7 @@ __all__ = [
     "SCENARIO_NAMES",
     "SCHEDULED_PHYSICAL",
     "STRUCTURED_RPBSID",
+    "WINDOW_CEILING",
     "control_task",
     "env_kwargs_for",
     "run_control",
@@ -140,6 +143,8 @@ def _construct(name: str, weights: LQRWeights, env: gym.Env) -> Any:
         return ClairvoyantLQG(env, weights)
     if name == SAME_START_CEILING:
         return same_start_ceiling(env, weights)
+    if name == WINDOW_CEILING:
+        return window_ceiling(env, weights=weights)
     if name == "full-state oracle":
         return OracleLQR(env, weights)
     raise ValueError(f"unknown controller {name!r}")
@@ -168,7 +173,8 @@ STRUCTURED_RPBSID = "adaptive LQG, structured RPBSID"
 
 #: The controllers of the default comparison, in their table order.
 CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive LQG", FAST,
-                    SAME_LAW, ORACLE, "full-state oracle", SAME_START_CEILING, CEILING)
+                    SAME_LAW, ORACLE, "full-state oracle", WINDOW_CEILING, SAME_START_CEILING,
+                    CEILING)
 #: Every controller the comparison can fly: the default ones and the options.
 ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL, STRUCTURED_RPBSID)
 
@@ -189,7 +195,8 @@ CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "adaptive-lqg-scheduled": SCHEDULED_PHYSICAL,
                    "adaptive-lqg-structured-rpbsid": STRUCTURED_RPBSID, "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle",
-                   "ceiling": CEILING, "same-start-ceiling": SAME_START_CEILING}
+                   "ceiling": CEILING, "same-start-ceiling": SAME_START_CEILING,
+                   "window-ceiling": WINDOW_CEILING}
 
 
 def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | None = None,
@@ -494,7 +501,8 @@ def _write_control(out: Path, scenario: str, seeds: int, kwargs: dict[str, Any],
     env = make_env()
     model = env.unwrapped.model
     text = control_table(table, ceiling=CEILING if CEILING in table else None,
-                         same_start=SAME_START_CEILING if SAME_START_CEILING in table else None)
+                         same_start=SAME_START_CEILING if SAME_START_CEILING in table else None,
+                         window=WINDOW_CEILING if WINDOW_CEILING in table else None)
     if interrupted is not None:
         text = (f"Interrupted: {seeds} of {interrupted} seeds completed; the table holds "
                 f"those.\n\n{text}")

@@ -16,8 +16,8 @@ import numpy as np
 
 from controllers.harness import SAME_START_S
 
-__all__ = ["CEILING", "SAME_START_CEILING", "SAME_START_LOOPS", "control_brief", "control_summary",
-           "control_table",
+__all__ = ["CEILING", "SAME_START_CEILING", "SAME_START_LOOPS", "WINDOW_CEILING",
+           "control_brief", "control_summary", "control_table",
            "fallback_causes_text", "flies_the_start", "identification_brief",
            "identification_table",
            "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
@@ -164,9 +164,12 @@ def identification_table(metrics: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: The names the comparison gives the two ceilings (:func:`controllers.ClairvoyantLQG`).
+#: The names the comparison gives the ceilings (:func:`controllers.ClairvoyantLQG`): of the
+#: whole episode, of the cost from the adaptive loop's start behind that start, and of the
+#: stationary window from 100 s (:func:`controllers.window_ceiling`).
 CEILING = "ceiling"
 SAME_START_CEILING = "same-start ceiling"
+WINDOW_CEILING = "window ceiling"
 
 
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
@@ -183,27 +186,27 @@ def flies_the_start(name: str) -> bool:
 
 def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
                   same_start: str | None = SAME_START_CEILING,
-                  baseline: str | None = "robust LQG") -> str:
+                  baseline: str | None = "robust LQG",
+                  window: str | None = WINDOW_CEILING) -> str:
     """Markdown table of :func:`controllers.compare` results, by the evaluation protocol.
 
-    Per controller (docs/design/evaluation.md): the common quadratic cost over
-    the whole episode (the quantity every LQG here minimizes;
-    :func:`controllers.stage_costs`), median [25th, 75th percentile] over seeds,
-    and its ratio to ``ceiling``'s (the clairvoyant LQG: no controller can
-    expect less) and to ``baseline``'s (the robust fixed design: what an
-    adaptive loop must beat); the cost from the end of the adaptive loop's
-    start (:data:`controllers.harness.SAME_START_S`) and its ratio to
-    ``same_start``'s (the ceiling flown behind that start: the price of
-    identification; shown for the controllers that fly that start,
-    :func:`flies_the_start`); the stationary window from 100 s; ratios are medians of
-    per-seed ratios (paired seeds). Then the split of the median whole-episode
-    cost into attitude, rate, deflection and torque, with the excitation's
-    share of the torque term, and the secondary columns: verdicts, attitude
-    RMS and vibration from 100 s, excitation RMS, the identified rigid-body
-    gain's median error and 2-sigma coverage of the truth from 60 s (pooled
-    over the seeds' samples; controllers with an identifier), the share of
-    steps the fallback flew from 60 s (after the warm-up) and over the
-    episode, and why it flew from 60 s (:func:`fallback_causes_text`).
+    Per controller (docs/design/evaluation.md): the common quadratic cost over the whole
+    episode (the quantity every LQG here minimizes; :func:`controllers.stage_costs`),
+    median [25th, 75th percentile] over seeds, and its ratio to ``ceiling``'s (the
+    clairvoyant LQG: no controller can expect less) and to ``baseline``'s (the robust
+    fixed design: what an adaptive loop must beat); the cost from the end of the
+    adaptive loop's start (:data:`controllers.harness.SAME_START_S`) and its ratio to
+    ``same_start``'s (the ceiling flown behind that start: the price of identification;
+    shown for the controllers that fly that start, :func:`flies_the_start`); the
+    stationary window from 100 s and its ratio to ``window``'s (the plan of that
+    window's cost alone, a bound for every controller); ratios are medians of per-seed
+    ratios (paired seeds). Then the split of the median whole-episode cost into
+    attitude, rate, deflection and torque, with the excitation's share of the torque
+    term, and the secondary columns: verdicts, attitude RMS and vibration from 100 s,
+    excitation RMS, the identified rigid-body gain's median error and 2-sigma coverage
+    of the truth from 60 s (pooled over the seeds' samples; controllers with an
+    identifier), the share of steps the fallback flew from 60 s (after the warm-up) and
+    over the episode, and why it flew from 60 s (:func:`fallback_causes_text`).
     """
     def cell(row: dict, key: str, digits: int) -> str:
         return (f"{row['median'][key]:.{digits}g} "
@@ -228,12 +231,13 @@ def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
 
     start = f"{SAME_START_S:g}"
     head = (f"| controller | cost, whole episode | / ceiling | / robust | cost t >= {start} s "
-            "| / same-start ceiling | cost t >= 100 s | split (whole): att / rate / defl "
-            "/ torque (excitation) | verdicts | attitude RMS t >= 100 s (deg) "
+            "| / same-start ceiling | cost t >= 100 s | / window ceiling "
+            "| split (whole): att / rate / defl / torque (excitation) | verdicts "
+            "| attitude RMS t >= 100 s (deg) "
             "| vibration t >= 100 s (mm) | excitation RMS (N m) "
             "| gain error, coverage t >= 60 s | fallback flew t >= 60 s (all) "
             "| why it flew t >= 60 s |")
-    lines = [head, "|" + "---|" * 15]
+    lines = [head, "|" + "---|" * 16]
     for name, row in table.items():
         med = row["median"]
         verdicts = ", ".join(f"{v} {c}/{row['runs']}" for v, c in row["verdicts"].items())
@@ -243,7 +247,8 @@ def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
         cells = [cell(row, "cost", 3), paired(name, ceiling, "cost"),
                  paired(name, baseline, "cost"), cell(row, "cost_after_start", 3),
                  after_start(name), cell(row, "cost_after_100s", 3),
-                 split, verdicts, cell(row, "attitude_rms_after_100s_deg", 3),
+                 paired(name, window, "cost_after_100s"), split, verdicts,
+                 cell(row, "attitude_rms_after_100s_deg", 3),
                  cell(row, "vibration_rms_after_100s_mm", 3),
                  f"{med['excitation_rms_Nm']:.3g}", gain(row),
                  f"{100 * med['fallback_share_after_60s']:.0f} % "
@@ -273,32 +278,35 @@ def fallback_causes_text(causes: dict[str, float], floor: float = 0.005) -> str:
 
 
 def control_brief(table: dict[str, dict], ceiling: str | None = CEILING,
-                  same_start: str | None = SAME_START_CEILING) -> str:
+                  same_start: str | None = SAME_START_CEILING,
+                  window: str | None = WINDOW_CEILING) -> str:
     """The terminal's short form of :func:`control_table`, within 100 columns for the
     default comparison: per controller the whole episode's cost (median over seeds) and
     its paired ratio to ``ceiling``, the cost from the end of the adaptive loop's start
     and its ratio to ``same_start`` (for the loops that fly that start), the stationary
-    cost from 100 s (no ceiling bounds it), how many seeds were judged stable (the
+    cost from 100 s and its ratio to ``window``, how many seeds were judged stable (the
     other verdicts are in ``table.md``) and the fallback's share from 60 s, aligned in
     plain text."""
-    rows = [("controller", "cost", "/ceiling", f"from {SAME_START_S:g}s", "/start", "from 100s",
-             "verdict", "fallback")]
+    rows = [("controller", "cost", "/ceil", f"from {SAME_START_S:g}s", "/start", "from 100s",
+             "/window", "stable", "fallback")]
     for name, row in table.items():
         fallback = row["median"]["fallback_share_after_60s"]
         ratios = [paired_cost_ratio(table, name, ref, key) if ref is not None
                   and (key == "cost" or flies_the_start(name)) else None
-                  for ref, key in ((ceiling, "cost"), (same_start, "cost_after_start"))]
+                  for ref, key in ((ceiling, "cost"), (same_start, "cost_after_start"),
+                                   (window, "cost_after_100s"))]
         rows.append((name, f"{row['median']['cost']:.3g}",
                      "-" if ratios[0] is None else f"{ratios[0]:.2f}",
                      f"{row['median']['cost_after_start']:.3g}",
                      "-" if ratios[1] is None else f"{ratios[1]:.2f}",
                      f"{row['median']['cost_after_100s']:.3g}",
+                     "-" if ratios[2] is None else f"{ratios[2]:.3g}",
                      # how many were stable; the other verdicts are in table.md
-                     f"{row['verdicts'].get('stable', 0)}/{row['runs']} stable",
+                     f"{row['verdicts'].get('stable', 0)}/{row['runs']}",
                      "-" if not np.isfinite(fallback) or not name.startswith("adaptive LQG")
                      else f"{100 * fallback:.0f} %"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) if i in (0, 6) else c.rjust(w)
+    return "\n".join("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
                                for i, (c, w) in enumerate(zip(r, widths, strict=True))).rstrip()
                      for r in rows) + "\n"
 
@@ -518,12 +526,17 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
         to_ceiling = paired_cost_ratio(table, adaptive, CEILING, "cost")
         to_start = paired_cost_ratio(table, adaptive, SAME_START_CEILING, "cost_after_start")
         to_robust = paired_cost_ratio(table, adaptive, robust, "cost")
+        to_window = paired_cost_ratio(table, adaptive, WINDOW_CEILING, "cost_after_100s")
         parts = []
         if to_ceiling is not None:
             parts.append(f"{to_ceiling:.2f} times the ceiling's over the whole episode")
         if to_start is not None:
             parts.append(f"{to_start:.2f} times the same-start ceiling's from "
                          f"{SAME_START_S:g} s (the price of identification)")
+        if to_window is not None:
+            parts.append(f"{to_window:.3g} times the window ceiling's from 100 s (the "
+                         "window's own optimum, which spends the first 100 s bringing the "
+                         "plant to rest)")
         if to_robust is not None:
             parts.append(f"{to_robust:.2f} times the robust fixed design's over the whole "
                          "episode")

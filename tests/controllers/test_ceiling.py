@@ -24,15 +24,19 @@ from controllers import (
     run_episode,
     same_start_ceiling,
     stage_costs,
+    window_ceiling,
 )
 from controllers.harness import SAME_START_S
 from spacecraft_env import ENV_IDS, env_id
 
 
-def _brute_force(a, b, c, q, q_lin, r, x0):
+def _brute_force(a, b, c, q, q_lin, r, x0, w=None, v=None):
     """The optimal inputs and cost of the affine LQ problem by stacking it into one
-    least-squares problem in the inputs (the closed form for a short horizon)."""
+    least-squares problem in the inputs (the closed form for a short horizon); ``w`` and
+    ``v`` weight each step's state and input cost."""
     horizon, n, m = b.shape
+    w = np.ones(horizon) if w is None else w
+    v = np.ones(horizon) if v is None else v
     # x_{k+1} = Phi_k x0 + Gamma_k U + d_k
     phi = np.eye(n)
     gammas, drifts, phis = [], [], []
@@ -46,14 +50,14 @@ def _brute_force(a, b, c, q, q_lin, r, x0):
         phis.append(phi.copy())
         gammas.append(gamma.copy())
         drifts.append(drift.copy())
-    h = np.kron(np.eye(horizon), r)
+    h = np.kron(np.diag(v), r)
     g = np.zeros(horizon * m)
     const = 0.0
-    for phi, gamma, drift in zip(phis, gammas, drifts, strict=True):
+    for wk, phi, gamma, drift in zip(w, phis, gammas, drifts, strict=True):
         free = phi @ x0 + drift
-        h = h + gamma.T @ q @ gamma
-        g = g + gamma.T @ (q @ free - q_lin)
-        const += free @ q @ free - 2 * q_lin @ free
+        h = h + wk * gamma.T @ q @ gamma
+        g = g + wk * gamma.T @ (q @ free - q_lin)
+        const += wk * (free @ q @ free - 2 * q_lin @ free)
     u = -np.linalg.solve(h, g)
     return u.reshape(horizon, m), const + g @ u
 
@@ -77,6 +81,31 @@ def test_finite_horizon_lqr_is_the_optimum_of_the_stacked_problem(rng):
         x = a[k] @ x + b[k] @ u_law[-1] + c[k]
     np.testing.assert_allclose(np.array(u_law), u_best, rtol=1e-9, atol=1e-10)
     np.testing.assert_allclose(x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0, cost_best, rtol=1e-9)
+
+
+def test_finite_horizon_lqr_weighs_each_step_as_told(rng):
+    """A window's cost (state free on the first steps, input nearly free there): the law
+    is the stacked problem's optimum for the same per-step weights."""
+    horizon, n, m = 6, 3, 2
+    a = rng.normal(size=(horizon, n, n)) * 0.7
+    b = rng.normal(size=(horizon, n, m))
+    c = rng.normal(size=(horizon, n))
+    q, q_lin, r = np.diag([1.0, 2.0, 0.5]), rng.normal(size=n), np.diag([0.5, 2.0])
+    w = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    v = np.array([1e-3, 1e-3, 1e-3, 1.0, 1.0, 1.0])
+    x0 = rng.normal(size=n)
+    gains, offsets, p0, p0_lin, kappa0 = finite_horizon_lqr(a, b, c, q, q_lin, r, w, v)
+    u_best, cost_best = _brute_force(a, b, c, q, q_lin, r, x0, w, v)
+    x, u_law = x0.copy(), []
+    for k in range(horizon):
+        u_law.append(-gains[k] @ x + offsets[k])
+        x = a[k] @ x + b[k] @ u_law[-1] + c[k]
+    np.testing.assert_allclose(np.array(u_law), u_best, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0, cost_best, rtol=1e-8)
+    with pytest.raises(ValueError, match=r"input_weights must be \(6,\) finite values > 0"):
+        finite_horizon_lqr(a, b, c, q, q_lin, r, w, np.zeros(horizon))
+    with pytest.raises(ValueError, match="stage_weights must be"):
+        finite_horizon_lqr(a, b, c, q, q_lin, r, -w)
 
 
 def test_a_long_horizon_gives_the_stationary_lqr_gain_at_its_start():
@@ -133,6 +162,28 @@ def test_no_controller_beats_the_ceiling(scenario, task):
             cost = _cost(env, make(env), seed)
             assert cost >= 0.98 * ceiling, (name, seed, cost / ceiling)
         env.close()
+
+
+@pytest.mark.parametrize("scenario", ["paddle_rotation", "docking"])
+def test_no_controller_beats_the_window_ceiling_over_its_window(scenario):
+    """The window ceiling's plan of the cost from 20 s on (40 s episodes): every fixed
+    controller and the whole-episode ceiling cost at least 0.98 times its cost over that
+    window, and it pays for it before the window."""
+    env = gym.make(env_id(scenario), max_episode_steps=400)
+
+    def costs(controller):
+        traj = run_episode(env, controller, seed=2)
+        stage = stage_costs(traj, env.unwrapped.model)[:, :4].sum(axis=1)
+        return stage[traj.time >= 20.0].mean(), stage.mean()
+
+    window, whole = costs(window_ceiling(env, from_s=20.0))
+    assert window_ceiling(env).name == "window ceiling"
+    ceiling = costs(ClairvoyantLQG(env))
+    assert ceiling[0] > 2 * window and ceiling[1] < whole
+    for name, make in FIXED.items():
+        cost = costs(make(env))[0]
+        assert cost >= 0.98 * window, (name, cost / window)
+    env.close()
 
 
 def test_the_adaptive_loop_and_its_same_start_ceiling_stay_above_the_ceiling():
@@ -209,6 +260,10 @@ def test_the_ceiling_validates_its_arguments():
         ClairvoyantLQG(env, start=PD(env), start_steps=-1)
     with pytest.raises(TypeError, match="start must be a controller"):
         ClairvoyantLQG(env, start=object(), start_steps=3)
+    with pytest.raises(ValueError, match="window_start_steps must be an integer >= 0"):
+        ClairvoyantLQG(env, window_start_steps=-2)
+    with pytest.raises(ValueError, match="from_s must be a finite time >= 0"):
+        window_ceiling(env, from_s=float("nan"))
     ctrl = ClairvoyantLQG(env)
     obs, _ = env.reset(seed=0)
     with pytest.raises(ValueError, match="needs the env's info dict"):
