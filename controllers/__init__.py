@@ -56,7 +56,7 @@ from controllers.ceiling import (
     same_start_ceiling,
     window_ceiling,
 )
-from controllers.excitation import BinaryExcitation
+from controllers.excitation import BinaryExcitation, MotionNeed
 from controllers.features import (
     IdentifiedModelFeatures,
     OracleModelFeatures,
@@ -111,6 +111,7 @@ __all__ = [
     "IdentifiedModelFeatures",
     "LQGLaw",
     "LQRWeights",
+    "MotionNeed",
     "OracleLQG",
     "OracleLQR",
     "OracleModelFeatures",

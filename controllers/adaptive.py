@@ -35,7 +35,12 @@ Every control step k (docs/design/control.md):
    takes the identified design off for :data:`SUPERVISOR_HOLD_S` when the measured envelope grows
    (:meth:`AdaptiveLQG._supervise`): a stale model can pass every test on
    itself;
-4. a designed excitation (:class:`controllers.excitation.BinaryExcitation`)
+4. identification in proportion to need: until the sensors show an attitude
+   error or rate beyond their noise (:class:`controllers.excitation.MotionNeed`)
+   the robust fallback flies with no excitation, since a model could improve
+   nothing (held at rest the loop flies the robust design's torques, where the
+   warm-up's excitation cost about 1000 times as much); then a designed
+   excitation (:class:`controllers.excitation.BinaryExcitation`)
    is added only when information is needed (dual control): the warm-up's
    budget while the identifier warms up (at the identifier's
    ``warmup_amplitude`` if it states one, else 1 N m), and afterwards an
@@ -84,7 +89,7 @@ from controllers.acceptance import (
 )
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
-from controllers.excitation import BinaryExcitation, warmup_excitation
+from controllers.excitation import NEED_SIGMAS, BinaryExcitation, MotionNeed, warmup_excitation
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
@@ -137,10 +142,11 @@ FALLBACK_WARNING_S = 60.0
 #: test's reason for the step's rejected gain (:data:`controllers.acceptance.REJECTION_REASONS`),
 #: a re-design that failed ("failed design"), the supervisor's hold after a growing
 #: envelope ("growing"), the bridge after a detected change ("bridge"), an accepted
-#: gain waiting out the dwell time ("dwell"), no identified model yet ("no model") or no
-#: usable state estimate on it ("no state").
+#: gain waiting out the dwell time ("dwell"), no identified model yet ("no model"), no
+#: usable state estimate on it ("no state"), or no motion beyond the sensors' noise yet
+#: ("at rest": nothing for the identified design to improve, :class:`MotionNeed`).
 FALLBACK_CAUSES = (*REJECTION_REASONS, "failed design", "growing", "bridge", "dwell",
-                   "no model", "no state")
+                   "no model", "no state", "at rest")
 
 
 class FallbackWarning(UserWarning):
@@ -241,6 +247,14 @@ class AdaptiveLQG(_LQGController):
         attitude and rate states read from the sensors (needs an identifier
         with :attr:`identifiers.OnlineIdentifier.rigid_states`, else as
         "filter"), which feeds the sensor noise through the rate gain.
+    need_sigmas : float or None
+        Identification in proportion to need (:class:`controllers.excitation.MotionNeed`):
+        until a sample shows an attitude error or rate beyond this many standard
+        deviations of the sensor's specified noise (default :data:`NEED_SIGMAS`), the
+        robust fallback flies, no excitation is added and no identified design flies
+        (fallback cause "at rest"); a spacecraft held at rest is not shaken. None:
+        identify from the first sample whatever the motion (the behaviour before
+        2026-12-07).
 
     Examples
     --------
@@ -280,8 +294,10 @@ class AdaptiveLQG(_LQGController):
                  rigid_state: str = "kalman", uncertainty_tolerance: float = 0.1,
                  excitation_budget: float = 0.1,
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
-                 warmup_controller: Controller | None = None) -> None:
+                 warmup_controller: Controller | None = None,
+                 need_sigmas: float | None = NEED_SIGMAS) -> None:
         super().__init__(env, weights)
+        self.need = None if need_sigmas is None else MotionNeed(env, need_sigmas)
         if identifier is None:
             identifier = closed_loop_identifier(env)
         if rigid_state not in ("kalman", "filter", "measured"):
@@ -336,6 +352,8 @@ class AdaptiveLQG(_LQGController):
         if self.warmup_controller is not self.fallback:
             self.warmup_controller.reset(seed)
         self.excitation.reset(seed)
+        if self.need is not None:
+            self.need.reset()
         self.gain: np.ndarray | None = None
         self._k = 0
         self._bridge_until = 0
@@ -354,6 +372,7 @@ class AdaptiveLQG(_LQGController):
         self._flying = False
         self._flying_gain: np.ndarray | None = None
         self._warm = False             # the identifier has had a model: the warm-up is over
+        self._needed = self.need is None       # motion beyond the noise seen (MotionNeed)
         self._excite_until: float | None = None     # end of the dual excitation's window
         self._switched = -self.dwell_steps
         self._peaks: deque = deque(maxlen=SUPERVISOR_WINDOWS)
@@ -547,6 +566,8 @@ class AdaptiveLQG(_LQGController):
 
     def _fallback_cause(self, held: bool, bridging: bool, usable: bool, wanted: bool) -> str:
         """Why the fallback flies this step: a key of :data:`FALLBACK_CAUSES`."""
+        if not self._needed:
+            return "at rest"
         if held:
             return "growing"
         if bridging:
@@ -562,7 +583,7 @@ class AdaptiveLQG(_LQGController):
         """One :class:`FallbackWarning` when the identified design has not flown a single
         step in the :data:`FALLBACK_WARNING_S` seconds after the warm-up's judging start."""
         after = self.stats["steps_after_60s"]
-        if (not self._fallback_warned and after * self.dt >= FALLBACK_WARNING_S
+        if (not self._fallback_warned and self._needed and after * self.dt >= FALLBACK_WARNING_S
                 and self.stats["fallback_steps_after_60s"] == after):
             self._fallback_warned = True
             reasons = ", ".join(f"{reason} {count}" for reason, count in sorted(
@@ -628,13 +649,20 @@ class AdaptiveLQG(_LQGController):
         if not np.isfinite(obs).all():
             self.stats["nonfinite_observations"] += 1
         y = obs[self._meas_obs]
+        ref = self._reference(info)
+        was_needed = self._needed
+        self._needed = self.need is None or self.need(obs, ref)
         fallback_action = self.fallback.act(obs, info)     # keeps its filter current
         model = self.identifier.model
         if not self._warm and model is not None:
             self._warm = True
             self._open_excitation_window()
+        elif self._warm and self._needed and not was_needed:
+            self._open_excitation_window()           # motion, after a model from rest
         if not self._warm and self.warmup_controller is not self.fallback:
-            fallback_action = self.warmup_controller.act(obs, info)
+            warmup_action = self.warmup_controller.act(obs, info)
+            if self._needed:
+                fallback_action = warmup_action      # at rest the robust design flies
         self._watch_events()
         x = None
         self._reason = "no model" if model is None else None
@@ -648,11 +676,11 @@ class AdaptiveLQG(_LQGController):
             agreement = self._agreement(y, model, x)
             self.gain = self._design(model, agreement)
         bridging = self._k < self._bridge_until
-        ref = self._reference(info)
         self._supervise(y, ref)
         held = self._k < self._hold_until
         usable = x is not None and np.isfinite(x).all()
-        wanted = self.gain is not None and usable and not bridging and not held
+        wanted = (self.gain is not None and usable and not bridging and not held
+                  and self._needed)
         if wanted:
             self._flying_gain = self.gain
         # dwell time: the loop changes between the identified design and the fallback at
@@ -685,7 +713,7 @@ class AdaptiveLQG(_LQGController):
                                    bool((np.abs(torque) > self.max_torque).any()))
         if self._k % 10 == 0:
             self._update_excitation()
-        excitation = self.excitation()
+        excitation = self.excitation(self._needed)
         self.last_excitation = excitation
         if np.any(excitation):
             self.stats["excited_steps"] += 1

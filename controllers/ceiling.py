@@ -54,8 +54,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controllers.base import Controller
-from controllers.baselines import PD, _EnvController
-from controllers.excitation import BinaryExcitation, warmup_excitation
+from controllers.baselines import PD, RobustLQG, _EnvController, _LQGController
+from controllers.excitation import BinaryExcitation, MotionNeed, warmup_excitation
 from controllers.harness import SCORED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
@@ -210,7 +210,11 @@ class ExcitedStart(Controller):
 
     Its torque is the controller's (saturated, as it sends it) plus the
     excitation's, saturated again: what :class:`controllers.AdaptiveLQG`
-    applies while its identifier warms up.
+    applies while its identifier warms up. With ``need`` and ``idle``, until
+    ``need`` has seen motion the ``idle`` controller flies without excitation
+    (the adaptive loop's robust fallback at rest); both controllers act every
+    step, so each keeps its filter current, and ``idle`` is told the torque
+    applied.
 
     Parameters
     ----------
@@ -220,27 +224,50 @@ class ExcitedStart(Controller):
         Added to it (reset with the episode's seed).
     max_torque : float
         Torque of a unit action, N m (the env's ``max_torque``).
+    need : MotionNeed, optional
+        Whether there is motion to identify (default: always).
+    idle : Controller, optional
+        Flies while ``need`` has seen none (required with ``need``).
     """
 
     name = "excited start"
 
     def __init__(self, controller: Controller, excitation: BinaryExcitation,
-                 max_torque: float) -> None:
+                 max_torque: float, need: MotionNeed | None = None,
+                 idle: Controller | None = None) -> None:
+        if (need is None) != (idle is None):
+            raise ValueError("ExcitedStart takes need and idle together (or neither)")
         self.controller = controller
         self.excitation = excitation
         self.max_torque = float(max_torque)
+        self.need = need
+        self.idle = idle
         self.last_excitation = np.zeros(3)
 
     def reset(self, seed: int | None = None) -> None:
         self.controller.reset(seed)
         self.excitation.reset(seed)
+        if self.need is not None:
+            self.need.reset()
+            self.idle.reset(seed)
         self.last_excitation = np.zeros(3)
 
     def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
+        needed = True
+        if self.need is not None:
+            idle_action = np.asarray(self.idle.act(obs, info), dtype=float)
+            reference = self.idle._reference(info) if hasattr(self.idle, "_reference") \
+                else np.asarray((info or {}).get("reference", np.zeros(3)), dtype=float)
+            needed = self.need(obs, reference)
         action = np.asarray(self.controller.act(obs, info), dtype=float)
-        self.last_excitation = self.excitation()
+        if not needed:
+            action = idle_action
+        self.last_excitation = self.excitation(needed)
         torque = action * self.max_torque + self.last_excitation
-        return np.minimum(np.maximum(torque / self.max_torque, -1.0), 1.0).astype(np.float32)
+        applied = np.minimum(np.maximum(torque / self.max_torque, -1.0), 1.0).astype(np.float32)
+        if isinstance(self.idle, _LQGController):
+            self.idle.applied_action = applied
+        return applied
 
 
 def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
@@ -248,9 +275,11 @@ def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
 
     The loop's warm-up PD with the binary excitation of its identifier's warm-up
     (:func:`controllers.closed_loop_identifier`'s ``warmup_amplitude`` N m per axis
-    for its ``warmup`` samples, then none), seeded as the loop seeds it, until the
-    identifier's first model can fly: the warm-up plus the first fit's latency
-    (:data:`controllers.LOOP_FIT_TIMING`; 40 s on the registered ids).
+    for its ``warmup`` samples, then none), seeded as the loop seeds it, or, until
+    the sensors show motion beyond their noise (:class:`MotionNeed`), its robust
+    fallback without excitation, until the identifier's first model can fly: the
+    warm-up plus the first fit's latency (:data:`controllers.LOOP_FIT_TIMING`; 40 s on
+    the registered ids).
 
     Parameters
     ----------
@@ -268,7 +297,8 @@ def adaptive_start(env: gym.Env) -> tuple[ExcitedStart, int]:
     excitation = warmup_excitation(identifier)
     timing = getattr(identifier, "fit_timing", None)
     latency = 0 if timing is None else timing.latency_samples(float(env.unwrapped.model.dt))
-    return (ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque)),
+    return (ExcitedStart(PD(env), excitation, float(env.unwrapped.max_torque),
+                         need=MotionNeed(env), idle=RobustLQG(env)),
             excitation.warmup_steps + latency)
 
 
