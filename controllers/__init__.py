@@ -63,6 +63,7 @@ from controllers.features import (
     PhysicalFeatures,
     PrivilegedFeatures,
 )
+from controllers.gyro_bias import FaultWarning, GyroBiasMonitor
 from controllers.harness import (
     ComparisonInterrupted,
     Trajectory,
@@ -106,8 +107,10 @@ __all__ = [
     "EstimatedFeatures",
     "ExcitedStart",
     "FallbackWarning",
+    "FaultWarning",
     "FixedLQG",
     "GainAcceptance",
+    "GyroBiasMonitor",
     "IdentifiedModelFeatures",
     "LQGLaw",
     "LQRWeights",

@@ -64,7 +64,8 @@ re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
 failed designs and non-finite observations, the steps (and fallback steps)
 from :data:`controllers.harness.JUDGED_FROM_S` with the cause of each of those
 fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), the
-identifier's fits (``fits``: its ``fit_log``, each fit's latency, CPU time and
+faults it inferred (``faults``: :class:`controllers.gyro_bias.GyroBiasMonitor`'s),
+the identifier's fits (``fits``: its ``fit_log``, each fit's latency, CPU time and
 outcome, for identifiers that fit off the control path), and reports the
 excitation's RMS torque.
 """
@@ -90,6 +91,7 @@ from controllers.acceptance import (
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import NEED_SIGMAS, BinaryExcitation, MotionNeed, warmup_excitation
+from controllers.gyro_bias import GyroBiasMonitor
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
@@ -255,6 +257,12 @@ class AdaptiveLQG(_LQGController):
         (fallback cause "at rest"); a spacecraft held at rest is not shaken. None:
         identify from the first sample whatever the motion (the behaviour before
         2026-12-07).
+    monitor_gyro : bool
+        Run :class:`controllers.gyro_bias.GyroBiasMonitor` on the observations
+        (default True): a gyro bias it declares is reported (a
+        :class:`controllers.gyro_bias.FaultWarning`, ``stats["faults"]``) and
+        subtracted from that gyro before the fallback, the identifier and the law
+        see it; with no fault declared the readings pass untouched.
 
     Examples
     --------
@@ -295,8 +303,9 @@ class AdaptiveLQG(_LQGController):
                  excitation_budget: float = 0.1,
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
                  warmup_controller: Controller | None = None,
-                 need_sigmas: float | None = NEED_SIGMAS) -> None:
+                 need_sigmas: float | None = NEED_SIGMAS, monitor_gyro: bool = True) -> None:
         super().__init__(env, weights)
+        self.gyro_monitor = GyroBiasMonitor(env) if monitor_gyro else None
         self.need = None if need_sigmas is None else MotionNeed(env, need_sigmas)
         if identifier is None:
             identifier = closed_loop_identifier(env)
@@ -354,6 +363,8 @@ class AdaptiveLQG(_LQGController):
         self.excitation.reset(seed)
         if self.need is not None:
             self.need.reset()
+        if self.gyro_monitor is not None:
+            self.gyro_monitor.reset()
         self.gain: np.ndarray | None = None
         self._k = 0
         self._bridge_until = 0
@@ -390,6 +401,8 @@ class AdaptiveLQG(_LQGController):
         # the identifier's fits (off the control path: when each fell due, when its
         # model flew, its CPU time and outcome), for identifiers that fit
         self.stats["fits"] = getattr(self.identifier, "fit_log", [])
+        # the faults the loop inferred (kind, axis, onset, when declared, value)
+        self.stats["faults"] = [] if self.gyro_monitor is None else self.gyro_monitor.faults
         self._reason: str | None = None
 
     # ------------------------------------------------------------ pieces
@@ -646,6 +659,8 @@ class AdaptiveLQG(_LQGController):
         self.stats["steps"] += 1
         self._commit(info)
         obs = self._observation(obs)
+        if self.gyro_monitor is not None:
+            obs = self.gyro_monitor(obs)     # a declared gyro bias subtracted
         if not np.isfinite(obs).all():
             self.stats["nonfinite_observations"] += 1
         y = obs[self._meas_obs]

@@ -1,0 +1,91 @@
+"""The gyro-bias monitor: a bias estimated from the star tracker, declared, dated and
+compensated; nothing declared without one."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from controllers import PD, AdaptiveLQG, FaultWarning, GyroBiasMonitor, run_episode
+from controllers.gyro_bias import SMALLEST_BIAS
+from spacecraft_env import FaultInjection, env_id, parse_fault
+
+BIAS = np.deg2rad(0.01)          # 36 deg/h
+
+
+def _gyro_bias(onset_s: float, axis: int = 1) -> object:
+    return parse_fault(f"sensor_bias,onset={onset_s},group=rate,axis={axis},value={BIAS}")
+
+
+def _monitor_over(env, traj):
+    monitor = GyroBiasMonitor(env)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FaultWarning)
+        for obs in traj.observations:
+            monitor(obs)
+    return monitor
+
+
+@pytest.mark.parametrize("snr_db", [40.0, 20.0, None])
+def test_nothing_is_declared_without_a_bias(snr_db):
+    """A PD slew (rates up to its manoeuvre's) at three noise levels, three seeds."""
+    env = gym.make(env_id("paddle_rotation"), task="slew", snr_db=snr_db,
+                   max_episode_steps=1500)
+    for seed in range(3):
+        monitor = _monitor_over(env, run_episode(env, PD(env), seed=seed))
+        assert monitor.faults == [] and not monitor.compensated.any()
+        # converged to its steady state: the estimate's noise
+        assert np.abs(monitor.bias).max() < max(5 * monitor.bias_std, SMALLEST_BIAS)
+    env.close()
+
+
+def test_a_bias_is_declared_dated_and_subtracted():
+    env = FaultInjection(gym.make(env_id("constant"), max_episode_steps=900),
+                         [_gyro_bias(40.0)])
+    traj = run_episode(env, PD(env), seed=5)
+    monitor = GyroBiasMonitor(env)
+    with pytest.warns(FaultWarning, match="gyro bias on axis 1"):
+        corrected = [monitor(obs) for obs in traj.observations]
+    (fault,) = monitor.faults
+    assert fault["kind"] == "gyro bias" and fault["axis"] == 1
+    assert 40.0 <= fault["detected_s"] <= 50.0          # within 10 s of the onset
+    assert abs(fault["onset_s"] - 40.0) <= 5.0
+    assert monitor.compensated.tolist() == [False, True, False]
+    # converged: the bias is gone from the corrected gyro, the other axes untouched
+    assert monitor.bias[1] == pytest.approx(BIAS, rel=0.1)
+    rate = env.unwrapped.observation_layout.indices("rate")
+    late = np.array(corrected[-200:])[:, rate] - traj.observations[-200:][:, rate]
+    np.testing.assert_allclose(late[:, 1], -monitor.bias[1], rtol=0.2)
+    assert not late[:, [0, 2]].any()
+    env.close()
+
+
+def test_a_missing_sample_only_predicts_and_bad_input_raises():
+    env = gym.make(env_id("constant"), max_episode_steps=20)
+    monitor = GyroBiasMonitor(env)
+    obs, _ = env.reset(seed=0)
+    monitor(obs)
+    out = monitor(np.full_like(obs, np.nan))
+    assert np.isfinite(monitor.bias).all() and np.isnan(out).all()
+    with pytest.raises(ValueError, match="bias_walk must be a finite rate > 0"):
+        GyroBiasMonitor(env, bias_walk=-1.0)
+    env.close()
+
+
+def test_the_loop_reports_a_gyro_bias_and_flies_as_before_without_one():
+    env = FaultInjection(gym.make(env_id("paddle_rotation"), max_episode_steps=600),
+                         [_gyro_bias(20.0, axis=0)])
+    with pytest.warns(FaultWarning, match="gyro bias on axis 0"):
+        traj = run_episode(env, AdaptiveLQG(env), seed=2)
+    (fault,) = traj.controller_stats["faults"]
+    assert fault["axis"] == 0 and fault["detected_s"] - 20.0 <= 10.0
+    clean = gym.make(env_id("paddle_rotation"), max_episode_steps=450)
+    on = run_episode(clean, AdaptiveLQG(clean), seed=2)
+    off = run_episode(clean, AdaptiveLQG(clean, monitor_gyro=False), seed=2)
+    assert on.controller_stats["faults"] == []
+    np.testing.assert_array_equal(on.torque, off.torque)
+    env.close()
+    clean.close()
