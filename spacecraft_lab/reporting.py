@@ -292,7 +292,7 @@ def control_brief(table: dict[str, dict], ceiling: str | None = CEILING,
     for name, row in table.items():
         fallback = row["median"]["fallback_share_after_60s"]
         ratios = [paired_cost_ratio(table, name, ref, key) if ref is not None
-                  and (key == "cost" or flies_the_start(name)) else None
+                  and (key != "cost_after_start" or flies_the_start(name)) else None
                   for ref, key in ((ceiling, "cost"), (same_start, "cost_after_start"),
                                    (window, "cost_after_100s"))]
         rows.append((name, f"{row['median']['cost']:.3g}",
