@@ -127,6 +127,7 @@ class GyroBiasMonitor:
     def reset(self) -> None:
         """A new episode: no estimate, nothing declared."""
         self._theta: np.ndarray | None = None
+        self._last_theta = np.full(3, np.nan)
         self._p = np.broadcast_to(self._prior, (3, 2, 2)).copy()
         self.bias = np.zeros(3)
         self._gyro = np.zeros(3)
@@ -143,7 +144,8 @@ class GyroBiasMonitor:
         Parameters
         ----------
         obs : ndarray
-            The env's observation (NaN entries allowed: that axis predicts only).
+            The env's observation (NaN entries, or an attitude bit-for-bit equal to the
+            last sample's, a held sensor: that axis predicts only).
 
         Returns
         -------
@@ -152,6 +154,10 @@ class GyroBiasMonitor:
         """
         obs = np.array(obs, dtype=float)
         theta, gyro = obs[self._att], obs[self._rate]
+        # a reading bit-for-bit equal to the last is a held or stuck sensor (noise never
+        # repeats): that axis predicts only, so a frozen star tracker is not read as a bias
+        held = theta == self._last_theta
+        self._last_theta = theta.copy()
         if self._theta is None:
             self._theta = np.where(np.isfinite(theta), theta, 0.0)
             self._gyro = np.where(np.isfinite(gyro), gyro, 0.0)
@@ -160,7 +166,7 @@ class GyroBiasMonitor:
             predicted = self._theta + 0.5 * self.dt * (self._gyro + gyro_now) - self.dt * self.bias
             self._gyro = gyro_now
             p = self._a @ self._p @ self._a.T + self._q          # (3, 2, 2), per axis
-            seen = np.isfinite(theta)
+            seen = np.isfinite(theta) & ~held
             gain = p[:, :, 0] / (p[:, 0, 0] + self._r)[:, None]   # (3, 2)
             gain[~seen] = 0.0                                    # a missing sample: predict
             innovation = np.where(seen, theta - predicted, 0.0)

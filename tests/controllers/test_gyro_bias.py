@@ -63,6 +63,18 @@ def test_a_bias_is_declared_dated_and_subtracted():
     env.close()
 
 
+def test_a_stuck_star_tracker_is_not_read_as_a_gyro_bias():
+    """The attitude sensor frozen for 60 s while a PD slews: the held readings are skipped
+    (not an innovation the bias would absorb)."""
+    stuck = parse_fault("stuck_sensor,onset=20,duration=60,group=attitude")
+    env = FaultInjection(gym.make(env_id("paddle_rotation"), task="slew",
+                                  max_episode_steps=1200), [stuck])
+    for seed in range(2):
+        monitor = _monitor_over(env, run_episode(env, PD(env), seed=seed))
+        assert monitor.faults == []
+    env.close()
+
+
 def test_a_missing_sample_only_predicts_and_bad_input_raises():
     env = gym.make(env_id("constant"), max_episode_steps=20)
     monitor = GyroBiasMonitor(env)
