@@ -37,7 +37,7 @@ demo: $(MAIN_STAMP)
 	@start=$$(date +%s); $(BIN)/spacecraft demo --scenario docking --out results/demo; \
 	echo "[demo stage: $$(( $$(date +%s) - start )) s]"
 	@start=$$(date +%s); \
-	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 4 --out results/control; \
+	$(BIN)/spacecraft control --scenario paddle_rotation --seeds 3 --out results/control; \
 	echo "[control stage: $$(( $$(date +%s) - start )) s]"
 
 # the API reference from the numpydoc docstrings (pdoc), into build/api; it needs the main

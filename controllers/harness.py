@@ -848,19 +848,24 @@ def _run_seed(controllers: dict[str, Callable[[Any], Controller]], make_env: Cal
               ) -> dict[str, tuple[dict[str, Any], Trajectory]]:
     """Every controller on one seed, each built fresh on a fresh environment, so the
     result depends on the seed alone (not on which seeds ran before, or where)."""
-    out = {}
-    for name, factory in controllers.items():
-        env = make_env()
-        try:
-            ctrl = factory(env)
-            traj = run_episode(env, ctrl, seed=seed, options=options)
-            metrics = episode_metrics(traj, env.unwrapped.model)
-        finally:
-            env.close()
-        metrics["seed"] = int(seed)
-        metrics["controller_stats"] = traj.controller_stats
-        out[name] = (metrics, traj)
-    return out
+    return {name: _run_one(factory, make_env, seed, options)
+            for name, factory in controllers.items()}
+
+
+def _run_one(factory: Callable[[Any], Controller], make_env: Callable[[], Any], seed: int,
+             options: dict[str, Any] | None) -> tuple[dict[str, Any], Trajectory]:
+    """One controller's episode on one seed, on a fresh environment: its metrics (with
+    the seed and the controller's stats) and trajectory."""
+    env = make_env()
+    try:
+        ctrl = factory(env)
+        traj = run_episode(env, ctrl, seed=seed, options=options)
+        metrics = episode_metrics(traj, env.unwrapped.model)
+    finally:
+        env.close()
+    metrics["seed"] = int(seed)
+    metrics["controller_stats"] = traj.controller_stats
+    return metrics, traj
 
 
 def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Callable[[], Any],
@@ -889,9 +894,10 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
     progress : bool
         Show a progress bar (episodes done, with an estimate of the time left).
     workers : int
-        Processes that run seeds side by side (default 1: this process). Each
-        worker runs its episodes with single-threaded BLAS, as the serial run
-        does.
+        Processes that run episodes side by side (default 1: this process): each
+        controller's episode on each seed is one task, so a slow controller does not
+        hold its seed's others back. Each worker runs its episodes with
+        single-threaded BLAS, as the serial run does.
 
     Returns
     -------
@@ -940,15 +946,18 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
                     results[seed] = _run_seed(controllers, make_env, seed, options)
                     bar.update()
             else:
-                pool = ProcessPoolExecutor(min(workers, len(seeds)),
+                tasks = [(seed, name) for seed in seeds for name in controllers]
+                pool = ProcessPoolExecutor(min(workers, len(tasks)),
                                            mp_context=multiprocessing.get_context("spawn"),
                                            initializer=exit_with_parent,
                                            initargs=(1.0, os.getpid()))
-                futures = {pool.submit(_run_seed, controllers, make_env, seed, options): seed
-                           for seed in seeds}
+                futures = {pool.submit(_run_one, controllers[name], make_env, seed, options):
+                           (seed, name) for seed, name in tasks}
                 for future in as_completed(futures):
-                    results[futures[future]] = future.result()
-                    bar.update()
+                    seed, name = futures[future]
+                    results.setdefault(seed, {})[name] = future.result()
+                    if len(results[seed]) == len(controllers):
+                        bar.update()
     except KeyboardInterrupt:
         if pool is not None:
             for proc in list(getattr(pool, "_processes", {}).values()):
@@ -956,7 +965,7 @@ def compare(controllers: dict[str, Callable[[Any], Controller]], make_env: Calla
             pool.shutdown(wait=False, cancel_futures=True)
             pool = None
         done = 0                       # the first seeds that all finished
-        while done < len(seeds) and seeds[done] in results:
+        while done < len(seeds) and len(results.get(seeds[done], {})) == len(controllers):
             done += 1
         table, runs = _collect(controllers, [results[s] for s in seeds[:done]])
         raise ComparisonInterrupted(table if done else {}, runs if done else {},
