@@ -62,6 +62,15 @@ def _brute_force(a, b, c, q, q_lin, r, x0, w=None, v=None):
     return u.reshape(horizon, m), const + g @ u
 
 
+def _flown(gains, offsets, a, b, c, x0):
+    """The inputs of the law ``u_k = -K_k x_k + f_k`` flown on the affine system from x0."""
+    x, inputs = x0.copy(), []
+    for k in range(len(gains)):
+        inputs.append(-gains[k] @ x + offsets[k])
+        x = a[k] @ x + b[k] @ inputs[-1] + c[k]
+    return np.array(inputs)
+
+
 def test_finite_horizon_lqr_is_the_optimum_of_the_stacked_problem(rng):
     horizon, n, m = 7, 4, 2
     a = rng.normal(size=(horizon, n, n)) * 0.6
@@ -75,11 +84,8 @@ def test_finite_horizon_lqr_is_the_optimum_of_the_stacked_problem(rng):
     gains, offsets, p0, p0_lin, kappa0 = finite_horizon_lqr(a, b, c, q, q_lin, r)
     u_best, cost_best = _brute_force(a, b, c, q, q_lin, r, x0)
     # the feedback law flown from x0 gives the stacked problem's inputs and cost
-    x, u_law = x0.copy(), []
-    for k in range(horizon):
-        u_law.append(-gains[k] @ x + offsets[k])
-        x = a[k] @ x + b[k] @ u_law[-1] + c[k]
-    np.testing.assert_allclose(np.array(u_law), u_best, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(_flown(gains, offsets, a, b, c, x0), u_best, rtol=1e-9,
+                               atol=1e-10)
     np.testing.assert_allclose(x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0, cost_best, rtol=1e-9)
 
 
@@ -96,11 +102,8 @@ def test_finite_horizon_lqr_weighs_each_step_as_told(rng):
     x0 = rng.normal(size=n)
     gains, offsets, p0, p0_lin, kappa0 = finite_horizon_lqr(a, b, c, q, q_lin, r, w, v)
     u_best, cost_best = _brute_force(a, b, c, q, q_lin, r, x0, w, v)
-    x, u_law = x0.copy(), []
-    for k in range(horizon):
-        u_law.append(-gains[k] @ x + offsets[k])
-        x = a[k] @ x + b[k] @ u_law[-1] + c[k]
-    np.testing.assert_allclose(np.array(u_law), u_best, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(_flown(gains, offsets, a, b, c, x0), u_best, rtol=1e-7,
+                               atol=1e-9)
     np.testing.assert_allclose(x0 @ p0 @ x0 - 2 * p0_lin @ x0 + kappa0, cost_best, rtol=1e-8)
     with pytest.raises(ValueError, match=r"input_weights must be \(6,\) finite values > 0"):
         finite_horizon_lqr(a, b, c, q, q_lin, r, w, np.zeros(horizon))
