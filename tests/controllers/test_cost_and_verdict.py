@@ -354,3 +354,26 @@ def test_acceptance_judges_a_handed_back_gain_again_only_for_the_same_model():
     assert judge.check(unstable, b, c, gain, *args) == GainAcceptance().check(
         unstable, b, c, gain, *args) == "unstable"
     assert judge.check(a, b, c, gain, *args) is None
+
+
+def test_the_verdict_on_a_biased_star_tracker_is_the_true_attitudes():
+    """A constant 2 deg star-tracker bias on roll: the loop holds the measured attitude on
+    target, so the spacecraft sits 2 deg off. The verdict reads the true state ("offset"),
+    not the sensor, which says the loop is on target; a 0.2 deg bias stays "stable"."""
+    from controllers import RobustLQG, episode_metrics, run_episode
+    from spacecraft_env import FaultInjection, env_id, parse_fault
+
+    for bias_deg, verdict in ((2.0, "offset"), (0.2, "stable")):
+        fault = parse_fault(f"sensor_bias,onset=0,group=attitude,axis=0,"
+                            f"value={np.deg2rad(bias_deg)}")
+        env = FaultInjection(gym.make(env_id("constant"), task="regulation",
+                                      max_episode_steps=1500), [fault])
+        traj = run_episode(env, RobustLQG(env), seed=0)
+        metrics = episode_metrics(traj, env.unwrapped.model)
+        att = env.unwrapped.observation_layout.indices("attitude")
+        measured = np.rad2deg(traj.observations[-100:, att[0]] - traj.reference[-100:, 0])
+        true = np.rad2deg(traj.states[-100:, 0] - traj.reference[-100:, 0])
+        assert abs(measured.mean()) < 0.05                      # on target, by its sensor
+        assert true.mean() == pytest.approx(-bias_deg, abs=0.05)  # off by the bias, in truth
+        assert metrics["verdict"] == verdict
+        env.close()
