@@ -25,6 +25,7 @@ import os
 import sys
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,9 +52,9 @@ FLOWN = ("adaptive LQG", "oracle LQG", "robust LQG")
 SCENARIOS = ("paddle_rotation", "docking")
 
 
-def _late_costs(runs: list, model_env) -> list[float]:
-    """Each trajectory's mean stage cost from :data:`JUDGED_FROM_S` (inf if it crashed)."""
-    model = model_env.unwrapped.model
+def _late_costs(runs: list, model: Any) -> list[float]:
+    """Each trajectory's mean stage cost from :data:`JUDGED_FROM_S` (inf if it crashed),
+    on the scenario's truth ``model`` (the faults strike the env, not the model)."""
     out = []
     for traj in runs:
         if traj.terminated or not np.isfinite(traj.states).all():
@@ -76,9 +77,12 @@ def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
     loop = {"adaptive LQG": factories["adaptive LQG"]}
     for scenario in SCENARIOS:
         clean_env = partial(_make_env, env_id(scenario), (), {})
-        table, runs = compare(loop, clean_env, list(range(seeds)), progress=True,
-                              workers=workers)
-        clean = _late_costs(runs["adaptive LQG"], clean_env())
+        env = clean_env()
+        model = env.unwrapped.model
+        env.close()
+        _, runs = compare(loop, clean_env, list(range(seeds)), progress=True,
+                          workers=workers)
+        clean = _late_costs(runs["adaptive LQG"], model)
         for label, spec in FAULTS.items():
             fault = parse_fault(spec)
             make_env = partial(_make_env, env_id(scenario), (fault,), {})
@@ -87,7 +91,7 @@ def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
             row = {"clean": clean}
             for name in FLOWN:
                 row[name] = {
-                    "late": _late_costs(runs[name], make_env()),
+                    "late": _late_costs(runs[name], model),
                     "stable": [m["verdict"] == "stable" for m in table[name]["per_seed"]],
                     "verdict": [m["verdict"] for m in table[name]["per_seed"]]}
             row["declared"] = [_declared(m) for m in table["adaptive LQG"]["per_seed"]]
