@@ -71,7 +71,7 @@ from controllers import (
 from controllers.baselines import process_noise
 from controllers.harness import SCORED_FROM_S
 from identifiers import CLOSED_LOOP_SETTINGS, Resonator
-from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.modal.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_env import DEFAULT_SNR_DB, env_id
 from spacecraft_lab.control import SCENARIO_NAMES, env_kwargs_for
 

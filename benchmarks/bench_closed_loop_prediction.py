@@ -63,7 +63,7 @@ from identifiers import (
     relative_gain_error,
     rigid_body_gain,
 )
-from identifiers.structured.modal_basis import Resonator
+from identifiers.core.modal_basis import Resonator
 from spacecraft_env import DEFAULT_SNR_DB, env_id
 from spacecraft_lab.control import env_kwargs_for
 from spacecraft_lab.identification import truth_sequence

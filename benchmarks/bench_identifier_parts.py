@@ -39,11 +39,11 @@ from collections.abc import Callable
 import numpy as np
 from bench_identifiers import bare_rls_seconds
 
+import identifiers.core.change_detection as change_detection
 import identifiers.core.data_monitor as data_monitor
 import identifiers.core.kalman as kalman
-import identifiers.structured.change_detection as change_detection
-import identifiers.structured.modal_tracker as modal_tracker
-import identifiers.structured.rigid_flexible as rigid_flexible
+import identifiers.modal.modal_tracker as modal_tracker
+import identifiers.modal.rigid_flexible as rigid_flexible
 from identifiers import CLOSED_LOOP_SETTINGS, add_measurement_noise, identification_inputs
 from spacecraft_conventions import single_threaded_blas
 from spacecraft_env import FlexibleSpacecraftModel, ets8_parameters

@@ -29,9 +29,9 @@ import time
 import gymnasium as gym
 import numpy as np
 
-import identifiers.structured.scheduled_identifier as scheduled_module
+import identifiers.physical.scheduled_identifier as scheduled_module
 from controllers import AdaptiveLQG, LQRWeights, episode_metrics, run_episode, scheduled_identifier
-from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
+from identifiers.physical.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_lab.control import env_id, env_kwargs_for
 
 

@@ -29,19 +29,27 @@ Streaming identifiers share one API: ``update(u, y)`` per sample,
 * :class:`WindowedPBSID`: batch PBSID refitted on a sliding window.
 * :func:`pbsid`: offline batch PBSID.
 
-The package has two families over a small core, and imports run one way
-(``core`` <- ``subspace`` <- ``structured`` <- the modules at the top):
+The package has four families over a small core, and imports run one way
+(``core`` <- ``subspace`` <- ``modal``, ``physical``, ``structured`` <- the
+modules at the top; the three structure-aware families never import each other):
 
 * :mod:`identifiers.core`: what every method uses: the streaming base class
   (:class:`OnlineIdentifier`) composed of its sample guard
   (:mod:`identifiers.core.screening`) and its health guard
   (:mod:`identifiers.core.rollback`), the one RLS primitive, the models,
-  the Kalman predictor, the health report and the data monitor;
-* :mod:`identifiers.subspace`: the predictor-based subspace methods
+  the Kalman predictor, the health report and the data monitor; and what the
+  structure-aware families share: the modal filter bank, the rigid-body gain,
+  the change tests and the filter on an identified model;
+* :mod:`identifiers.subspace` (black-box): the predictor-based subspace methods
   (recursive, sliding-window and batch PBSID) and their shared stages;
-* :mod:`identifiers.structured`: the structure-aware identifier
-  (:class:`RigidFlexibleIdentifier`) and its parts: the modal filter bank,
-  the mode search and tracker, the rigid-body gain, the change tests;
+* :mod:`identifiers.modal`: the rigid-flexible identifier
+  (:class:`RigidFlexibleIdentifier`) and its parts: the modal regression, the
+  mode search and tracker, the exported model;
+* :mod:`identifiers.physical`: physical models fitted by output error and held
+  (:class:`PhysicalFitIdentifier`, the drive-scheduled
+  :class:`ScheduledPhysicalIdentifier`);
+* :mod:`identifiers.structured`: the structure-aware RPBSID
+  (:class:`StructuredRPBSID`): the paper's RPBSID with the rigid body known;
 * :mod:`identifiers.defaults` (the recommended settings) and
   :mod:`identifiers.signals` (test inputs and noise) and
   :mod:`identifiers.evaluation` (predictions and scores).
@@ -50,11 +58,14 @@ Everything public is importable from ``identifiers`` itself.
 """
 
 from identifiers.core.background import FIT_OUTCOMES, FitTiming
+from identifiers.core.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
 from identifiers.core.fit_jobs import FitCancelled, cancel_fits, cancellation_point
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
+from identifiers.core.modal_basis import ModalFilterBank, Resonator
 from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
 from identifiers.core.online import OnlineIdentifier
+from identifiers.core.rigid_gain import RigidGainEstimate
 from identifiers.core.rls import RecursiveLeastSquares
 from identifiers.defaults import (
     CLOSED_LOOP_SETTINGS,
@@ -75,19 +86,16 @@ from identifiers.evaluation import (
     unstable_share,
     vaf,
 )
+from identifiers.modal.modal_discovery import discover_resonators, merge_resonators
+from identifiers.modal.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.physical.physical_fit import PhysicalFit, fit_physical_model
+from identifiers.physical.physical_identifier import PhysicalFitIdentifier
+from identifiers.physical.physical_model import PhysicalModel
+from identifiers.physical.scheduled_fit import ScheduledFit, fit_scheduled_model
+from identifiers.physical.scheduled_identifier import ScheduledPhysicalIdentifier
+from identifiers.physical.scheduled_model import ScheduledPhysicalModel
 from identifiers.signals import add_measurement_noise, identification_inputs, paper_test_inputs
-from identifiers.structured.change_detection import ChangeEvent, InnovationCUSUM, RegressionGLR
-from identifiers.structured.modal_basis import ModalFilterBank, Resonator
-from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
-from identifiers.structured.physical_fit import PhysicalFit, fit_physical_model
-from identifiers.structured.physical_identifier import PhysicalFitIdentifier
-from identifiers.structured.physical_model import PhysicalModel
 from identifiers.structured.rigid_block import RigidBlock
-from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
-from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.scheduled_fit import ScheduledFit, fit_scheduled_model
-from identifiers.structured.scheduled_identifier import ScheduledPhysicalIdentifier
-from identifiers.structured.scheduled_model import ScheduledPhysicalModel
 from identifiers.structured.structured_rpbsid import StructuredRPBSID
 from identifiers.subspace.batch import PBSIDResult, pbsid
 from identifiers.subspace.classical import ClassicalRPBSID

@@ -3,7 +3,7 @@
 Everything that needs "the identifier we recommend" (the adaptive
 controller, the RL features wrapper, the experiments) calls
 :func:`default_identifier`. Its settings are the constructor defaults of
-:class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`, written once
+:class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`, written once
 there; :data:`DEFAULT_SETTINGS` lists them for display.
 """
 
@@ -15,7 +15,7 @@ from types import MappingProxyType
 from typing import Any
 
 from identifiers.core.online import OnlineIdentifier
-from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+from identifiers.modal.rigid_flexible import RigidFlexibleIdentifier
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["CLOSED_LOOP_SETTINGS", "DEFAULT_SETTINGS", "STRUCTURED_CLOSED_LOOP_SETTINGS",
@@ -79,13 +79,13 @@ def default_identifier(layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
         Sample time, s.
     **options
         Overrides of :data:`DEFAULT_SETTINGS`, i.e. any keyword of
-        :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` (e.g.
+        :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier` (e.g.
         ``prior=`` a nominal structural model's modes).
 
     Returns
     -------
     OnlineIdentifier
-        A new :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`.
+        A new :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`.
 
     Examples
     --------

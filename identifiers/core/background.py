@@ -2,7 +2,7 @@
 
 A flight computer that samples at 10 Hz cannot stop its loop for a fit of
 seconds. :class:`BackgroundFits` is the part of an identifier that fits
-(:class:`identifiers.structured.warmup_fit.WarmupFit`'s hosts) which, when a
+(:class:`identifiers.physical.warmup_fit.WarmupFit`'s hosts) which, when a
 fit falls due at sample ``T``, forks the identifier (a copy that shares the
 record's samples), runs the fit on the fork in a worker thread and goes on
 with the model it holds. The fit's result becomes usable at the sample its

@@ -144,7 +144,7 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
         reset, a data gap. An identifier that can carry its estimates over
         keeps them and restarts only what describes the old record's signals
         (past windows, filter states, the state estimate).
-        :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` does;
+        :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier` does;
         this default forgets everything (:meth:`reset`), because the
         past-window methods also keep data windows and bases built from the
         old record.

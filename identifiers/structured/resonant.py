@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identifiers.structured.modal_basis import MAX_DAMPING
+from identifiers.core.modal_basis import MAX_DAMPING
 
 __all__ = ["REFLECTED_DAMPING", "resonant_part"]
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from identifiers.structured.modal_basis import HighPass, ModalFilterBank
-from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.core.modal_basis import HighPass, ModalFilterBank
+from identifiers.core.rigid_gain import RigidGainEstimate
 from spacecraft_conventions import OutputLayout
 
 __all__ = ["N_RIGID_REGRESSORS", "RIGID_ORDER", "RigidBlock", "highpass_offset"]

@@ -34,12 +34,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import block_diag
 
+from identifiers.core.change_detection import ChangeEvent, RegressionGLR, resolved_variance
 from identifiers.core.checks import positive_float
 from identifiers.core.kalman import KalmanPredictor
+from identifiers.core.modal_basis import HighPass
+from identifiers.core.rigid_gain import RigidGainEstimate
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import ChangeEvent, RegressionGLR, resolved_variance
+from identifiers.core.state_filter import ModelFilter
 from identifiers.structured.flexible_part import FLEXIBLE_METHODS, FlexiblePart
-from identifiers.structured.modal_basis import HighPass
 from identifiers.structured.resonant import resonant_part
 from identifiers.structured.rigid_block import (
     N_RIGID_REGRESSORS,
@@ -47,8 +49,6 @@ from identifiers.structured.rigid_block import (
     RigidBlock,
     highpass_offset,
 )
-from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.state_filter import ModelFilter
 from identifiers.subspace.improved import ImprovedRPBSID
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
@@ -94,7 +94,7 @@ class StructuredRPBSID(ImprovedRPBSID):
         assumes (default 10: it follows the sensors where the model disagrees).
     detect_changes : bool
         Watch the rate rows' errors with a likelihood-ratio test
-        (:class:`identifiers.structured.change_detection.RegressionGLR`) and,
+        (:class:`identifiers.core.change_detection.RegressionGLR`) and,
         at an alarm (a docking), multiply the rigid block's covariance by
         ``discount`` and restart its initial-condition terms.
     min_mode_hz : float, optional

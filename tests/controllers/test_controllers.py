@@ -438,7 +438,7 @@ def test_the_dual_excitation_runs_only_in_its_window_after_the_warm_up_or_a_chan
     """With a tolerance no estimate meets, the excitation wants to run for good: it runs
     for ``excitation_window_s`` after the identifier's first model, then stops; a change
     the identifier reports opens the window again; ``inf`` keeps the old behaviour."""
-    from identifiers.structured.rigid_flexible import RigidFlexibleIdentifier
+    from identifiers.modal.rigid_flexible import RigidFlexibleIdentifier
 
     reported: list = []          # the changes the identifier reports (the loop counts them)
     monkeypatch.setattr(RigidFlexibleIdentifier, "events", property(lambda self: reported))
@@ -859,7 +859,7 @@ def test_a_scheduled_identifier_gets_each_samples_drive_angle():
     np.testing.assert_array_equal(recorded, angles[:-1])
     assert np.ptp(recorded) > 0                      # the paddles turned meanwhile
     # the identifier's rotation about DRIVE_AXIS is the env's paddle rotation
-    from identifiers.structured.scheduled_model import drive_rotation
+    from identifiers.physical.scheduled_model import drive_rotation
     from spacecraft_env.dynamics import rotation_pitch
 
     np.testing.assert_allclose(drive_rotation(DRIVE_AXIS, 1.3), rotation_pitch(1.3), atol=1e-15)

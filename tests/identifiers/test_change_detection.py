@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from identifiers import InnovationCUSUM, RegressionGLR
-from identifiers.structured.change_detection import misfit_confirms_change
+from identifiers.core.change_detection import misfit_confirms_change
 
 THETA = np.array([[1.0, 0.5, -0.3], [0.2, -1.0, 0.4], [0.0, 0.3, 0.8]])
 

@@ -7,7 +7,7 @@ import pytest
 from scipy.linalg import expm
 
 from identifiers import ModalFilterBank, Resonator, discover_resonators, merge_resonators
-from identifiers.structured.modal_basis import HighPass, mode_zoh
+from identifiers.core.modal_basis import HighPass, mode_zoh
 
 
 def test_mode_zoh_is_the_exact_sample_of_the_oscillator():

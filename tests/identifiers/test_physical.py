@@ -13,7 +13,7 @@ from identifiers import (
     StateSpaceModel,
     fit_physical_model,
 )
-from identifiers.structured.physical_model import simulate
+from identifiers.physical.physical_model import simulate
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 
 #: Starting frequencies of the tests' fits (Hz): a coarse grid, for time.

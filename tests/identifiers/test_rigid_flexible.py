@@ -20,7 +20,7 @@ from identifiers import (
     rigid_body_gain,
     unstable_share,
 )
-from identifiers.structured.record_replay import clearly_worse, horizon_errors
+from identifiers.modal.record_replay import clearly_worse, horizon_errors
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_env import FlexibleSpacecraftModel
 from spacecraft_lab.identification import env_record, identification_records

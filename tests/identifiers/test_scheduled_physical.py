@@ -19,12 +19,12 @@ from identifiers import (
     prediction_vaf,
     relative_gain_error,
 )
-from identifiers.structured import warmup_fit
-from identifiers.structured.change_detection import ChangeEvent
-from identifiers.structured.scheduled_fit import noise_floor
-from identifiers.structured.scheduled_identifier import EXPORT_RESOLUTION
-from identifiers.structured.scheduled_model import _cross, drive_rotation, plane_basis
-from identifiers.structured.scheduled_simulation import segments, simulate_scheduled
+from identifiers.core.change_detection import ChangeEvent
+from identifiers.physical import warmup_fit
+from identifiers.physical.scheduled_fit import noise_floor
+from identifiers.physical.scheduled_identifier import EXPORT_RESOLUTION
+from identifiers.physical.scheduled_model import _cross, drive_rotation, plane_basis
+from identifiers.physical.scheduled_simulation import segments, simulate_scheduled
 from spacecraft_conventions import STANDARD_OUTPUTS, OutputLayout
 from spacecraft_lab.identification import drive_angles, env_record
 
@@ -151,7 +151,7 @@ def test_the_fits_jacobian_is_the_forward_difference_of_its_residuals(disturbanc
     """The initial state's (and the disturbance's) columns, which reuse the blocks'
     matrices, equal those of a full re-simulation; every column is the forward
     difference of the residuals."""
-    from identifiers.structured.scheduled_fit import _Problem
+    from identifiers.physical.scheduled_fit import _Problem
 
     truth = _model()
     u, y, angle = _record(truth, 150, np.random.default_rng(4))
@@ -183,7 +183,7 @@ def test_the_gains_derivative_is_its_central_difference(anisotropy, angle):
     parameters (rest inertia's upper triangle, anisotropy, couplings) equals central
     differences of the gain through the model's own constructor, turning and fixed
     appendages both, at ``P = 0`` too (where ``|P|`` has no derivative: 0 both)."""
-    from identifiers.structured.scheduled_uncertainty import (
+    from identifiers.physical.scheduled_uncertainty import (
         _gain_derivative,
         _inertia_parameters,
     )
@@ -494,7 +494,7 @@ def test_the_identifier_refuses_what_it_cannot_identify():
 
 
 def test_a_failed_fit_is_retried_after_half_a_warmup_not_every_sample(monkeypatch):
-    import identifiers.structured.scheduled_identifier as module
+    import identifiers.physical.scheduled_identifier as module
 
     calls = []
 
@@ -515,7 +515,7 @@ def test_the_record_doubles_and_each_refit_starts_from_the_held_model(monkeypatc
     """With ``accumulate`` (the default) the fit is redone when as many samples have come
     as it used, on at most ``max_record`` samples, from the held model and its state at
     the record's first sample; without it the warm-up's fit is held."""
-    import identifiers.structured.scheduled_identifier as module
+    import identifiers.physical.scheduled_identifier as module
     from identifiers import ScheduledFit
 
     truth = _model()
@@ -590,7 +590,7 @@ def test_the_information_a_record_holds_at_a_fits_own_parameters_is_its_covarian
     residual variance (the Jacobian's forward differences at the re-packed parameters
     agree to rounding, which the ill-conditioned ``(J^T J)^-1`` amplifies to about
     1e-3)."""
-    from identifiers.structured.scheduled_information import predicted_gain_covariance
+    from identifiers.physical.scheduled_information import predicted_gain_covariance
 
     truth = _model()
     rng = np.random.default_rng(11)
@@ -622,7 +622,7 @@ def test_a_refit_the_record_cannot_pay_for_is_skipped(monkeypatch, held_variance
     worse is refitted every time (at 80, 160, 280 and 400 samples). A skipped refit
     leaves what a refit the guard keeps out leaves: the next is tried as many samples
     later as the held fit used (every 40 here)."""
-    import identifiers.structured.scheduled_identifier as module
+    import identifiers.physical.scheduled_identifier as module
     from identifiers import ScheduledFit
 
     truth = _model()

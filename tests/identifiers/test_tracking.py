@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 
 from identifiers import default_identifier
+from identifiers.core.modal_basis import ModalFilterBank, Resonator, mode_zoh
+from identifiers.core.modal_kernels import oscillator_zoh, oscillator_zoh_derivatives
 from identifiers.core.residual_statistics import (
     MAX_CORRELATION,
     correlation_time,
     lag_product_step,
     mean_square_step,
 )
+from identifiers.core.rigid_gain import RigidGainEstimate
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.modal_basis import ModalFilterBank, Resonator, mode_zoh
-from identifiers.structured.modal_kernels import oscillator_zoh, oscillator_zoh_derivatives
-from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
-from identifiers.structured.rigid_gain import RigidGainEstimate
+from identifiers.modal.modal_tracker import ModalTracker, TrackerGroup
 from spacecraft_env import FlexibleSpacecraftModel
 
 DT = 0.1

@@ -17,7 +17,7 @@ squares on the simulation error (output error: the torques are known
 exactly, so the regressors carry no noise, in open or closed loop), the
 initial state included and ``D`` solved linearly inside every evaluation
 (variable projection), the modes added one at a time from a frequency grid
-(:mod:`identifiers.structured.physical_fit`).
+(:mod:`identifiers.physical.physical_fit`).
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ import scipy.signal
 from numpy.typing import ArrayLike
 
 from identifiers.core.fit_jobs import cancellation_point
+from identifiers.core.modal_kernels import oscillator_zoh as mode_zoh
 from identifiers.core.model import StateSpaceModel
-from identifiers.structured.modal_kernels import oscillator_zoh as mode_zoh
 from spacecraft_conventions import OutputLayout
 
 __all__ = ["DAMPING_BOUNDS", "FREQUENCY_BOUNDS_HZ", "PhysicalModel", "mode_response", "simulate"]

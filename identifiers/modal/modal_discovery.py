@@ -6,7 +6,7 @@ rates do not carry, and its double integrators make the fit harder) with
 several past windows, keeps the lightly damped oscillatory poles in the
 structural band that every fit agrees on (noise modes move with the
 window), merges modes closer than the record can resolve into one
-:class:`identifiers.structured.modal_basis.Resonator` of higher rank, and keeps the
+:class:`identifiers.core.modal_basis.Resonator` of higher rank, and keeps the
 strongest within a budget of modes.
 
 :func:`merge_resonators` applies the same merging to any list (a prior
@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from identifiers.structured.modal_basis import Resonator
+from identifiers.core.modal_basis import Resonator
 from identifiers.subspace.batch import pbsid
 
 __all__ = ["discover_resonators", "merge_resonators"]

@@ -1,4 +1,4 @@
-"""What :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` gives:
+"""What :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier` gives:
 the minimal innovation-form model and the estimates behind it.
 
 :class:`MinimalModelExport` turns the current gains into the exported model
@@ -14,16 +14,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from identifiers.core.change_detection import ChangeEvent
 from identifiers.core.checks import all_finite
-from identifiers.structured.change_detection import ChangeEvent
-from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.state_filter import ATTITUDE_STATES, RATE_STATES
+from identifiers.core.rigid_gain import RigidGainEstimate
+from identifiers.core.state_filter import ATTITUDE_STATES, RATE_STATES
 
 __all__ = ["MinimalModelExport"]
 
 
 class MinimalModelExport:
-    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`:
     the exported model, its state and the estimates it reports."""
 
     # ------------------------------------------------------------ the model
@@ -160,7 +160,7 @@ class MinimalModelExport:
     @property
     def rigid_gain(self) -> RigidGainEstimate | None:
         """The rigid-body gain ``G = J^-1`` (rad/s^2 per N m) with its calibrated
-        covariance (:class:`identifiers.structured.rigid_gain.RigidGainEstimate`), from the rate
+        covariance (:class:`identifiers.core.rigid_gain.RigidGainEstimate`), from the rate
         regression; None before warm-up."""
         if not self._fits or self._resvar is None:
             return None

@@ -2,8 +2,8 @@
 
 :class:`ScheduledPhysicalIdentifier` records the first ``warmup`` samples with
 the drive angle of each (:meth:`ScheduledPhysicalIdentifier.set_schedule`),
-fits a :class:`identifiers.structured.scheduled_model.ScheduledPhysicalModel` to
-them by output error (:func:`identifiers.structured.scheduled_fit.fit_scheduled_model`) and from
+fits a :class:`identifiers.physical.scheduled_model.ScheduledPhysicalModel` to
+them by output error (:func:`identifiers.physical.scheduled_fit.fit_scheduled_model`) and from
 then on exports that model evaluated at the latest angle, with a Kalman filter
 on it for the state. The drive's rotation is followed through the angle. By
 default (``accumulate``) the fit is redone, from the held model, each time the
@@ -25,14 +25,14 @@ from numpy.typing import ArrayLike
 from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.model import ModelSequence
 from identifiers.core.online import OnlineIdentifier
-from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.scheduled_fit import fit_scheduled_model
-from identifiers.structured.scheduled_information import (
+from identifiers.core.rigid_gain import RigidGainEstimate
+from identifiers.physical.scheduled_fit import fit_scheduled_model
+from identifiers.physical.scheduled_information import (
     held_misfit,
     predicted_gain_covariance,
 )
-from identifiers.structured.scheduled_simulation import simulate_scheduled
-from identifiers.structured.warmup_fit import WarmupFit
+from identifiers.physical.scheduled_simulation import simulate_scheduled
+from identifiers.physical.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["EXPORT_RESOLUTION", "SCREEN_MARGIN", "ScheduledPhysicalIdentifier"]
@@ -117,7 +117,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         ``warmup``.
     screen_refits : bool
         Before an accumulating refit, judge the record at the held parameters
-        (:func:`identifiers.structured.scheduled_information.predicted_gain_covariance`:
+        (:func:`identifiers.physical.scheduled_information.predicted_gain_covariance`:
         one Jacobian, 0.05-0.25 s) and skip the refit where the gain it predicts
         is more than :data:`SCREEN_MARGIN` times less certain than the held
         fit's, a refit the guard would keep out (``n_refits_skipped``).
@@ -131,7 +131,7 @@ class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
         its basin), about 4x faster at the same closed-loop cost
         (docs/results/control.md).
     fit_options : dict, optional
-        Keywords for :func:`identifiers.structured.scheduled_fit.fit_scheduled_model`
+        Keywords for :func:`identifiers.physical.scheduled_fit.fit_scheduled_model`
         (``filter_constants``, ``good_enough``, ``start_nfev``, ``max_nfev``,
         ``disturbance``, ``disturbance_threshold``), e.g. fewer starts for speed;
         default: its defaults (a constant disturbance torque fitted with the

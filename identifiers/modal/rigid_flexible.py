@@ -6,7 +6,7 @@ already fixes, and on this plant it scatters the three double integrators
 long-horizon prediction. :class:`RigidFlexibleIdentifier` uses what is
 known and is composed of separate parts, each in its own module:
 
-1. **Kinematics and modal structure** (:mod:`identifiers.structured.modal_basis`).
+1. **Kinematics and modal structure** (:mod:`identifiers.core.modal_basis`).
    Attitude integrates rate, and rate integrates torque through the inverse
    inertia ``G = J(t)^-1``; the flexible modes are resonators. Given their
    frequencies every output is *linear* in the unknown gains. A
@@ -24,15 +24,15 @@ known and is composed of separate parts, each in its own module:
    docs/design/identification.md) this is the exact conditional mean for
    that parameter model, and its covariance, scaled by the measured residual
    variance, is the calibrated uncertainty of the rigid-body gain
-   (:class:`identifiers.structured.rigid_gain.RigidGainEstimate`, :attr:`rigid_gain`).
-3. **The modes** are *found* by a batch search (:mod:`identifiers.structured.modal_discovery`)
+   (:class:`identifiers.core.rigid_gain.RigidGainEstimate`, :attr:`rigid_gain`).
+3. **The modes** are *found* by a batch search (:mod:`identifiers.modal.modal_discovery`)
    at the end of the warm-up and again, with a back-off, on the longer
    record kept since (modes 2 % apart need hundreds of seconds to
    separate), and *tracked* in between every ``refresh`` samples by variable
-   projection on a forgetting window (:class:`identifiers.structured.modal_tracker.ModalTracker`):
+   projection on a forgetting window (:class:`identifiers.modal.modal_tracker.ModalTracker`):
    frequencies and damping move a little every second, the filter bank with
    them (its states corrected to first order), without a rebuild.
-4. **Changes** (:mod:`identifiers.structured.change_detection`): a generalized
+4. **Changes** (:mod:`identifiers.core.change_detection`): a generalized
    likelihood-ratio test on the rate regression's errors flags an abrupt
    change of the inertia; the rigid gains' covariance is inflated, the
    initial-condition regressors restart and the modal tracker's window
@@ -42,11 +42,11 @@ known and is composed of separate parts, each in its own module:
    innovations; its predictor gain is the model's ``K``.
 
 The class is composed of three parts, each in its own module:
-:class:`identifiers.structured.modal_regression.ModalRegression` (items
+:class:`identifiers.modal.modal_regression.ModalRegression` (items
 1-4: the modes found, rebuilt on and tracked, the sensor groups'
 regressions and the reaction to a change),
-:class:`identifiers.structured.state_filter.StateFilter` (item 5) and
-:class:`identifiers.structured.minimal_model.MinimalModelExport` (the
+:class:`identifiers.core.state_filter.StateFilter` (item 5) and
+:class:`identifiers.modal.minimal_model.MinimalModelExport` (the
 minimal innovation-form model exported every ``refresh`` samples, order
 ``n``, state ``[psi (3); omega (3); one complex mode per resonator rank as
 2 real states]``, and the estimates it reports); this module holds the
@@ -64,21 +64,21 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identifiers.core.change_detection import RESOLUTION, resolved_variance
 from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.kalman import KalmanPredictor
-from identifiers.core.online import OnlineIdentifier
-from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import RESOLUTION, resolved_variance
-from identifiers.structured.minimal_model import MinimalModelExport
-from identifiers.structured.modal_basis import (
+from identifiers.core.modal_basis import (
     HighPass,
     ModalFilterBank,
     Resonator,
     highpass_noise_gain,
 )
-from identifiers.structured.modal_regression import ModalRegression
-from identifiers.structured.modal_tracker import ModalTracker
-from identifiers.structured.state_filter import StateFilter
+from identifiers.core.online import OnlineIdentifier
+from identifiers.core.rls import RecursiveLeastSquares
+from identifiers.core.state_filter import StateFilter
+from identifiers.modal.minimal_model import MinimalModelExport
+from identifiers.modal.modal_regression import ModalRegression
+from identifiers.modal.modal_tracker import ModalTracker
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["RESOLUTION", "RigidFlexibleIdentifier"]
@@ -140,7 +140,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         Run the change detector and react to its alarms.
     change_threshold : float
         Alarm level of the change test, a multiple of its degrees of freedom
-        (see :class:`identifiers.structured.change_detection.RegressionGLR`).
+        (see :class:`identifiers.core.change_detection.RegressionGLR`).
     discount : float
         Factor by which the covariance of the gains grows at a detected
         change (old information discounted that much).
@@ -156,7 +156,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
         of the modes (the Kalman filter runs every sample).
     track_modes : bool
         Track the modal frequencies and damping every ``refresh`` samples
-        (:class:`identifiers.structured.modal_tracker.ModalTracker`).
+        (:class:`identifiers.modal.modal_tracker.ModalTracker`).
     tracking_memory : float
         Forgetting of the tracker's window (default 0.998: 50 s).
     rediscover : int or None
@@ -190,7 +190,7 @@ class RigidFlexibleIdentifier(ModalRegression, StateFilter, MinimalModelExport,
     n_searches_rejected : int
         Times a search found other modes whose model predicted the last 50 s
         10 s ahead clearly worse than the model in use (the rebuild on them was
-        undone; :meth:`identifiers.structured.record_replay.RecordReplay._try_modes`).
+        undone; :meth:`identifiers.modal.record_replay.RecordReplay._try_modes`).
     """
 
     # the filter bank and high-passes run on the signals (kept current by a rollback);

@@ -1,7 +1,7 @@
 """The drive-scheduled fit's uncertainty: the record's white-noise floor, and the
 covariance of the fitted parameters (those the inertia ``J(a)`` depends on) from
 the output-error fit's Jacobian (used by
-:func:`identifiers.structured.scheduled_fit.fit_scheduled_model`)."""
+:func:`identifiers.physical.scheduled_fit.fit_scheduled_model`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from identifiers.structured.scheduled_model import (
+from identifiers.physical.scheduled_model import (
     ScheduledPhysicalModel,
     drive_rotation,
     plane_basis,
@@ -34,7 +34,7 @@ def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
 
 def _inertia_parameters(model: ScheduledPhysicalModel) -> np.ndarray:
     """``[S's upper triangle; anisotropy; couplings]`` (see
-    :attr:`identifiers.structured.scheduled_fit.ScheduledFit.inertia_covariance`)."""
+    :attr:`identifiers.physical.scheduled_fit.ScheduledFit.inertia_covariance`)."""
     return np.concatenate([model.rest_inertia[np.triu_indices(3)], model.drive_anisotropy,
                            model.couplings.ravel()])
 

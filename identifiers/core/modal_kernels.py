@@ -1,4 +1,4 @@
-"""Compiled per-sample kernels of the modal filter bank (:mod:`identifiers.structured.modal_basis`).
+"""Compiled per-sample kernels of the modal filter bank (:mod:`identifiers.core.modal_basis`).
 
 A damped oscillator ``q'' + 2 zeta w q' + w^2 q = f`` sampled with a
 zero-order hold has a closed-form transition (:func:`oscillator_zoh`), so
@@ -164,7 +164,7 @@ def bank_step(u: np.ndarray, dt: float, ratio: float, pos: np.ndarray, vel: np.n
 def bank_regressor(out: np.ndarray, pos: np.ndarray, vel: np.ndarray, q: np.ndarray,
                    free: np.ndarray, since: int, dt: float) -> None:
     """Write the bank's regressor (layout of
-    :meth:`identifiers.structured.modal_basis.ModalFilterBank.regressor`) into ``out``."""
+    :meth:`identifiers.core.modal_basis.ModalFilterBank.regressor`) into ``out``."""
     m = q.shape[0]
     for ax in range(3):
         out[ax] = pos[ax]

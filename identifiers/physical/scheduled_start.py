@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
-from identifiers.structured.scheduled_model import drive_rotation
+from identifiers.physical.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
+from identifiers.physical.scheduled_model import drive_rotation
 
 __all__ = ["COUPLING_SCALES", "equation_error_start"]
 
@@ -48,7 +48,7 @@ def _filtered(x: np.ndarray, dt: float, tau: float, order: int) -> np.ndarray:
 def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
     """Packed parameters of the equation-error start at filter constant ``tau`` (s)
     for ``problem`` (the output-error problem of
-    :mod:`identifiers.structured.scheduled_fit`: its record, layout, appendages and
+    :mod:`identifiers.physical.scheduled_fit`: its record, layout, appendages and
     ``pack``); see the module docstring."""
     n, rot = problem.n, problem.turning
     y = np.where(np.isfinite(y), y, 0.0)

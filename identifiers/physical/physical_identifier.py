@@ -1,8 +1,8 @@
 """The physical model, fitted once to the warm-up record, as a streaming identifier.
 
 :class:`PhysicalFitIdentifier` records the first ``warmup`` samples, fits a
-:class:`identifiers.structured.physical_model.PhysicalModel` to them by
-output error (:func:`identifiers.structured.physical_fit.fit_physical_model`)
+:class:`identifiers.physical.physical_model.PhysicalModel` to them by
+output error (:func:`identifiers.physical.physical_fit.fit_physical_model`)
 and from then on holds that model, with a Kalman filter on it for the
 state. The model is physical by construction (symmetric positive definite
 ``J^-1``, passive collocated modes), and output error needs nothing but the
@@ -20,10 +20,10 @@ from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.online import OnlineIdentifier
-from identifiers.structured.physical_fit import fit_physical_model
-from identifiers.structured.physical_model import simulate
-from identifiers.structured.rigid_gain import RigidGainEstimate
-from identifiers.structured.warmup_fit import WarmupFit
+from identifiers.core.rigid_gain import RigidGainEstimate
+from identifiers.physical.physical_fit import fit_physical_model
+from identifiers.physical.physical_model import simulate
+from identifiers.physical.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["PhysicalFitIdentifier"]
@@ -50,7 +50,7 @@ class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
         (default 0.05, the baselines' value).
     grid_hz : sequence of float, optional
         Starting frequencies of the fit's mode search
-        (see :func:`identifiers.structured.physical_fit.fit_physical_model`).
+        (see :func:`identifiers.physical.physical_fit.fit_physical_model`).
     input_scale, output_scale, max_abs
         See :class:`identifiers.core.online.OnlineIdentifier`; defaults:
         1 N m and the layout's nominal levels.

@@ -1,14 +1,14 @@
-"""The modal structure of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+"""The modal structure of :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`:
 its modes found, rebuilt on and tracked, and the regressions physics allows.
 
 :class:`ModalRegression` finds the flexible modes in the kept record at the
 end of the warm-up and again with a back-off
-(:func:`identifiers.structured.modal_discovery.discover_resonators`),
+(:func:`identifiers.modal.modal_discovery.discover_resonators`),
 rebuilds the estimator on them (filter bank, one RLS per sensor group over
 the regressors that group may see, the modal tracker) and replays the
-record (:class:`identifiers.structured.record_replay.RecordReplay`), and
+record (:class:`identifiers.modal.record_replay.RecordReplay`), and
 refines the modes between searches by one variable-projection step of the
-:class:`identifiers.structured.modal_tracker.ModalTracker`.
+:class:`identifiers.modal.modal_tracker.ModalTracker`.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from identifiers.core.change_detection import RESOLUTION, ChangeEvent, RegressionGLR
+from identifiers.core.modal_basis import Resonator
 from identifiers.core.residual_statistics import (
     correlation_time,
     lag_product_step,
     mean_square_step,
 )
 from identifiers.core.rls import RecursiveLeastSquares
-from identifiers.structured.change_detection import RESOLUTION, ChangeEvent, RegressionGLR
-from identifiers.structured.modal_basis import Resonator
-from identifiers.structured.modal_discovery import discover_resonators, merge_resonators
-from identifiers.structured.modal_tracker import ModalTracker, TrackerGroup
-from identifiers.structured.record_replay import RecordReplay
+from identifiers.modal.modal_discovery import discover_resonators, merge_resonators
+from identifiers.modal.modal_tracker import ModalTracker, TrackerGroup
+from identifiers.modal.record_replay import RecordReplay
 from spacecraft_conventions import MEASURES
 
 __all__ = ["FILTER_TAIL", "FLEXIBLE_FLOOR", "INITIAL_COVARIANCE", "REBUILD_TOLERANCE",
@@ -75,7 +75,7 @@ def _same_modes(a: Sequence[Resonator], b: Sequence[Resonator],
 
 
 class ModalRegression(RecordReplay):
-    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`:
     the modes (search, rebuild, tracking), the sensor groups' regressions and
     their reaction to a detected change."""
 

@@ -1,5 +1,5 @@
 """The replay of the kept record after a rebuild of
-:class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`.
+:class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`.
 
 When the modes change, the estimator is rebuilt on them and learns the
 kept record again. :class:`RecordReplay` does that replay in batch where
@@ -7,7 +7,7 @@ the order of operations allows it: the record's head (the gains, the
 error and signal levels, the modal tracker's moments) in one pass, and the
 tail, over which the Kalman filter also runs, in stretches between the
 model exports. The results are those of feeding every sample through
-:meth:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier._sample`
+:meth:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier._sample`
 in turn, bit for bit (tests).
 
 A search's modes are a candidate, not a verdict (:meth:`RecordReplay._try_modes`):
@@ -115,7 +115,7 @@ def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
 
 
 class RecordReplay:
-    """Mixin of :class:`identifiers.structured.modal_regression.ModalRegression`: the
+    """Mixin of :class:`identifiers.modal.modal_regression.ModalRegression`: the
     replay of the kept record, in batch.
 
     The host provides ``_fits`` (sensor rows, regressor columns and RLS per

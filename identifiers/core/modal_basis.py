@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from identifiers.structured.modal_kernels import (
+from identifiers.core.modal_kernels import (
     bank_highpassed,
     bank_regressor,
     bank_run,
@@ -152,7 +152,7 @@ class ModalFilterBank:
     ``step``, ``ramp``    2        1 and ``t - t_restart`` (s)
     ====================  =======  =====================================
 
-    One sample is one compiled pass (:func:`identifiers.structured.modal_kernels.bank_step`).
+    One sample is one compiled pass (:func:`identifiers.core.modal_kernels.bank_step`).
     """
 
     def __init__(self, resonators: tuple[Resonator, ...] | list[Resonator], dt: float,

@@ -1,8 +1,8 @@
 """The state of the structure-aware identifiers: a Kalman filter on their own model.
 
 :class:`ModelFilter` is what
-:class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier` and
-:class:`identifiers.structured.physical_identifier.PhysicalFitIdentifier`
+:class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier` and
+:class:`identifiers.physical.physical_identifier.PhysicalFitIdentifier`
 share: the sensor layout's checks, the model and state they export (attitude
 and body rate first), the stand-in for a skipped output (its prediction),
 the filter's re-convergence after a rollback and ``x_{k|k}`` for a
@@ -109,7 +109,7 @@ class ModelFilter:
 
 
 class StateFilter(ModelFilter):
-    """Mixin of :class:`identifiers.structured.rigid_flexible.RigidFlexibleIdentifier`:
+    """Mixin of :class:`identifiers.modal.rigid_flexible.RigidFlexibleIdentifier`:
     its Kalman filter, the noise it assumes and estimates, and the outlier guard."""
 
     def _admissible(self, u: np.ndarray, y: np.ndarray) -> bool | np.ndarray:

@@ -1,15 +1,15 @@
-"""Fitting a :class:`identifiers.structured.scheduled_model.ScheduledPhysicalModel`
+"""Fitting a :class:`identifiers.physical.scheduled_model.ScheduledPhysicalModel`
 to a record of torques, outputs and drive angles by output error.
 
 Two stages. Equation-error starts
-(:mod:`identifiers.structured.scheduled_start`): each appendage's mode and
+(:mod:`identifiers.physical.scheduled_start`): each appendage's mode and
 coupling from a linear regression of its deflection's second derivative, then
 the inertia and couplings from the hub's torque balance, on signals passed
 through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
 from each start, every parameter, the initial state and a constant disturbance
 torque included, by bounded nonlinear least squares on the weighted simulation
 error (the model re-discretized per
-:data:`identifiers.structured.scheduled_simulation.RESOLUTION` of drive
+:data:`identifiers.physical.scheduled_simulation.RESOLUTION` of drive
 travel; the tip gains solved linearly inside every evaluation, variable
 projection), the best kept; a torque whose Wald statistic is below the
 Bayesian information criterion's penalty is dropped and the model refined
@@ -27,16 +27,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
-from identifiers.structured.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
-from identifiers.structured.scheduled_model import ScheduledPhysicalModel
-from identifiers.structured.scheduled_simulation import (
+from identifiers.physical.physical_model import DAMPING_BOUNDS, FREQUENCY_BOUNDS_HZ
+from identifiers.physical.scheduled_model import ScheduledPhysicalModel
+from identifiers.physical.scheduled_simulation import (
     _block_angles,
     _block_bounds,
     _block_models,
     _run_blocks,
 )
-from identifiers.structured.scheduled_start import equation_error_start
-from identifiers.structured.scheduled_uncertainty import (
+from identifiers.physical.scheduled_start import equation_error_start
+from identifiers.physical.scheduled_uncertainty import (
     _gain_derivative,
     _inertia_covariance,
     _parameter_covariance,

@@ -3,19 +3,19 @@
 :class:`WarmupFit` records the samples until the warm-up is over, calls the
 host's ``_fit_record`` (retried once the record is half a warm-up longer when it
 fails: each attempt is a nonlinear fit of seconds), then runs a Kalman filter
-on the held model (:class:`identifiers.structured.state_filter.ModelFilter`),
+on the held model (:class:`identifiers.core.state_filter.ModelFilter`),
 its measurement noise the fit's residual per output and its process noise an
 unmodelled torque.
 
 A host with ``refit_on_change`` set also watches the filter's innovations
-with a CUSUM test (:class:`identifiers.structured.change_detection.InnovationCUSUM`,
+with a CUSUM test (:class:`identifiers.core.change_detection.InnovationCUSUM`,
 alarm level :data:`CHANGE_THRESHOLD`, allowance :data:`CHANGE_DRIFT`; the test
 runs on across accumulating refits): when it fires, the held model keeps flying
 while a new record of ``warmup`` samples is taken, and the host's
 ``_fit_record`` then fits that record (it may start from the held fit). A host
 that ``judges_changes`` (``_held_misfit``) has the alarm confirmed first: the
 refit replaces the held model only where it explains the record clearly better
-(:func:`identifiers.structured.change_detection.misfit_confirms_change`) than
+(:func:`identifiers.core.change_detection.misfit_confirms_change`) than
 the held model refined on the whole accumulated record does; otherwise that
 refinement flies and the record stays (where the refit fails, the held model).
 Each alarm is reported in :attr:`WarmupFit.events`, its ``confirmed`` flag set by
@@ -38,13 +38,13 @@ from typing import Any
 import numpy as np
 
 from identifiers.core.background import BackgroundFits
-from identifiers.core.kalman import KalmanPredictor
-from identifiers.structured.change_detection import (
+from identifiers.core.change_detection import (
     ChangeEvent,
     InnovationCUSUM,
     misfit_confirms_change,
 )
-from identifiers.structured.state_filter import ModelFilter
+from identifiers.core.kalman import KalmanPredictor
+from identifiers.core.state_filter import ModelFilter
 
 __all__ = ["CHANGE_DRIFT", "CHANGE_THRESHOLD", "WarmupFit"]
 

@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
-from identifiers.structured.scheduled_fit import ScheduledFit, _Problem
-from identifiers.structured.scheduled_uncertainty import (
+from identifiers.physical.scheduled_fit import ScheduledFit, _Problem
+from identifiers.physical.scheduled_uncertainty import (
     _gain_derivative,
     _inertia_covariance,
     noise_floor,
@@ -71,7 +71,7 @@ def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
         torque is among the parameters where it kept one.
     u, y, angle, dt, layout
         The record, as for
-        :func:`identifiers.structured.scheduled_fit.fit_scheduled_model`
+        :func:`identifiers.physical.scheduled_fit.fit_scheduled_model`
         (default output weights).
     initial_state : (6 + 2 N,) array_like
         The held model's state at the record's first sample (physical units).
@@ -80,11 +80,11 @@ def predicted_gain_covariance(fit: ScheduledFit, u: ArrayLike, y: ArrayLike,
     -------
     (9, 9) ndarray
         Covariance of ``J(a)^-1``'s row-major entries, (rad/s^2 per N m)^2: the
-        record's white-noise floor (:func:`identifiers.structured.scheduled_fit.noise_floor`,
+        record's white-noise floor (:func:`identifiers.physical.scheduled_fit.noise_floor`,
         what a refit's residuals reach: 1.04-1.14x it in the closed loop)
         times ``(J^T J)^-1`` of the output error's Jacobian at the held
         parameters, mapped as
-        :meth:`identifiers.structured.scheduled_fit.ScheduledFit.gain_covariance`.
+        :meth:`identifiers.physical.scheduled_fit.ScheduledFit.gain_covariance`.
         Against the refit's own covariance, on the closed-loop refits measured
         (docs/design/control.md): its standard deviation 0.4-2.1x the refit's.
 
@@ -114,7 +114,7 @@ def held_misfit(fit: ScheduledFit, u: ArrayLike, y: ArrayLike, angle: ArrayLike,
     initial state and constant torque refitted.
 
     The same weighted residuals as the fit's
-    :attr:`identifiers.structured.scheduled_fit.ScheduledFit.cost` (default output
+    :attr:`identifiers.physical.scheduled_fit.ScheduledFit.cost` (default output
     weights), so the two compare on one record: a refit of the
     record from the held fit reaches at most this (it starts there with more
     freedom). The state and the torque enter the simulation linearly; a

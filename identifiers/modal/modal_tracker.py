@@ -2,7 +2,7 @@
 
 Given the resonators' frequencies and damping ratios ``rho``, every output
 of the rigid-flexible model is linear in its gains ``Theta``
-(:mod:`identifiers.structured.modal_basis`): ``y = Theta^T phi(rho) + e``. The
+(:mod:`identifiers.core.modal_basis`): ``y = Theta^T phi(rho) + e``. The
 frequencies enter nonlinearly. :class:`ModalTracker` estimates their
 correction ``delta`` by *variable projection* on a forgetting window: the
 gains are projected out (the least-squares ``Theta`` of the window for
@@ -14,7 +14,7 @@ Two facts make this cheap enough to run every second:
 
 * **Taylor regressors.** ``phi(rho + delta) = phi(rho) + sum_j delta_j dphi/drho_j``
   to first order, and the derivative filters of
-  :class:`identifiers.structured.modal_basis.ModalFilterBank` give ``dphi/drho`` at
+  :class:`identifiers.core.modal_basis.ModalFilterBank` give ``dphi/drho`` at
   every sample. So the window is summarized by the exponentially weighted
   second moments of the extended regressor ``[phi; dphi]`` and the outputs,
   updated by one rank-1 step per sample, and ``V`` and its derivatives
@@ -46,8 +46,8 @@ import numpy as np
 from numba import njit
 from scipy.linalg import get_lapack_funcs
 
-from identifiers.structured.change_detection import RESOLUTION
-from identifiers.structured.modal_basis import MAX_DAMPING, MIN_DAMPING
+from identifiers.core.change_detection import RESOLUTION
+from identifiers.core.modal_basis import MAX_DAMPING, MIN_DAMPING
 
 __all__ = ["ModalTracker", "TrackerGroup"]
 

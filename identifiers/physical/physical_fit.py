@@ -1,4 +1,4 @@
-"""Fitting a :class:`identifiers.structured.physical_model.PhysicalModel` to a record
+"""Fitting a :class:`identifiers.physical.physical_model.PhysicalModel` to a record
 by output error (nonlinear least squares on the simulation error)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
-from identifiers.structured.modal_kernels import oscillator_zoh as mode_zoh
-from identifiers.structured.physical_model import (
+from identifiers.core.modal_kernels import oscillator_zoh as mode_zoh
+from identifiers.physical.physical_model import (
     DAMPING_BOUNDS,
     FREQUENCY_BOUNDS_HZ,
     PhysicalModel,

@@ -1,11 +1,11 @@
-"""Simulating a :class:`identifiers.structured.scheduled_model.ScheduledPhysicalModel`
+"""Simulating a :class:`identifiers.physical.scheduled_model.ScheduledPhysicalModel`
 over a record whose drive angle moves.
 
 The model is discretized (zero-order hold) once per block of samples whose angle
 stays within :data:`RESOLUTION` of the block's first one, at the block's middle
 angle: all blocks' exponentials in one stacked call, the recursion in one
 compiled pass (:func:`simulate_scheduled`). The output-error fit
-(:mod:`identifiers.structured.scheduled_fit`) simulates the record this way at
+(:mod:`identifiers.physical.scheduled_fit`) simulates the record this way at
 every evaluation.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from identifiers.core.fit_jobs import cancellation_point
-from identifiers.structured.scheduled_model import ScheduledPhysicalModel
+from identifiers.physical.scheduled_model import ScheduledPhysicalModel
 
 __all__ = ["RESOLUTION", "segments", "simulate_scheduled"]
 
