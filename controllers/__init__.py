@@ -35,6 +35,7 @@ from controllers.acceptance import (
     input_disk_margin,
     stable_under_input_gains,
 )
+from controllers.actuator_monitor import ActuatorMonitor
 from controllers.adaptation import AdaptationModule, EstimatedFeatures
 from controllers.adaptive import AdaptiveLQG, FallbackWarning, ScheduleWarning
 from controllers.base import Controller, PolicyController
@@ -97,6 +98,7 @@ from spacecraft_conventions import __version__
 __all__ = [
     "LOOP_FIT_TIMING",
     "PD",
+    "ActuatorMonitor",
     "AdaptationModule",
     "AdaptiveLQG",
     "BaseRelativeReward",

@@ -64,7 +64,8 @@ re-designs, gains rejected (by reason, "growing" for the supervisor's holds),
 failed designs and non-finite observations, the steps (and fallback steps)
 from :data:`controllers.harness.JUDGED_FROM_S` with the cause of each of those
 fallback steps (``fallback_by_after_60s``, keys of :data:`FALLBACK_CAUSES`), the
-faults it inferred (``faults``: :class:`controllers.gyro_bias.GyroBiasMonitor`'s),
+faults it inferred (``faults``: :class:`controllers.gyro_bias.GyroBiasMonitor`'s and
+:class:`controllers.actuator_monitor.ActuatorMonitor`'s, in the order declared),
 the identifier's fits (``fits``: its ``fit_log``, each fit's latency, CPU time and
 outcome, for identifiers that fit off the control path), and reports the
 excitation's RMS torque.
@@ -88,6 +89,7 @@ from controllers.acceptance import (
     input_disk_margin,
     stable_under_input_gains,
 )
+from controllers.actuator_monitor import ActuatorMonitor
 from controllers.base import PADDLE_ANGLE, Controller
 from controllers.baselines import PD, RobustLQG, _LQGController, process_noise
 from controllers.excitation import NEED_SIGMAS, BinaryExcitation, MotionNeed, warmup_excitation
@@ -263,6 +265,12 @@ class AdaptiveLQG(_LQGController):
         :class:`controllers.gyro_bias.FaultWarning`, ``stats["faults"]``) and
         subtracted from that gyro before the fallback, the identifier and the law
         see it; with no fault declared the readings pass untouched.
+    monitor_actuators : bool
+        Run :class:`controllers.actuator_monitor.ActuatorMonitor` (default True):
+        a wheel that does not deliver its command (a bias, a stuck or weak wheel)
+        is reported, and an axis whose wheel does not answer is reported lost
+        (``stats["faults"]``, a :class:`controllers.gyro_bias.FaultWarning`); it
+        reports only, the loop flies as without it.
 
     Examples
     --------
@@ -303,9 +311,11 @@ class AdaptiveLQG(_LQGController):
                  excitation_budget: float = 0.1,
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
                  warmup_controller: Controller | None = None,
-                 need_sigmas: float | None = NEED_SIGMAS, monitor_gyro: bool = True) -> None:
+                 need_sigmas: float | None = NEED_SIGMAS, monitor_gyro: bool = True,
+                 monitor_actuators: bool = True) -> None:
         super().__init__(env, weights)
         self.gyro_monitor = GyroBiasMonitor(env) if monitor_gyro else None
+        self.actuator_monitor = ActuatorMonitor(env) if monitor_actuators else None
         self.need = None if need_sigmas is None else MotionNeed(env, need_sigmas)
         if identifier is None:
             identifier = closed_loop_identifier(env)
@@ -365,6 +375,8 @@ class AdaptiveLQG(_LQGController):
             self.need.reset()
         if self.gyro_monitor is not None:
             self.gyro_monitor.reset()
+        if self.actuator_monitor is not None:
+            self.actuator_monitor.reset()
         self.gain: np.ndarray | None = None
         self._k = 0
         self._bridge_until = 0
@@ -402,7 +414,7 @@ class AdaptiveLQG(_LQGController):
         # model flew, its CPU time and outcome), for identifiers that fit
         self.stats["fits"] = getattr(self.identifier, "fit_log", [])
         # the faults the loop inferred (kind, axis, onset, when declared, value)
-        self.stats["faults"] = [] if self.gyro_monitor is None else self.gyro_monitor.faults
+        self.stats["faults"] = []
         self._reason: str | None = None
 
     # ------------------------------------------------------------ pieces
@@ -642,6 +654,13 @@ class AdaptiveLQG(_LQGController):
             self._peaks.clear()
             self.stats["rejected_by"]["growing"] = self.stats["rejected_by"].get("growing", 0) + 1
 
+    def _collect_faults(self) -> None:
+        """``stats["faults"]``: every monitor's reports, in the order they were declared."""
+        monitors = (self.gyro_monitor, self.actuator_monitor)
+        found = [f for m in monitors if m is not None for f in m.faults]
+        if len(found) != len(self.stats["faults"]):
+            self.stats["faults"] = sorted(found, key=lambda f: f["detected_s"])
+
     def _watch_events(self) -> None:
         events = getattr(self.identifier, "events", ())
         if len(events) > self._events_seen:
@@ -661,6 +680,9 @@ class AdaptiveLQG(_LQGController):
         obs = self._observation(obs)
         if self.gyro_monitor is not None:
             obs = self.gyro_monitor(obs)     # a declared gyro bias subtracted
+        if self.actuator_monitor is not None:
+            self.actuator_monitor(obs, info)  # reports only
+        self._collect_faults()
         if not np.isfinite(obs).all():
             self.stats["nonfinite_observations"] += 1
         y = obs[self._meas_obs]

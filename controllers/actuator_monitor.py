@@ -1,0 +1,208 @@
+"""Wheels that do not deliver what is commanded, found from the momentum balance and reported.
+
+Per axis the spacecraft's angular momentum changes by the torque the wheels
+deliver: over a window of ``W`` samples,
+
+.. math::
+
+    J\\,(\\bar\\omega_k - \\bar\\omega_{k-W}) = \\sum_{j=k-W}^{k-1} u_j\\,dt
+    + W dt\\, d_k,
+
+with ``J`` the nominal inertia (kg m^2; the robust design's), ``omega-bar`` the
+gyro's rate averaged over :data:`AVERAGE_S` (the flexible modes' momentum
+exchange with the hub averages out), ``u`` the commanded torque (N m, the env's
+``info["torque"]``, averaged the same way) and ``d`` the torque the wheels did
+*not* deliver as commanded (N m): zero for healthy wheels, the bias of a biased
+wheel, ``s - u`` for a wheel stuck at ``s``, ``(e - 1) u`` for one delivering
+the share ``e``. The nominal inertia is off after a docking or with the paddles
+turned, so ``d`` is judged against the torque the balance itself sees,
+``a = J (omega-bar_k - omega-bar_{k-W}) / (W dt)`` (a vector: an inertia error
+couples the axes through the products of inertia): an axis is *beyond* when
+``|d| > SMALLEST_TORQUE + INERTIA_UNCERTAINTY * ||a||``. A fault is declared after
+:data:`CONFIRM_S` beyond on end. The thresholds were set on recorded fault-free
+episodes of every scenario (slews, dockings, turning paddles: none declared)
+and the wheel faults of the fault table; a capture's momentum, an impulse, stays
+in the window for ``WINDOW_S + AVERAGE_S`` and is judged by the same test.
+
+:class:`ActuatorMonitor` reports each declared axis (a
+:class:`controllers.gyro_bias.FaultWarning` and an entry of ``faults``: kind
+"actuator torque", the axis, the onset estimate, the torque error ``d`` at
+declaration) and, when the axis goes on accelerating the same way while its
+command sits at the torque limit for :data:`LOST_S`, a second report (kind
+"axis lost"): the wheel does not answer, and with one wheel per axis no
+controller can hold that axis. It reports only: the loop flies as without it.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from controllers.baselines import nominal_model
+from controllers.gyro_bias import FaultWarning
+
+__all__ = ["AVERAGE_S", "CONFIRM_S", "INERTIA_UNCERTAINTY", "LOST_S", "SMALLEST_TORQUE",
+           "WINDOW_S", "ActuatorMonitor"]
+
+#: Length of the momentum balance's window, s.
+WINDOW_S = 8.0
+#: The rate and the commanded impulse are averaged over this long at both ends, s.
+AVERAGE_S = 2.0
+#: Smallest torque error declared, N m.
+SMALLEST_TORQUE = 0.04
+#: Relative error of the nominal inertia allowed for (a docking adds tens of percent).
+INERTIA_UNCERTAINTY = 0.5
+#: An axis must stay beyond this long to be declared, s.
+CONFIRM_S = 6.0
+#: An axis whose command sits at the torque limit this long while it accelerates the
+#: way the fault pushes it is reported lost, s.
+LOST_S = 5.0
+#: Share of the torque limit that counts as "at the limit".
+AT_LIMIT = 0.95
+
+_AXES = ("roll", "pitch", "yaw")
+
+
+class ActuatorMonitor:
+    """Checks each axis's momentum balance against the commanded torque; reports the wheels
+    that do not deliver it.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A spacecraft env: its observation layout (the ``"rate"`` group), ``dt``,
+        ``max_torque`` (N m) and the nominal inertia of its model (kg m^2) are read.
+
+    Attributes
+    ----------
+    torque_error : (3,) ndarray
+        The latest ``d`` per axis, N m (0 until a window has filled).
+    declared : (3,) bool ndarray
+        The axes declared.
+    faults : list of dict
+        One entry per report: ``kind`` ("actuator torque" or "axis lost"), ``axis``,
+        ``onset_s`` (when the run of beyond samples that led to the declaration
+        started, less the share of a window a constant error of the declared size
+        takes to cross the threshold), ``detected_s`` and ``value`` (``d``, N m).
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> env = gym.make("spacecraft_env:FlexibleSpacecraft-v2", task="regulation",
+    ...                initial_attitude_deg=0.0)
+    >>> monitor = ActuatorMonitor(env)
+    >>> obs, info = env.reset(seed=0)
+    >>> for _ in range(400):      # 40 s: 1 N m commanded on yaw, none delivered
+    ...     monitor(obs, info)
+    ...     obs, _, _, _, info = env.step(np.zeros(3, dtype=np.float32))
+    ...     info = {**info, "torque": np.array([0.0, 0.0, 1.0])}
+    >>> [(f["kind"], f["axis"]) for f in monitor.faults]
+    [('actuator torque', 2)]
+    """
+
+    def __init__(self, env: Any) -> None:
+        env = getattr(env, "unwrapped", env)
+        self._rate = env.observation_layout.indices("rate")
+        self.dt = float(env.model.dt)
+        self.max_torque = float(env.max_torque)
+        self.inertia = np.asarray(nominal_model(env.model).inertia(0.0), dtype=float)
+        self._window = max(1, round(WINDOW_S / self.dt))
+        self._average = max(1, round(AVERAGE_S / self.dt))
+        self._confirm = max(1, round(CONFIRM_S / self.dt))
+        self._lost_steps = max(1, round(LOST_S / self.dt))
+        self.reset()
+
+    def reset(self) -> None:
+        """A new episode: no history, nothing declared."""
+        self._k = 0
+        self._impulse = np.zeros(3)                       # N m s commanded since reset
+        self._raw = deque(maxlen=self._average)           # (momentum, impulse) pairs
+        self._smooth = deque(maxlen=self._window + 1)     # their averages
+        self._last_rate = np.zeros(3)
+        self._beyond = np.zeros(3, dtype=int)
+        self._at_limit = np.zeros(3, dtype=int)
+        self.torque_error = np.zeros(3)
+        self._threshold = np.full(3, SMALLEST_TORQUE)
+        self.declared = np.zeros(3, dtype=bool)
+        self.lost = np.zeros(3, dtype=bool)
+        self.faults: list[dict[str, Any]] = []
+
+    def __call__(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> None:
+        """Advance by one sample.
+
+        Parameters
+        ----------
+        obs : ndarray
+            The env's observation after the last step (a NaN rate: the last finite
+            reading held).
+        info : dict, optional
+            The step's ``info``; its ``"torque"`` (N m, (3,)) is the torque commanded
+            over the step that ended at ``obs`` (absent at a reset: none).
+
+        Returns
+        -------
+        None
+        """
+        rate = np.asarray(obs, dtype=float)[self._rate]
+        rate = np.where(np.isfinite(rate), rate, self._last_rate)
+        self._last_rate = rate
+        torque = None if info is None else info.get("torque")
+        if torque is not None and self._k > 0:
+            torque = np.asarray(torque, dtype=float)
+            if np.isfinite(torque).all():
+                self._impulse = self._impulse + torque * self.dt
+            self._track_limit(torque)
+        self._raw.append((self.inertia @ rate, self._impulse.copy()))
+        if len(self._raw) == self._average:
+            self._smooth.append(np.mean(np.array(self._raw), axis=0))   # (2, 3)
+        if len(self._smooth) == self._smooth.maxlen:
+            (h0, i0), (h1, i1) = self._smooth[0], self._smooth[-1]
+            span = self._window * self.dt
+            seen = (h1 - h0) / span                    # the torque the balance sees
+            self.torque_error = seen - (i1 - i0) / span
+            # an inertia error couples the axes (products of inertia): the whole torque seen
+            self._threshold = np.full(3, SMALLEST_TORQUE
+                                      + INERTIA_UNCERTAINTY * float(np.linalg.norm(seen)))
+            beyond = np.abs(self.torque_error) > self._threshold
+            self._beyond = np.where(beyond, self._beyond + 1, 0)
+            self._declare()
+        self._k += 1
+
+    def _track_limit(self, torque: np.ndarray) -> None:
+        """Counts the samples each declared axis's command has sat at the limit while the
+        balance says it is pushed the other way; reports the axis lost after
+        :data:`LOST_S`."""
+        pushed = np.sign(self.torque_error)
+        at_limit = (np.abs(torque) >= AT_LIMIT * self.max_torque) & (np.sign(torque) == -pushed)
+        self._at_limit = np.where(at_limit & self.declared, self._at_limit + 1, 0)
+        for axis in np.flatnonzero((self._at_limit >= self._lost_steps) & ~self.lost):
+            self.lost[axis] = True
+            self._report("axis lost", int(axis),
+                         f"the {_AXES[axis]} wheel does not answer: its command has sat at "
+                         f"the {self.max_torque:g} N m limit for {LOST_S:g} s while the "
+                         f"axis accelerates the other way; with one wheel per axis no "
+                         f"controller can hold {_AXES[axis]}")
+
+    def _declare(self) -> None:
+        for axis in np.flatnonzero((self._beyond >= self._confirm) & ~self.declared):
+            self.declared[axis] = True
+            self._report("actuator torque", int(axis),
+                         f"the {_AXES[axis]} wheel delivers "
+                         f"{self.torque_error[axis]:+.3g} N m from what it is commanded")
+
+    def _report(self, kind: str, axis: int, what: str) -> None:
+        detected = self._k * self.dt
+        # a torque error from t0 on fills the window linearly: it crossed the threshold
+        # at t0 + (threshold / error) of a window, half an average late
+        filled = min(1.0, self._threshold[axis] / max(abs(self.torque_error[axis]), 1e-12))
+        crossed = self._k - self._beyond[axis] + 1
+        onset = max(0.0, (crossed - filled * self._window - self._average / 2) * self.dt)
+        fault = {"kind": kind, "axis": axis, "onset_s": float(onset),
+                 "detected_s": float(detected), "value": float(self.torque_error[axis])}
+        self.faults.append(fault)
+        warnings.warn(f"{kind} on axis {axis} ({_AXES[axis]}) from about {onset:.1f} s "
+                      f"(declared at {detected:.1f} s): {what}", FaultWarning, stacklevel=3)

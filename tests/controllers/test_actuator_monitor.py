@@ -1,0 +1,102 @@
+"""The actuator monitor: a wheel that does not deliver its command is declared, dated and
+valued from the momentum balance; an axis whose wheel does not answer is reported lost;
+nothing is declared with healthy wheels."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from controllers import PD, ActuatorMonitor, AdaptiveLQG, FaultWarning, run_episode
+from controllers.actuator_monitor import SMALLEST_TORQUE
+from spacecraft_env import FaultInjection, env_id, parse_fault
+
+
+def _at_rest(faults=(), steps=600):
+    env = gym.make(env_id("constant"), task="regulation", initial_attitude_deg=0.0,
+                   max_episode_steps=steps)
+    return FaultInjection(env, [parse_fault(f) for f in faults]) if faults else env
+
+
+def _fly(env, action, monitor, seed=0, steps=None):
+    """Steps ``env`` with a constant normalized ``action``, the monitor reading each
+    observation and the step's info (the commanded torque)."""
+    obs, info = env.reset(seed=seed)
+    monitor.reset()
+    for _ in range(steps or env.spec.max_episode_steps):
+        monitor(obs, info)
+        obs, _, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
+        if terminated or truncated:
+            break
+    return monitor
+
+
+def test_healthy_wheels_at_rest_and_in_a_slew_declare_nothing():
+    env = _at_rest()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FaultWarning)
+        monitor = _fly(env, np.zeros(3), ActuatorMonitor(env))
+        assert monitor.faults == [] and not monitor.declared.any()
+        # the balance closes to within the gyro's noise, below the declared size
+        assert np.abs(monitor.torque_error).max() < SMALLEST_TORQUE
+        slew = gym.make(env_id("paddle_rotation"), task="slew", max_episode_steps=1200)
+        traj = run_episode(slew, PD(slew), seed=1)
+        monitor = ActuatorMonitor(slew)
+        monitor(traj.observations[0])
+        for obs, torque in zip(traj.observations[1:], traj.torque, strict=True):
+            monitor(obs, {"torque": torque})
+        assert monitor.faults == []
+
+
+def test_a_wheel_bias_is_declared_dated_and_valued():
+    """0.5 N m added on pitch from 20 s, nothing commanded: the balance misses 0.5 N m."""
+    env = _at_rest(["actuator_bias,onset=20,axis=1,value=0.5"])
+    with pytest.warns(FaultWarning, match="actuator torque on axis 1 \\(pitch\\)"):
+        monitor = _fly(env, np.zeros(3), ActuatorMonitor(env))
+    (fault,) = monitor.faults
+    assert fault["kind"] == "actuator torque" and fault["axis"] == 1
+    assert 20.0 < fault["detected_s"] <= 30.0                  # within 10 s of the onset
+    assert abs(fault["onset_s"] - 20.0) <= 4.0
+    assert monitor.torque_error[1] == pytest.approx(0.5, rel=0.05)
+    assert monitor.declared.tolist() == [False, True, False]
+
+
+def test_a_wheel_that_does_not_answer_is_reported_lost():
+    """Pitch commanded at the limit one way, its wheel stuck at 0.5 N m the other way:
+    declared, then the axis reported lost (no other actuator torques pitch)."""
+    env = _at_rest(["stuck_actuator,onset=5,axis=1,value=0.5"], steps=400)
+    with pytest.warns(FaultWarning, match="no\\s+controller can hold pitch"):
+        monitor = _fly(env, [0.0, -1.0, 0.0], ActuatorMonitor(env))
+    kinds = [(f["kind"], f["axis"]) for f in monitor.faults]
+    assert kinds == [("actuator torque", 1), ("axis lost", 1)]
+    # the balance sees the whole miss: 0.5 N m delivered against -10 commanded
+    assert monitor.torque_error[1] == pytest.approx(10.5, rel=0.05)
+
+
+def test_the_monitor_pickles_mid_episode_and_resumes_identically():
+    env = _at_rest(["actuator_bias,onset=5,axis=2,value=0.3"], steps=300)
+    obs, info = env.reset(seed=3)
+    monitor, samples = ActuatorMonitor(env), []
+    for _ in range(300):
+        samples.append((obs, info))
+        obs, _, _, _, info = env.step(np.zeros(3, dtype=np.float32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FaultWarning)
+        for o, i in samples[:100]:
+            monitor(o, i)
+        copy = pickle.loads(pickle.dumps(monitor))
+        for o, i in samples[100:]:
+            monitor(o, i)
+            copy(o, i)
+    assert copy.faults == monitor.faults and len(monitor.faults) == 1
+    np.testing.assert_array_equal(copy.torque_error, monitor.torque_error)
+
+
+def test_the_adaptive_loop_carries_the_monitor_and_can_leave_it_out():
+    env = _at_rest(steps=10)
+    assert isinstance(AdaptiveLQG(env).actuator_monitor, ActuatorMonitor)
+    assert AdaptiveLQG(env, monitor_actuators=False).actuator_monitor is None
