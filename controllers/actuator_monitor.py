@@ -19,18 +19,20 @@ turned, so ``d`` is judged against the torque the balance itself sees,
 ``a = J (omega-bar_k - omega-bar_{k-W}) / (W dt)`` (a vector: an inertia error
 couples the axes through the products of inertia): an axis is *beyond* when
 ``|d| > SMALLEST_TORQUE + INERTIA_UNCERTAINTY * ||a||``. A fault is declared after
-:data:`CONFIRM_S` beyond on end. The thresholds were set on recorded fault-free
-episodes of every scenario (slews, dockings, turning paddles: none declared)
-and the wheel faults of the fault table; a capture's momentum, an impulse, stays
-in the window for ``WINDOW_S + AVERAGE_S`` and is judged by the same test.
+:data:`CONFIRM_S` beyond on end, longer than a one-off step of momentum stays in the
+window (``WINDOW_S + AVERAGE_S``): a capture's momentum, or a gyro bias's jump,
+is not a wheel fault. The thresholds were set on recorded fault-free episodes of
+every scenario (slews, dockings, turning paddles) and the wheel faults of the
+fault table.
 
 :class:`ActuatorMonitor` reports each declared axis (a
 :class:`controllers.gyro_bias.FaultWarning` and an entry of ``faults``: kind
 "actuator torque", the axis, the onset estimate, the torque error ``d`` at
-declaration) and, when the axis goes on accelerating the same way while its
-command sits at the torque limit for :data:`LOST_S`, a second report (kind
-"axis lost"): the wheel does not answer, and with one wheel per axis no
-controller can hold that axis. It reports only: the loop flies as without it.
+declaration) and, when from then on the torque the balance sees follows less than
+:data:`LOST_SLOPE` of the commanded torque (a least-squares slope) over a command
+range of :data:`LOST_RANGE`, a second report (kind "axis lost"): the wheel does
+not answer, and with one wheel per axis no controller can hold that axis. It
+reports only: the loop flies as without it.
 """
 
 from __future__ import annotations
@@ -44,8 +46,8 @@ import numpy as np
 from controllers.baselines import nominal_model
 from controllers.gyro_bias import FaultWarning
 
-__all__ = ["AVERAGE_S", "CONFIRM_S", "INERTIA_UNCERTAINTY", "LOST_S", "SMALLEST_TORQUE",
-           "WINDOW_S", "ActuatorMonitor"]
+__all__ = ["AVERAGE_S", "CONFIRM_S", "INERTIA_UNCERTAINTY", "LOST_RANGE", "LOST_SLOPE",
+           "SMALLEST_TORQUE", "WINDOW_S", "ActuatorMonitor"]
 
 #: Length of the momentum balance's window, s.
 WINDOW_S = 8.0
@@ -55,13 +57,14 @@ AVERAGE_S = 2.0
 SMALLEST_TORQUE = 0.04
 #: Relative error of the nominal inertia allowed for (a docking adds tens of percent).
 INERTIA_UNCERTAINTY = 0.5
-#: An axis must stay beyond this long to be declared, s.
-CONFIRM_S = 6.0
-#: An axis whose command sits at the torque limit this long while it accelerates the
-#: way the fault pushes it is reported lost, s.
-LOST_S = 5.0
-#: Share of the torque limit that counts as "at the limit".
-AT_LIMIT = 0.95
+#: An axis must stay beyond this long to be declared, s: longer than a one-off step of
+#: momentum (a capture, a bump, a gyro bias's jump) stays in the balance,
+#: ``WINDOW_S + AVERAGE_S``.
+CONFIRM_S = WINDOW_S + AVERAGE_S + 0.5
+#: A declared axis whose delivered torque follows less than this share of its command...
+LOST_SLOPE = 0.1
+#: ...over a command range at least this wide (N m) is reported lost.
+LOST_RANGE = 1.0
 
 _AXES = ("roll", "pitch", "yaw")
 
@@ -113,7 +116,6 @@ class ActuatorMonitor:
         self._window = max(1, round(WINDOW_S / self.dt))
         self._average = max(1, round(AVERAGE_S / self.dt))
         self._confirm = max(1, round(CONFIRM_S / self.dt))
-        self._lost_steps = max(1, round(LOST_S / self.dt))
         self.reset()
 
     def reset(self) -> None:
@@ -124,7 +126,8 @@ class ActuatorMonitor:
         self._smooth = deque(maxlen=self._window + 1)     # their averages
         self._last_rate = np.zeros(3)
         self._beyond = np.zeros(3, dtype=int)
-        self._at_limit = np.zeros(3, dtype=int)
+        self._answer = np.zeros((3, 5))      # per axis: n, sum c, sum s, sum c^2, sum c s
+        self._range = np.stack([np.full(3, np.inf), np.full(3, -np.inf)])
         self.torque_error = np.zeros(3)
         self._threshold = np.full(3, SMALLEST_TORQUE)
         self.declared = np.zeros(3, dtype=bool)
@@ -155,7 +158,6 @@ class ActuatorMonitor:
             torque = np.asarray(torque, dtype=float)
             if np.isfinite(torque).all():
                 self._impulse = self._impulse + torque * self.dt
-            self._track_limit(torque)
         self._raw.append((self.inertia @ rate, self._impulse.copy()))
         if len(self._raw) == self._average:
             self._smooth.append(np.mean(np.array(self._raw), axis=0))   # (2, 3)
@@ -170,22 +172,31 @@ class ActuatorMonitor:
             beyond = np.abs(self.torque_error) > self._threshold
             self._beyond = np.where(beyond, self._beyond + 1, 0)
             self._declare()
+            self._track_answer(seen, (i1 - i0) / span)
         self._k += 1
 
-    def _track_limit(self, torque: np.ndarray) -> None:
-        """Counts the samples each declared axis's command has sat at the limit while the
-        balance says it is pushed the other way; reports the axis lost after
-        :data:`LOST_S`."""
-        pushed = np.sign(self.torque_error)
-        at_limit = (np.abs(torque) >= AT_LIMIT * self.max_torque) & (np.sign(torque) == -pushed)
-        self._at_limit = np.where(at_limit & self.declared, self._at_limit + 1, 0)
-        for axis in np.flatnonzero((self._at_limit >= self._lost_steps) & ~self.lost):
+    def _track_answer(self, seen: np.ndarray, commanded: np.ndarray) -> None:
+        """From each axis's declaration on, the least-squares slope of the torque the
+        balance sees on the commanded one; an axis whose slope stays under
+        :data:`LOST_SLOPE` over a command range of :data:`LOST_RANGE` is reported lost."""
+        on = self.declared & ~self.lost
+        if not on.any():
+            return
+        self._answer[on] += np.stack([np.ones(3), commanded, seen, commanded**2,
+                                      commanded * seen], axis=1)[on]
+        self._range[0] = np.where(on, np.minimum(self._range[0], commanded), self._range[0])
+        self._range[1] = np.where(on, np.maximum(self._range[1], commanded), self._range[1])
+        n, c, sv, cc, cs = self._answer.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slope = (n * cs - c * sv) / (n * cc - c * c)
+        wide = self._range[1] - self._range[0] >= LOST_RANGE
+        for axis in np.flatnonzero(on & wide & (np.abs(slope) < LOST_SLOPE)):
             self.lost[axis] = True
             self._report("axis lost", int(axis),
-                         f"the {_AXES[axis]} wheel does not answer: its command has sat at "
-                         f"the {self.max_torque:g} N m limit for {LOST_S:g} s while the "
-                         f"axis accelerates the other way; with one wheel per axis no "
-                         f"controller can hold {_AXES[axis]}")
+                         f"the {_AXES[axis]} wheel does not answer: it delivered "
+                         f"{slope[axis]:.2f} of its command over a "
+                         f"{self._range[1, axis] - self._range[0, axis]:.2g} N m range; "
+                         f"with one wheel per axis no controller can hold {_AXES[axis]}")
 
     def _declare(self) -> None:
         for axis in np.flatnonzero((self._beyond >= self._confirm) & ~self.declared):
