@@ -74,7 +74,7 @@ BEHAVIOURS = {
 def record_seconds(truth, u, y, **overrides) -> float:
     """Wall time of a new default identifier (its settings overridden by ``overrides``)
     over the record ``(u, y)``, single-threaded BLAS."""
-    ident = make_identifier("rigid-flexible", truth, "default", **overrides)
+    ident = make_identifier("rigid-flexible", truth, "recommended", **overrides)
     with single_threaded_blas:
         start = time.perf_counter()
         for k in range(len(u)):
@@ -164,7 +164,7 @@ def parts(truth, u, y) -> list[tuple[str, float]]:
             timers.wrap(definer, name, label, context)
     try:
         with single_threaded_blas:
-            ident = make_identifier("rigid-flexible", truth, "default")
+            ident = make_identifier("rigid-flexible", truth, "recommended")
             for k in range(N_SAMPLES):
                 ident.update(u[k], y[k])
     finally:

@@ -31,7 +31,7 @@ def grid(seeds: int) -> SweepConfig:
     return SweepConfig.from_dict({
         "name": "bench", "task": "identify", "seeds": seeds,
         "params": {"scenario": "docking", "order": 22},
-        "cases": [{"method": "classical", "preset": "paper"}, {"method": "rigid-flexible"}],
+        "cases": [{"method": "classical-rpbsid", "preset": "paper"}, {"method": "rigid-flexible"}],
     })
 
 

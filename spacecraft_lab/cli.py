@@ -65,6 +65,7 @@ from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.paper import PAPER_SNR_DB
 from spacecraft_lab.plots import plot_adaptation, plot_rl_comparison
 from spacecraft_lab.reporting import (
+    FAST_ADAPTIVE_LQG,
     control_brief,
     control_summary,
     identification_brief,
@@ -353,8 +354,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--out", type=_output_directory, default="results/identify",
                        help="output directory")
     ident.add_argument("--methods", nargs="+", default=None, choices=sorted(METHODS),
-                       help="methods to run (default: all but the slow windowed-svd)")
-    ident.add_argument("--preset", choices=PRESETS, default="default",
+                       help="methods to run (default: all but the slow windowed-pbsid)")
+    ident.add_argument("--preset", choices=PRESETS, default="recommended",
                        help="the methods' settings: the package's defaults, or the source "
                             "paper's constants (p = 15, forgetting 0.98, ...)")
     ident.add_argument("--snr-db", type=_snr, default=PAPER_SNR_DB,
@@ -645,7 +646,7 @@ def _train(args: argparse.Namespace) -> int:
     for key in ("oracle_lqg", "adaptive_lqg", "fixed_lqg"):
         brief[key] = {k: v for k, v in m[key].items() if not isinstance(v, list)}
     print(json.dumps(brief, indent=2))
-    print("env steps to 2x the adaptive LQG's cost from 100 s:",
+    print(f"env steps to 2x the {FAST_ADAPTIVE_LQG}'s cost from 100 s:",
           [r["steps_to_2x_adaptive"] for r in m["runs"]])
     print("training throughput, env steps/s (evaluations included):",
           [round(r["env_steps_per_s"]) for r in m["runs"]])

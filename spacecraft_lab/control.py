@@ -66,6 +66,7 @@ from spacecraft_env import (
 from spacecraft_lab.plots import plot_control_comparison
 from spacecraft_lab.reporting import (
     CEILING,
+    FAST_ADAPTIVE_LQG,
     SAME_START_CEILING,
     SAME_START_LOOPS,
     WINDOW_CEILING,
@@ -163,7 +164,7 @@ SCHEDULED_PHYSICAL = SAME_START_LOOPS[1]
 #: The adaptive law on the structured recursive identifier
 #: (:func:`controllers.fast_identifier`): the adaptive LQG's default until
 #: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.
-FAST = "adaptive LQG, fast identifier"
+FAST = FAST_ADAPTIVE_LQG
 #: The adaptive law on a recursive PBSID with an exact rigid block
 #: (:func:`controllers.structured_identifier`: :class:`identifiers.StructuredRPBSID` with
 #: its closed-loop settings since 2026-11-28): the source paper's family of algorithms in

@@ -106,8 +106,9 @@ __all__ = [
     "truth_sequence",
 ]
 
-#: Method presets: the package's defaults, or the source paper's constants.
-PRESETS = ("default", "paper")
+#: Method presets: the settings we recommend (what no option gives), or the source paper's
+#: constants.
+PRESETS = ("recommended", "paper")
 #: Rows that are not identifiers: the trivial baseline and the ceiling.
 BASELINES = ("persistence", "truth frozen at k")
 #: Sampling period (samples) of the gain and modal tracks.
@@ -147,23 +148,23 @@ def _windowed(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> On
     return WindowedPBSID(truth.n, 15, **kwargs)
 
 
-#: Method name -> builder ``(truth, preset, **options) -> identifier``. The
-#: paper's method is ``improved`` (its "improved RPBSID").
+#: Method name (the class's name in kebab case) -> builder ``(truth, preset, **options) ->
+#: identifier``. The paper's method is ``improved-rpbsid`` (its "improved RPBSID").
 METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
     "rigid-flexible": _rigid_flexible,
-    "moment-refit": _recursive(MomentRefitRPBSID),
-    "predictor": _recursive(PredictorRPBSID),
-    "improved": _recursive(ImprovedRPBSID),
+    "moment-refit-rpbsid": _recursive(MomentRefitRPBSID),
+    "predictor-rpbsid": _recursive(PredictorRPBSID),
+    "improved-rpbsid": _recursive(ImprovedRPBSID),
     "structured-rpbsid": _structured,
-    "classical": _recursive(ClassicalRPBSID),
-    "windowed-svd": _windowed,
+    "classical-rpbsid": _recursive(ClassicalRPBSID),
+    "windowed-pbsid": _windowed,
 }
 #: Methods run when none are named (the sliding-window SVD takes ~30 s a run).
-DEFAULT_METHODS = ("rigid-flexible", "structured-rpbsid", "moment-refit", "predictor", "improved",
-                   "classical")
+DEFAULT_METHODS = ("rigid-flexible", "structured-rpbsid", "moment-refit-rpbsid",
+                   "predictor-rpbsid", "improved-rpbsid", "classical-rpbsid")
 
 
-def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "default",
+def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "recommended",
                     **options: Any) -> OnlineIdentifier:
     """Build a method of :data:`METHODS` for ``truth``'s outputs.
 
@@ -480,7 +481,7 @@ def _truth(scenario: str, n_modes: int) -> FlexibleSpacecraftModel:
 
 def run_identification(scenario: str = "docking", seeds: int = 10,
                        out: str | Path = "results/identify", *,
-                       methods: Sequence[str] | None = None, preset: str = "default",
+                       methods: Sequence[str] | None = None, preset: str = "recommended",
                        snr_db: float | None = PAPER_SNR_DB, n_modes: int = 2, n_samples: int = 2500,
                        convergence_s: float = 150.0, progress: bool = True,
                        workers: int | None = None) -> dict[str, Any]:
@@ -496,7 +497,7 @@ def run_identification(scenario: str = "docking", seeds: int = 10,
         Output directory.
     methods : sequence of str, optional
         Subset of :data:`METHODS` (default :data:`DEFAULT_METHODS`).
-    preset : {"default", "paper"}
+    preset : {"recommended", "paper"}
         The methods' settings.
     snr_db : float or None
         Measurement SNR per channel (paper: 40 dB); None for noiseless.
@@ -648,7 +649,7 @@ def _task_setup(method: str, scenario: str, order: int | None, n_modes: int, pre
 
 
 def _check_identify(*, method: str, seed: int | None = None, scenario: str = "docking",
-                    order: int | None = None, n_modes: int = 2, preset: str = "default",
+                    order: int | None = None, n_modes: int = 2, preset: str = "recommended",
                     snr_db: float | None = PAPER_SNR_DB, n_samples: int = 2500,
                     convergence_s: float = 150.0, baselines: bool = False) -> None:
     """:func:`identify_task`'s values checked without running it (a sweep file is checked
@@ -661,7 +662,7 @@ def _check_identify(*, method: str, seed: int | None = None, scenario: str = "do
 
 @single_threaded_blas
 def identify_task(*, method: str, seed: int, scenario: str = "docking",
-                  order: int | None = None, n_modes: int = 2, preset: str = "default",
+                  order: int | None = None, n_modes: int = 2, preset: str = "recommended",
                   snr_db: float | None = PAPER_SNR_DB, n_samples: int = 2500,
                   convergence_s: float = 150.0, baselines: bool = False) -> dict[str, Any]:
     """One identification run: one method on one seed (a sweep task).
@@ -680,7 +681,7 @@ def identify_task(*, method: str, seed: int, scenario: str = "docking",
     order : int, optional
         System order n = 14, 22, 30, 38, 46, ... (``6 + 8 k``); overrides
         ``n_modes`` (k modes per appendage).
-    preset : {"default", "paper"}
+    preset : {"recommended", "paper"}
     baselines : bool
         Also score persistence and the frozen truth on the same record
         (prefixed ``persistence_`` and ``ceiling_``).

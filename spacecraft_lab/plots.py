@@ -21,6 +21,7 @@ from controllers.harness import SAME_START_S
 from identifiers import ModelSequence
 from spacecraft_conventions import DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftModel
+from spacecraft_lab.reporting import FAST_ADAPTIVE_LQG
 
 __all__ = [
     "MAX_AGENT_SERIES",
@@ -159,8 +160,8 @@ def plot_rigid_gain(path: str | Path, truth: FlexibleSpacecraftModel,
 
 #: The series of the prediction figure, at most five: the trivial baseline, the ceiling,
 #: the default identifier and the paper's two recursive methods (the rest are in the table).
-PREDICTION_SERIES = ("persistence", "truth frozen at k", "rigid-flexible", "improved",
-                     "classical")
+PREDICTION_SERIES = ("persistence", "truth frozen at k", "rigid-flexible", "improved-rpbsid",
+                     "classical-rpbsid")
 
 
 def plot_prediction_horizons(path: str | Path, metrics: Mapping[str, Any],
@@ -340,8 +341,8 @@ def plot_learning_curves(path: str | Path, metrics: Mapping[str, Any]) -> None:
         for ax, key in zip(axes, keys, strict=True):
             if all(key in c for c in run["curve"]):
                 ax.plot(steps, [c[key] for c in run["curve"]], "o-", label=f"seed {run['seed']}")
-    for name, ref, style in (("oracle LQG", "oracle_lqg", ":"), ("adaptive LQG", "adaptive_lqg",
-                                                                "--"),
+    for name, ref, style in (("oracle LQG", "oracle_lqg", ":"),
+                             (FAST_ADAPTIVE_LQG, "adaptive_lqg", "--"),
                              ("fixed LQG", "fixed_lqg", "-.")):
         for ax, key in zip(axes, keys, strict=True):
             if ref in metrics and key in metrics[ref]:
@@ -398,7 +399,7 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     references = [(name, key, style) for name, key, style in (
         ("oracle LQG", "oracle_lqg", ":"),
         ("scheduled LQG", "scheduled_lqg", (0, (3, 1, 1, 1, 1, 1))),
-        ("adaptive LQG", "adaptive_lqg", "--"),
+        (FAST_ADAPTIVE_LQG, "adaptive_lqg", "--"),
         ("fixed LQG", "fixed_lqg", "-."))
         if key in last and left in last[key] and right in last[key]]
     series = []

@@ -16,7 +16,8 @@ import numpy as np
 
 from controllers.harness import SAME_START_S
 
-__all__ = ["CEILING", "SAME_START_CEILING", "SAME_START_LOOPS", "WINDOW_CEILING",
+__all__ = ["CEILING", "FAST_ADAPTIVE_LQG", "SAME_START_CEILING", "SAME_START_LOOPS",
+           "WINDOW_CEILING",
            "control_brief", "control_summary", "control_table",
            "fallback_causes_text", "flies_the_start", "identification_brief",
            "identification_table",
@@ -172,6 +173,10 @@ SAME_START_CEILING = "same-start ceiling"
 WINDOW_CEILING = "window ceiling"
 
 
+#: The display name of the adaptive LQG on the fast identifier
+#: (:func:`controllers.fast_identifier`): ``spacecraft control``'s ``adaptive-lqg-fast``, and
+#: the adaptive loop the RL agents are based on and compared with (their ``adaptive_lqg``).
+FAST_ADAPTIVE_LQG = "adaptive LQG, fast identifier"
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
 #: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
 #: by their names in the comparison; a loop on another identifier starts otherwise.
@@ -479,11 +484,11 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             f"| {spread([ratio(f, m.get('fixed_lqg'), mean) for f in finals], '.3g')} |")
     head = ["| agent | features | task | env steps | seeds | cost from 100 s (median episode) "
             "| / oracle LQG | / fixed LQG | attitude RMS (deg) | vibration RMS (mm) "
-            "| env steps to <= 2x adaptive LQG's cost | cost, mean over episodes "
+            f"| env steps to <= 2x the {FAST_ADAPTIVE_LQG}'s cost | cost, mean over episodes "
             "| worst episode (seed: cost) | mean / fixed LQG's mean |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
-        for name, key in (("oracle LQG", "oracle_lqg"), ("adaptive LQG", "adaptive_lqg"),
+        for name, key in (("oracle LQG", "oracle_lqg"), (FAST_ADAPTIVE_LQG, "adaptive_lqg"),
                           ("fixed LQG", "fixed_lqg"), ("scheduled LQG", "scheduled_lqg"),
                           ("zero torque", "zero_torque")):
             if key in last:

@@ -204,7 +204,7 @@ def test_adaptive_lqg_feeds_nan_samples_to_the_identifier():
 # ----------------------------------------------------------------- sweeps
 def test_a_second_driver_on_the_same_directory_stops_at_once(tmp_path):
     config = SweepConfig.from_dict({"task": "identify", "seeds": 1,
-                                    "params": {"method": "moment-refit", "n_samples": 600,
+                                    "params": {"method": "moment-refit-rpbsid", "n_samples": 600,
                                                "convergence_s": 55.0}})
     with FileLock(tmp_path / ".sweep.lock"):
         with pytest.raises(SweepLockedError, match="another sweep is running"):

@@ -350,7 +350,7 @@ GOOD = {"kind": "identify", "status": "ok", "metrics": {"vaf_h10_rate": 99.0}}
 ])
 def test_d5_d6_a_wrong_typed_record_is_torn_and_its_task_runs_again(tmp_path, record):
     config = SweepConfig.from_dict({"task": "identify", "seeds": 2, "params": {
-        "method": "moment-refit", "n_samples": 600, "convergence_s": 55.0}})
+        "method": "moment-refit-rpbsid", "n_samples": 600, "convergence_s": 55.0}})
     tasks = config.tasks()
     store = ResultStore(tmp_path / "results.jsonl")
     store.append({"task_id": tasks[0].task_id, "params": tasks[0].params, **GOOD})
@@ -398,20 +398,20 @@ def test_d7_a_scored_window_inside_the_warm_up_fails_before_any_task(tmp_path):
 @pytest.mark.parametrize("seeds", ['"abc"', "true", "{start = 0}", "[1, 1]", "2.5"])
 def test_d8_a_bad_seeds_entry_is_a_one_line_error(tmp_path, seeds):
     path = _sweep_file(tmp_path, f'task = "identify"\nseeds = {seeds}\n[params]\n'
-                                 'method = "moment-refit"\n')
+                                 'method = "moment-refit-rpbsid"\n')
     _one_line_error(_cli("sweep", "--config", str(path), "--out", str(tmp_path / "o"),
                          "--dry-run"))
 
 
 def test_d9_the_task_count_is_bounded_before_anything_is_listed(tmp_path):
     path = _sweep_file(tmp_path, 'task = "identify"\nseeds = {start = 0, count = 100000000}\n'
-                                 '[params]\nmethod = "moment-refit"\n')
+                                 '[params]\nmethod = "moment-refit-rpbsid"\n')
     start = time.perf_counter()
     proc = _cli("sweep", "--config", str(path), "--out", str(tmp_path / "o"), "--dry-run")
     _one_line_error(proc)
     assert "100,000,000 tasks" in proc.stderr and "--max-tasks" in proc.stderr
     small = _sweep_file(tmp_path, 'task = "identify"\nseeds = 20\n[params]\n'
-                                  'method = "moment-refit"\n')
+                                  'method = "moment-refit-rpbsid"\n')
     with pytest.raises(ValueError, match="more than the limit of 10"):
         load_config(small, max_tasks=10)
     assert len(load_config(small, max_tasks=20).tasks()) == 20

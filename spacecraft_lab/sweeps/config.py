@@ -18,8 +18,8 @@ grid, e.g. one per method with its own settings) and the seeds. Example
     order = [22, 30, 38, 46]
 
     [[cases]]                  # crossed with the grid; "label" names the series
-    label = "classical"
-    method = "classical"
+    label = "classical-rpbsid"
+    method = "classical-rpbsid"
 
     [summary]                  # how `spacecraft sweep-summary` tabulates
     rows = "label"
@@ -129,7 +129,7 @@ class Reference:
     Attributes
     ----------
     row : str
-        Row of the pivot table they belong to (e.g. ``"classical"``).
+        Row of the pivot table they belong to (e.g. ``"classical-rpbsid"``).
     metric : str
         Metric they compare with (e.g. ``"time_s"``).
     source : str

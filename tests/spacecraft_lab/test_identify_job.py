@@ -47,8 +47,8 @@ def test_the_figures_of_the_identify_command_show_their_point(tmp_path):
     from spacecraft_lab.plots import PREDICTION_SERIES, plot_prediction_horizons
 
     metrics = run_identification("docking", 2, tmp_path, n_samples=800, convergence_s=50.0,
-                                 methods=["rigid-flexible", "improved", "classical",
-                                          "predictor"], progress=False)
+                                 methods=["rigid-flexible", "improved-rpbsid", "classical-rpbsid",
+                                          "predictor-rpbsid"], progress=False)
     for name in ("prediction", "gain", "modal", "responses"):
         assert (tmp_path / f"{name}.png").stat().st_size > 20_000, name
     fig = plot_prediction_horizons(tmp_path / "again.png", metrics, {}, None)
@@ -58,7 +58,7 @@ def test_the_figures_of_the_identify_command_show_their_point(tmp_path):
         assert ax.get_legend() is None and ax.get_ylim()[1] <= 101
         assert len(ax.collections) == len(labels)            # one band per series
     assert len(fig.legends) == 1
-    summary = metrics["methods"]["classical"]["summary"]["h_step_vaf"]
+    summary = metrics["methods"]["classical-rpbsid"]["summary"]["h_step_vaf"]
     cell = summary[str(metrics["horizons_samples"][-1])]["rate"]
     assert cell["q25"] <= cell["median"] <= cell["q75"]
     ylim = fig.axes[1].get_ylim()[0]

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TINY_IDENTIFY = {
     "name": "tiny", "task": "identify", "seeds": 2,
     "params": {"scenario": "docking", "n_samples": 700, "convergence_s": 55.0},
-    "grid": {"method": ["rigid-flexible", "improved"]},
+    "grid": {"method": ["rigid-flexible", "improved-rpbsid"]},
     "cases": [{"label": "n22", "order": 22}],
 }
 TINY_CONTROL = {
@@ -72,14 +72,15 @@ def test_shipped_sweep_files_parse():
 def test_toml_yaml_json_give_the_same_tasks(tmp_path):
     toml = tmp_path / "s.toml"
     toml.write_text('task = "identify"\nseeds = {start = 5, count = 2}\n[params]\nsnr_db = 30.0\n'
-                    '[grid]\nmethod = ["improved", "classical"]\norder = [22, 30]\n')
+                    '[grid]\nmethod = ["improved-rpbsid", "classical-rpbsid"]\norder = [22, 30]\n')
     yaml_file = tmp_path / "s.yaml"
     yaml_file.write_text("task: identify\nseeds: {start: 5, count: 2}\nparams: {snr_db: 30.0}\n"
-                         "grid:\n  method: [improved, classical]\n  order: [22, 30]\n")
+                         "grid:\n  method: [improved-rpbsid, classical-rpbsid]\n"
+                         "  order: [22, 30]\n")
     json_file = tmp_path / "s.json"
     json_file.write_text(json.dumps({"task": "identify", "seeds": [5, 6],
                                      "params": {"snr_db": 30.0},
-                                     "grid": {"method": ["improved", "classical"],
+                                     "grid": {"method": ["improved-rpbsid", "classical-rpbsid"],
                                               "order": [22, 30]}}))
     ids = [[t.task_id for t in load_config(f).tasks()] for f in (toml, yaml_file, json_file)]
     assert len(ids[0]) == 8 and ids[0] == ids[1] == ids[2]
@@ -88,12 +89,12 @@ def test_toml_yaml_json_give_the_same_tasks(tmp_path):
 
 def test_task_ids_are_stable_and_ignore_labels():
     a = SweepConfig.from_dict({"task": "identify", "seeds": [0],
-                               "cases": [{"label": "x", "method": "improved"}]}).tasks()[0]
+                               "cases": [{"label": "x", "method": "improved-rpbsid"}]}).tasks()[0]
     b = SweepConfig.from_dict({"task": "identify", "seeds": [0],
-                               "params": {"method": "improved"}}).tasks()[0]
+                               "params": {"method": "improved-rpbsid"}}).tasks()[0]
     assert a.task_id == b.task_id
     # a hash of canonical JSON, so results files stay resumable across versions
-    blob = '{"kind":"identify","params":{"method":"improved","seed":0}}'
+    blob = '{"kind":"identify","params":{"method":"improved-rpbsid","seed":0}}'
     assert a.task_id == hashlib.sha1(blob.encode()).hexdigest()[:16]
     assert a.label == "x" and b.label is None
 
@@ -101,27 +102,27 @@ def test_task_ids_are_stable_and_ignore_labels():
 @pytest.mark.parametrize(("data", "match"), [
     ({"task": "identify", "seeds": 2, "bogus": 1}, "unknown top-level"),
     ({"task": "identify"}, "needs 'task' and 'seeds'"),
-    ({"task": "identify", "seeds": 2, "params": {"method": "improved", "ordr": 22}},
+    ({"task": "identify", "seeds": 2, "params": {"method": "improved-rpbsid", "ordr": 22}},
      "takes no parameter"),
     ({"task": "identify", "seeds": 2}, "needs parameter"),
-    ({"task": "identify", "seeds": 2, "params": {"method": "improved", "seed": 1}}, "seed"),
-    ({"task": "identify", "seeds": 2, "params": {"method": "improved", "snr_db": 10.0},
+    ({"task": "identify", "seeds": 2, "params": {"method": "improved-rpbsid", "seed": 1}}, "seed"),
+    ({"task": "identify", "seeds": 2, "params": {"method": "improved-rpbsid", "snr_db": 10.0},
       "grid": {"snr_db": [5.0, 10.0]}}, "also set"),
-    ({"task": "identify", "seeds": 2, "params": {"method": "improved"}, "grid": {"snr_db": []}},
-     "non-empty"),
-    ({"task": "identify", "seeds": 0, "params": {"method": "improved"}}, "positive"),
-    ({"task": "identify", "seeds": [1, 1], "params": {"method": "improved"}}, "distinct"),
-    ({"task": "identify", "seeds": [-1], "params": {"method": "improved"}}, "non-negative"),
+    ({"task": "identify", "seeds": 2, "params": {"method": "improved-rpbsid"},
+      "grid": {"snr_db": []}}, "non-empty"),
+    ({"task": "identify", "seeds": 0, "params": {"method": "improved-rpbsid"}}, "positive"),
+    ({"task": "identify", "seeds": [1, 1], "params": {"method": "improved-rpbsid"}}, "distinct"),
+    ({"task": "identify", "seeds": [-1], "params": {"method": "improved-rpbsid"}}, "non-negative"),
     ({"task": "nope", "seeds": 1}, "unknown task kind"),
     ({"task": "nowhere.module:fn", "seeds": 1}, "cannot import"),
-    ({"task": "identify", "seeds": 1, "cases": [{"method": "improved", "label": "a"},
-                                                 {"method": "improved", "label": "b"}]},
+    ({"task": "identify", "seeds": 1, "cases": [{"method": "improved-rpbsid", "label": "a"},
+                                                 {"method": "improved-rpbsid", "label": "b"}]},
      "identical tasks"),
-    ({"task": "identify", "seeds": 1, "params": {"method": "improved", "snr_db": float("nan")}},
-     "finite"),
-    ({"task": "identify", "seeds": 1, "params": {"method": "improved"},
+    ({"task": "identify", "seeds": 1,
+      "params": {"method": "improved-rpbsid", "snr_db": float("nan")}}, "finite"),
+    ({"task": "identify", "seeds": 1, "params": {"method": "improved-rpbsid"},
       "summary": {"colums": "order"}}, "unknown keys"),
-    ({"task": "identify", "seeds": 1, "params": {"method": "improved"},
+    ({"task": "identify", "seeds": 1, "params": {"method": "improved-rpbsid"},
       "summary": {"reference": [{"row": "a"}]}}, "needs row, metric"),
 ])
 def test_bad_configs_raise_before_running(data, match):
