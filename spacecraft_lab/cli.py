@@ -492,10 +492,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="PPO's initial log std of the action noise, normalized action "
                             "units (default -1; -3 for the residual-* settings, whose "
                             "action is scaled by 0.05)")
-    train.add_argument("--envs", type=_integer(1, 64), default=1,
+    train.add_argument("--envs", type=_integer(1, 64), default=None,
                        help="environments stepped side by side while training (above 1: "
                             "one process each; PPO collects a rollout from every env, so "
-                            "it is a different run, not the same one faster)")
+                            "it is a different run, not the same one faster; default: one "
+                            "per core for PPO and SAC, 1 for ARS)")
     train.add_argument("--out", type=_output_directory, default="results/train",
                        help="output directory")
     train.add_argument("--tensorboard", type=_output_directory, default=None,
@@ -628,6 +629,14 @@ def _control(args: argparse.Namespace) -> int:
     return 0
 
 
+def _training_envs(args: argparse.Namespace) -> int:
+    """``--envs``, or its default: every core for PPO and SAC, one env for ARS (which flies
+    its candidates one episode at a time)."""
+    if args.envs is not None:
+        return args.envs
+    return 1 if args.algo == "ars" else max(1, min(os.cpu_count() or 1, 64))
+
+
 def _train(args: argparse.Namespace) -> int:
     m = run_training(args.algo, args.features, args.timesteps, args.seeds, args.out,
                      scenario=args.scenario, eval_every=args.eval_every,
@@ -635,7 +644,7 @@ def _train(args: argparse.Namespace) -> int:
                      randomize=args.randomize, repeat=args.repeat, reward=args.reward,
                      first_seed=args.first_seed,
                      eval_seeds=tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_episodes)),
-                     workers=args.workers, envs=args.envs, log_std_init=args.log_std,
+                     workers=args.workers, envs=_training_envs(args), log_std_init=args.log_std,
                      relative_to_base=args.relative_to_base,
                      reward_from_s=args.reward_from, cache=args.cache)
     brief = {k: m[k] for k in ("algo", "features", "scenario", "timesteps", "randomize",

@@ -333,6 +333,9 @@ def training_metrics_problem(m: Any) -> str | None:
     for key in ("algo", "features", "scenario"):
         if not isinstance(m.get(key), str):
             return f"{key!r} missing or not a string"
+    if m.get("complete") is False:
+        return ("an unfinished run (interrupted, or still training): its curve so far is "
+                "under 'in_progress'")
     if not isinstance(m.get("timesteps"), int) or isinstance(m.get("timesteps"), bool):
         return "'timesteps' missing or not an integer"
     if not isinstance(m.get("relative_to_base", False), bool):

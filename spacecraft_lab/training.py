@@ -119,12 +119,33 @@ from spacecraft_lab.random_search import paired_ars
 from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
-__all__ = ["ACTION_REPEAT", "ALGORITHMS", "AVERAGED_DEFLECTION_LEVEL", "AVERAGED_FEATURES",
-           "AVERAGED_RESIDUAL_SCALE", "EVAL_SEEDS", "EVAL_WARMUP_SEED", "FEATURES",
-           "HYPERPARAMETERS", "NOMINAL_UNITS_FEATURES", "POLICIES", "RESIDUAL_HYPERPARAMETERS",
-           "RESIDUAL_REPEAT", "RESIDUAL_SCALE", "SCHEDULE_CHANNELS", "NormalizedPolicy",
-           "ZeroTorque", "algorithm_class", "fast_adaptive_lqg", "residual_scale",
-           "run_training"]
+__all__ = [
+    "ACTION_REPEAT",
+    "ALGORITHMS",
+    "AVERAGED_DEFLECTION_LEVEL",
+    "AVERAGED_FEATURES",
+    "AVERAGED_RESIDUAL_SCALE",
+    "EVAL_SEEDS",
+    "EVAL_WARMUP_SEED",
+    "FEATURES",
+    "HYPERPARAMETERS",
+    "NOMINAL_UNITS_FEATURES",
+    "POLICIES",
+    "PPO_MINIBATCH",
+    "PPO_ROLLOUT",
+    "RESIDUAL_HYPERPARAMETERS",
+    "RESIDUAL_REPEAT",
+    "RESIDUAL_SCALE",
+    "SCHEDULE_CHANNELS",
+    "SHORTEST_ROLLOUT",
+    "NormalizedPolicy",
+    "ZeroTorque",
+    "algorithm_class",
+    "fast_adaptive_lqg",
+    "ppo_rollout",
+    "residual_scale",
+    "run_training",
+]
 
 
 #: stable-baselines3 algorithms the job trains: PPO and SAC (MLP policies) and augmented
@@ -275,6 +296,51 @@ def residual_scale(features: str) -> float | None:
     return AVERAGED_RESIDUAL_SCALE if features in _AVERAGED_RESIDUAL else RESIDUAL_SCALE
 
 
+#: PPO's rollout per env (decisions) and minibatch as tuned (SB3's defaults); the run's
+#: rollout is the divisor of its budget nearest to it, so the budget is whole rollouts.
+PPO_ROLLOUT, PPO_MINIBATCH = 2048, 64
+#: Smallest PPO rollout per env chosen for a budget that allows a longer one (decisions).
+SHORTEST_ROLLOUT = 64
+
+
+def ppo_rollout(decisions_per_env: int, envs: int = 1) -> tuple[int, int]:
+    """PPO's ``n_steps`` and ``batch_size`` for a budget of whole rollouts.
+
+    Parameters
+    ----------
+    decisions_per_env : int
+        The agent decisions each env trains (>= 1).
+    envs : int
+        Envs stepped side by side (>= 1).
+
+    Returns
+    -------
+    n_steps : int
+        The divisor of ``decisions_per_env`` nearest to :data:`PPO_ROLLOUT` (the larger
+        on a tie), at least :data:`SHORTEST_ROLLOUT` where the budget allows: the
+        budget is then ``decisions_per_env / n_steps`` whole rollouts.
+    batch_size : int
+        :data:`PPO_MINIBATCH` when it divides ``n_steps * envs`` (no truncated
+        minibatch), else the largest divisor of ``n_steps * envs`` below it, unless that
+        is under 8 (a prime rollout): then :data:`PPO_MINIBATCH`, the last minibatch
+        truncated.
+
+    Raises
+    ------
+    ValueError
+        For ``decisions_per_env`` or ``envs`` below 1.
+    """
+    if decisions_per_env < 1 or envs < 1:
+        raise ValueError(f"decisions_per_env and envs must be >= 1, got "
+                         f"{decisions_per_env}, {envs}")
+    divisors = [d for d in range(1, decisions_per_env + 1) if decisions_per_env % d == 0]
+    allowed = [d for d in divisors if d >= SHORTEST_ROLLOUT] or divisors
+    n_steps = min(allowed, key=lambda d: (abs(d - PPO_ROLLOUT), -d))
+    buffer = n_steps * envs
+    batch = max(d for d in range(1, PPO_MINIBATCH + 1) if buffer % d == 0)
+    return n_steps, (batch if batch >= 8 else PPO_MINIBATCH)
+
+
 def algorithm_class(algo: str) -> type:
     """The class that trains and loads agents of one of :data:`ALGORITHMS`.
 
@@ -347,12 +413,13 @@ def _training_env_kwargs(randomize: bool, reward: str) -> dict[str, Any]:
 
 def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
                    repeat: int, relative_to_base: bool = False,
-                   reward_from_s: float = 0.0) -> gym.Env:
+                   reward_from_s: float = 0.0, monitor_file: str | None = None) -> gym.Env:
     """One training env: the setting's env (with ``relative_to_base``, its reward minus
     the base's on a twin of the episode, :class:`controllers.BaseRelativeReward`; with
     ``reward_from_s`` > 0, rewarded from that time on,
     :class:`controllers.ScoredWindowReward`), its action held ``repeat`` steps,
-    Monitor-wrapped (module level, so a ``SubprocVecEnv`` can build it in its worker)."""
+    Monitor-wrapped, its episodes written to ``monitor_file`` (``.monitor.csv``) when
+    given (module level, so a ``SubprocVecEnv`` can build it in its worker)."""
     from stable_baselines3.common.monitor import Monitor
 
     env = _make_env(scenario, features, env_kwargs)
@@ -360,7 +427,7 @@ def _monitored_env(scenario: str, features: str, env_kwargs: dict[str, Any],
         env = BaseRelativeReward(env)
     if reward_from_s > 0:
         env = ScoredWindowReward(env, reward_from_s)
-    return Monitor(ActionRepeat(env, repeat))
+    return Monitor(ActionRepeat(env, repeat), filename=monitor_file)
 
 
 def _make_env(scenario: str, features: str, env_kwargs: dict[str, Any],
@@ -566,10 +633,21 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
 
     ``timesteps`` and ``eval_every`` count env steps (0.1 s samples), also
     under ``repeat`` (agent decisions are ``timesteps / repeat``), so runs
-    with different ``repeat`` compare at equal simulated time. PPO trains
-    whole rollouts, so it can train more env steps than asked (it says so):
-    ``metrics.json``'s ``"timesteps"`` are the env steps trained (each seed's
-    in ``runs[i]["env_steps"]``), ``"timesteps_requested"`` what was asked.
+    with different ``repeat`` compare at equal simulated time. PPO and SAC train
+    exactly ``timesteps`` env steps: the budget must be a whole number of decisions
+    per env (a multiple of ``repeat * envs``; otherwise refused, naming the nearest
+    valid budgets), and PPO's rollout is set from it (:func:`ppo_rollout`, recorded in
+    ``hyperparameters``). ARS trains whole iterations of whole episodes (an episode
+    ends when it ends), so it stops at the end of the first iteration past the budget.
+    ``metrics.json``'s ``"timesteps"`` are the env steps trained (each seed's in
+    ``runs[i]["env_steps"]``), ``"timesteps_requested"`` what was asked.
+
+    The policy is evaluated every ``eval_every`` env steps at the first update boundary
+    past them (the start of a rollout: never before the first update), and once at
+    the end. Each evaluation writes ``metrics.json`` (``"complete": false`` until the
+    run ends) and ``learning_curves.png``, so an interrupted run keeps its curve.
+    SB3's log goes to the console and to ``logs/<run>/progress.csv`` beside the
+    Monitor's episode record (``monitor/<run>-env<i>.monitor.csv``).
 
     ``workers``: processes that score the comparators (:data:`COMPARATORS`) side by side
     before training (default: one per core, at most one per comparator); every episode is
@@ -622,7 +700,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     # optional dependency (the "rl" extra): imported where it is needed
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.logger import Logger
+    from stable_baselines3.common.logger import configure as configure_logger
+    from stable_baselines3.common.logger import make_output_format
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     if algo == "ars" and importlib.util.find_spec("sb3_contrib") is None:
@@ -666,6 +745,16 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     env_kwargs = _training_env_kwargs(randomize, reward)
     # the env checks the reward form and the wrapper the repeat, before anything is written
     ActionRepeat(gym.make(env_id(scenario), **env_kwargs), repeat).close()
+    if algo != "ars" and timesteps % (repeat * envs):
+        unit = repeat * envs
+        below, above = timesteps // unit * unit, -(-timesteps // unit) * unit
+        raise ValueError(
+            f"{algo.upper()} trains whole decisions of {repeat} env steps in each of {envs} "
+            f"env(s): timesteps must be a multiple of {unit}, got {timesteps:,}; the nearest "
+            f"valid budgets are {', '.join(f'{b:,}' for b in (below, above) if b > 0)}")
+    if algo == "ppo":
+        n_steps, batch = ppo_rollout(timesteps // (repeat * envs), envs)
+        hyper = {**hyper, "n_steps": n_steps, "batch_size": batch}
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     comparators = _score_comparators(scenario, env_kwargs, eval_seeds, workers, progress,
@@ -675,67 +764,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     # whole-episode attitude RMS is dominated by the slew, which every policy flies alike
     target = 2.0 * baseline["cost_after_100s"]
 
-    runs = []
-    with _one_torch_thread(torch):
-        torch_threads = torch.get_num_threads()
-        for seed in range(first_seed, first_seed + seeds):
-            factory = partial(_monitored_env, scenario, features, env_kwargs, repeat,
-                              bool(relative_to_base), reward_from_s)
-            vec = (DummyVecEnv([factory]) if envs == 1
-                   else SubprocVecEnv([factory] * envs, start_method="forkserver"))
-            # ARS compares whole returns within an iteration: no running reward scale;
-            # its linear policy acts on nominal units where the setting gives them
-            venv = VecNormalize(vec, norm_obs=not (algo == "ars"
-                                                   and features in NOMINAL_UNITS_FEATURES),
-                                norm_reward=algo != "ars", clip_obs=10.0)
-            venv.seed(seed)
-            model = algorithm(POLICIES[algo], venv, seed=seed, verbose=0,
-                              tensorboard_log=tensorboard, **hyper)
-            if tensorboard is None:
-                # SB3's default logger makes an empty /tmp/SB3-<date> folder per model
-                model.set_logger(Logger(folder=None, output_formats=[]))
-            if residual and algo != "ars":
-                _start_at_the_base(model)
-            curve: list[dict[str, float]] = []
-            name = f"{algo}-{features}-seed{seed}"
-
-            decisions = -(-timesteps // repeat)
-            # PPO collects whole rollouts: it runs to the next multiple of n_steps
-            rollout = getattr(model, "n_steps", 1) * venv.num_envs
-            total = -(-decisions // rollout) * rollout * repeat
-            if algo == "ars" and progress and seed == first_seed:
-                tqdm.write(f"ARS trains whole iterations of {model.pop_size} episodes: "
-                           "it stops at the end of the first past the env steps asked "
-                           "(metrics.json's 'timesteps' are those trained).")
-            elif total != timesteps and progress and seed == first_seed:
-                tqdm.write(f"{algo.upper()} trains whole rollouts of {rollout} decisions x "
-                           f"{repeat} env steps: {timesteps:,} env steps asked, {total:,} "
-                           "trained (metrics.json's 'timesteps'; the request is "
-                           "'timesteps_requested').")
-            callback = _eval_callback(BaseCallback, model, venv, name, curve, total,
-                                     eval_every, scenario, features, env_kwargs, progress, repeat,
-                                     eval_seeds, out)
-            started = time.perf_counter()
-            model.learn(total_timesteps=decisions, callback=callback,
-                        tb_log_name=name if tensorboard else "run")
-            seconds = time.perf_counter() - started
-            # the final evaluation is the curve's last point (same episodes, same axis)
-            final = callback.evaluate_now()
-            venv.training = False       # saved for inference: the statistics stay fixed
-            model.save(out / f"{name}.zip")
-            venv.save(str(out / f"{name}_vecnormalize.pkl"))
-            venv.close()
-            reached = next((c["timesteps"] for c in curve if c["cost_after_100s"] <= target),
-                           None)
-            runs.append({"seed": seed, "final": final, "curve": curve,
-                         "steps_to_2x_adaptive": reached,
-                         "env_steps": int(model.num_timesteps * repeat),
-                         # training throughput on this machine (evaluations included)
-                         "env_steps_per_s": float(model.num_timesteps * repeat / seconds),
-                         # selected on the evaluation episodes: optimistic
-                         "best_checkpoint": callback.best})
-
-    metrics = {
+    runs: list[dict[str, Any]] = []
+    settings = {
         "algo": algo, "features": features, "scenario": scenario, "randomize": bool(randomize),
         "repeat": repeat, "reward": reward, "relative_to_base": bool(relative_to_base),
         "reward_from_s": reward_from_s,
@@ -746,26 +776,101 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
                                  if residual and make is _RESIDUAL[features]), None),
         # the residual base's integral settle time, so a loaded agent flies that base
         "base_integral_settle_s": INTEGRAL_SETTLE_S if residual else None,
-        # the env steps every seed trained (whole rollouts), and what was asked
-        "timesteps": int(max(r["env_steps"] for r in runs)), "timesteps_requested": timesteps,
-        "seeds": seeds, "eval_seeds": list(eval_seeds),
-        "torch_threads": torch_threads,
+        "timesteps_requested": timesteps, "seeds": seeds, "eval_seeds": list(eval_seeds),
         **comparators,
-        "threshold": "cost_after_100s", "target_cost_after_100s": target, "runs": runs,
-        "final_cost_after_100s": float(np.median([r["final"]["cost_after_100s"] for r in runs])),
-        "final_attitude_rms_deg": float(np.mean([r["final"]["attitude_rms_deg"] for r in runs])),
-        "final_vibration_rms_mm": float(np.mean([r["final"]["vibration_rms_mm"] for r in runs])),
-        "final_return": float(np.mean([r["final"]["return"] for r in runs])),
+        "threshold": "cost_after_100s", "target_cost_after_100s": target,
     }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    plot_learning_curves(out / "learning_curves.png", metrics)
-    return metrics
+
+    def write_metrics(in_progress: dict[str, Any] | None = None) -> dict[str, Any]:
+        """``metrics.json`` and ``learning_curves.png`` of the seeds done and, while
+        one trains, its curve so far (``"complete": false``)."""
+        metrics = {**settings, "complete": in_progress is None, "runs": runs,
+                   # the env steps every seed trained, and what was asked
+                   "timesteps": int(max((r["env_steps"] for r in runs), default=0))}
+        if in_progress is not None:
+            metrics["in_progress"] = in_progress
+        if runs:
+            finals = [r["final"] for r in runs]
+            metrics.update({
+                "final_cost_after_100s": float(np.median([f["cost_after_100s"]
+                                                          for f in finals])),
+                "final_attitude_rms_deg": float(np.mean([f["attitude_rms_deg"]
+                                                         for f in finals])),
+                "final_vibration_rms_mm": float(np.mean([f["vibration_rms_mm"]
+                                                         for f in finals])),
+                "final_return": float(np.mean([f["return"] for f in finals]))})
+        (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+        curves = runs + ([in_progress] if in_progress is not None else [])
+        plot_learning_curves(out / "learning_curves.png", {**metrics, "runs": curves})
+        return metrics
+
+    with _one_torch_thread(torch):
+        settings["torch_threads"] = torch.get_num_threads()
+        for seed in range(first_seed, first_seed + seeds):
+            name = f"{algo}-{features}-seed{seed}"
+            (out / "monitor").mkdir(exist_ok=True)
+            factories = [partial(_monitored_env, scenario, features, env_kwargs, repeat,
+                                 bool(relative_to_base), reward_from_s,
+                                 str(out / "monitor" / f"{name}-env{i}"))
+                         for i in range(envs)]
+            vec = (DummyVecEnv(factories) if envs == 1
+                   else SubprocVecEnv(factories, start_method="forkserver"))
+            # ARS compares whole returns within an iteration: no running reward scale;
+            # its linear policy acts on nominal units where the setting gives them
+            venv = VecNormalize(vec, norm_obs=not (algo == "ars"
+                                                   and features in NOMINAL_UNITS_FEATURES),
+                                norm_reward=algo != "ars", clip_obs=10.0)
+            venv.seed(seed)
+            model = algorithm(POLICIES[algo], venv, seed=seed, verbose=0, **hyper)
+            # SB3's log: the console and a CSV per run, and TensorBoard when asked (not
+            # SB3's default logger, which makes an empty /tmp/SB3-<date> folder per model)
+            model.set_logger(configure_logger(str(out / "logs" / name), ["stdout", "csv"]))
+            if tensorboard:
+                model.logger.output_formats.append(
+                    make_output_format("tensorboard", str(Path(tensorboard) / name)))
+            if residual and algo != "ars":
+                _start_at_the_base(model)
+            curve: list[dict[str, float]] = []
+
+            decisions = timesteps // repeat if algo != "ars" else -(-timesteps // repeat)
+            if algo == "ars" and progress and seed == first_seed:
+                tqdm.write(f"ARS trains whole iterations of {model.pop_size} episodes: "
+                           "it stops at the end of the first past the env steps asked "
+                           "(metrics.json's 'timesteps' are those trained).")
+            callback = _eval_callback(
+                BaseCallback, model, venv, name, curve, decisions * repeat, eval_every,
+                scenario, features, env_kwargs, progress, repeat, eval_seeds, out,
+                on_evaluation=partial(write_metrics, {"seed": seed, "curve": curve}))
+            started = time.perf_counter()
+            model.learn(total_timesteps=decisions, callback=callback)
+            seconds = time.perf_counter() - started
+            # the final evaluation is the curve's last point (same episodes, same axis)
+            final = callback.evaluate_now()
+            venv.training = False       # saved for inference: the statistics stay fixed
+            model.save(out / f"{name}.zip")
+            venv.save(str(out / f"{name}_vecnormalize.pkl"))
+            venv.close()
+            model.logger.close()
+            reached = next((c["timesteps"] for c in curve if c["cost_after_100s"] <= target),
+                           None)
+            runs.append({"seed": seed, "final": final, "curve": curve,
+                         "steps_to_2x_adaptive": reached,
+                         "env_steps": int(model.num_timesteps * repeat),
+                         # training throughput on this machine (evaluations included)
+                         "env_steps_per_s": float(model.num_timesteps * repeat / seconds),
+                         # selected on the evaluation episodes: optimistic
+                         "best_checkpoint": callback.best})
+    return write_metrics()
 
 
 def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenario,
-                  features, env_kwargs, progress, repeat, eval_seeds, out=None):
+                  features, env_kwargs, progress, repeat, eval_seeds, out=None,
+                  on_evaluation=None):
     """SB3 callback: tqdm progress and a harness evaluation every ``eval_every`` env
-    steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each).
+    steps (``num_timesteps`` counts agent decisions, ``repeat`` env steps each), at the
+    first update boundary past them (the start of a rollout, after the update the last
+    one fed: PPO's and ARS's whole rollouts, SAC's every step), never before the first
+    update; ``on_evaluation()`` after each (the partial ``metrics.json``).
 
     Not SB3's ``EvalCallback``: that one scores returns through
     ``evaluate_policy``, while these runs are judged on the controllers' harness
@@ -806,13 +911,20 @@ def _eval_callback(base, model, venv, name, curve, timesteps, eval_every, scenar
                              "cost_after_100s": score["cost_after_100s"]}
                 model.save(out / f"{name}_best.zip")
                 venv.save(str(out / f"{name}_best_vecnormalize.pkl"))
+            if on_evaluation is not None:
+                on_evaluation()
             return score
+
+        def _on_rollout_start(self) -> None:
+            env_steps = self.num_timesteps * repeat
+            # a rollout starts after the update the last one fed (none before the first)
+            if timesteps > env_steps >= self.next_eval and self.num_timesteps > 0:
+                while self.next_eval <= env_steps:
+                    self.next_eval += eval_every
+                self.evaluate_now()
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs * repeat)
-            if timesteps > self.num_timesteps * repeat >= self.next_eval:
-                self.next_eval += eval_every
-                self.evaluate_now()
             # none at the end (the last rollout's update is still to come): the final
             # evaluation after ``learn`` scores the policy that is saved, once
             return True

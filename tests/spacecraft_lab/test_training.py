@@ -13,12 +13,15 @@ import numpy as np
 import pytest
 
 from spacecraft_env import env_id
+from spacecraft_lab.reporting import load_training_metrics
 from spacecraft_lab.training import (
     ACTION_REPEAT,
     FEATURES,
+    PPO_MINIBATCH,
     NormalizedPolicy,
     _make_env,
     _one_torch_thread,
+    ppo_rollout,
     run_training,
 )
 
@@ -30,7 +33,7 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     scratch.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     monkeypatch.delenv("SB3_LOGDIR", raising=False)
-    m = run_training("ppo", "none", 2048, 1, tmp_path, eval_every=2048, progress=False,
+    m = run_training("ppo", "none", 2000, 1, tmp_path, eval_every=1000, progress=False,
                      eval_seeds=(1000, 1001))
     assert (tmp_path / "ppo-none-seed0.zip").exists()
     assert not list(scratch.glob("SB3-*"))
@@ -44,11 +47,15 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     assert m["repeat"] == ACTION_REPEAT and m["reward"] == "bounded"
     assert m["torch_threads"] == 1
     assert 2000 < m["adaptive_lqg"]["return"] <= 2500
-    # curves count env steps, not decisions; PPO's whole rollout (2048 decisions x 10 env
-    # steps) is what was trained, and metrics.json says so beside the request
-    assert m["runs"][0]["curve"][0]["timesteps"] >= 2048
-    assert m["timesteps_requested"] == 2048 and m["timesteps"] == 20480
-    assert m["runs"][0]["env_steps"] == 20480 == m["runs"][0]["curve"][-1]["timesteps"]
+    # curves count env steps, not decisions; the budget is trained exactly (PPO's rollout
+    # set from it: 200 decisions x 10 env steps, one update, so no evaluation before it)
+    assert m["timesteps_requested"] == 2000 == m["timesteps"] and m["complete"] is True
+    assert m["hyperparameters"]["n_steps"] == 200
+    assert [c["timesteps"] for c in m["runs"][0]["curve"]] == [2000]
+    assert m["runs"][0]["env_steps"] == 2000
+    # SB3's log and the Monitor's episodes are kept beside the run
+    assert (tmp_path / "logs" / "ppo-none-seed0" / "progress.csv").exists()
+    assert (tmp_path / "monitor" / "ppo-none-seed0-env0.monitor.csv").exists()
     # the final result is the curve's last point, scored on the comparators' episodes
     run = m["runs"][0]
     assert run["final"] == {k: v for k, v in run["curve"][-1].items() if k != "timesteps"}
@@ -138,9 +145,10 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     event_accumulator = pytest.importorskip(
         "tensorboard.backend.event_processing.event_accumulator")
     # randomized docking with the oracle features: short episodes so Monitor closes some
-    # eval_every far below one rollout (2048 decisions = 20480 env steps): every
-    # evaluation must reach TensorBoard, at its env step
-    m = run_training("ppo", "oracle", 2048, 1, tmp_path / "out", eval_every=5000,
+    # one decision per env step: two rollouts of 2048; eval_every far below one rollout:
+    # evaluated at the update boundary past it, never before the first update, and
+    # every evaluation reaches TensorBoard at its env step
+    m = run_training("ppo", "oracle", 4096, 1, tmp_path / "out", eval_every=1000, repeat=1,
                      progress=False, randomize=True, tensorboard=str(tmp_path / "tb"),
                      eval_seeds=(1000,))
     assert m["randomize"] and np.isfinite(m["final_vibration_rms_mm"])
@@ -153,7 +161,7 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
             "eval/stable_share"} <= tags
     assert "time/fps" in tags
     curve = m["runs"][0]["curve"]
-    assert [c["timesteps"] for c in curve] == [5000, 10000, 15000, 20000, 20480]
+    assert [c["timesteps"] for c in curve] == [2048, 4096]
     logged = acc.Scalars("eval/cost_after_100s")
     assert [e.step for e in logged] == [c["timesteps"] for c in curve]
     np.testing.assert_allclose([e.value for e in logged],
@@ -163,8 +171,8 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     from spacecraft_lab.reporting import rl_table
 
     table = rl_table([tmp_path / "out"])
-    assert "| PPO | oracle | randomized docking, bounded reward | 20,480 | 1 |" in table
-    assert "| fixed LQG |" in table and "| adaptive LQG |" in table
+    assert "| PPO | oracle | randomized docking, bounded reward | 4,096 | 1 |" in table
+    assert "| fixed LQG |" in table and "| adaptive LQG, fast identifier |" in table
     assert "| oracle LQG | - | - | - | - |" in table and "| 1.00 |" in table
     assert "| zero torque |" in table
     worst = m["fixed_lqg"]
@@ -178,7 +186,8 @@ def test_training_logs_monitor_and_evaluation_metrics_to_tensorboard(tmp_path):
     assert len(fig.legends) == 1 and all(ax.get_legend() is None for ax in fig.axes)
     for ax in fig.axes:
         agents = [ln for ln in ax.get_lines() if ln.get_marker() not in (None, "None", "")]
-        refs = [ln for ln in ax.get_lines() if ln not in agents]
+        # (an evaluation that crashed adds the marked "crashed" level, in C3)
+        refs = [ln for ln in ax.get_lines() if ln not in agents and ln.get_color() != "C3"]
         assert len(agents) == 1 and len(refs) == 4
         assert min(a.get_zorder() for a in agents) > max(r.get_zorder() for r in refs)
     many = plot_rl_comparison(tmp_path / "many.png", [m] * 7)
@@ -513,16 +522,17 @@ def test_rl_figure_draws_crashed_evaluations_on_a_marked_level(tmp_path):
 @pytest.mark.slow        # 12 s of training (two env processes): kept out of the default run
 def test_training_steps_several_envs_side_by_side_and_reports_its_throughput(tmp_path):
     """--envs 2: a SubprocVecEnv of two processes; PPO collects a rollout of n_steps
-    decisions from each, so one rollout is twice the env steps; metrics.json says how
+    decisions from each (the budget's 400 decisions: 200 each); metrics.json says how
     many envs and how fast training went."""
     pytest.importorskip("stable_baselines3")
-    m = run_training("ppo", "none", 2048, 1, tmp_path, eval_every=10**9, progress=False,
+    m = run_training("ppo", "none", 4000, 1, tmp_path, eval_every=10**9, progress=False,
                      eval_seeds=(1000,), envs=2, workers=1, log_std_init=-2.5)
     run = m["runs"][0]
     assert m["envs"] == 2
     # the exploration asked for is the one trained with, and recorded
     assert m["hyperparameters"]["policy_kwargs"]["log_std_init"] == -2.5
-    assert run["env_steps"] == 2 * 2048 * ACTION_REPEAT == m["timesteps"]
+    assert run["env_steps"] == 4000 == m["timesteps"]
+    assert (tmp_path / "monitor" / "ppo-none-seed0-env1.monitor.csv").exists()
     assert run["env_steps_per_s"] > 0
     assert (tmp_path / "ppo-none-seed0.zip").exists()
 
@@ -536,6 +546,37 @@ def test_training_refuses_bad_envs_and_exploration_settings(tmp_path):
     with pytest.raises(ValueError, match=r"log_std_init must be in \[-10, 2\]"):
         run_training("ppo", "none", 2048, 1, tmp_path, log_std_init=float("nan"),
                      progress=False)
+
+
+@pytest.mark.parametrize(("algo", "envs", "budget", "nearest"), [
+    ("ppo", 1, 2048, "2,040, 2,050"), ("sac", 1, 5, "10"), ("ppo", 2, 4010, "4,000, 4,020")])
+def test_a_budget_of_part_decisions_is_refused_naming_the_nearest(tmp_path, algo, envs, budget,
+                                                                  nearest):
+    pytest.importorskip("stable_baselines3")
+    with pytest.raises(ValueError, match=f"nearest valid budgets are {nearest}$"):
+        run_training(algo, "none", budget, 1, tmp_path, envs=envs, progress=False)
+    assert not (tmp_path / "metrics.json").exists()
+
+
+@pytest.mark.parametrize(("decisions", "envs", "rollout"), [
+    (200, 1, (200, 50)), (4096, 1, (2048, 64)), (80_000, 1, (2000, 50)), (100, 2, (100, 50)),
+    (30, 1, (30, 30)), (211, 1, (211, 64)), (6144, 3, (2048, 64))])
+def test_ppo_rollout_makes_the_budget_whole_rollouts(decisions, envs, rollout):
+    n_steps, batch = ppo_rollout(decisions, envs)
+    assert (n_steps, batch) == rollout
+    assert decisions % n_steps == 0
+    assert (n_steps * envs) % batch == 0 or batch == PPO_MINIBATCH     # a prime rollout
+    with pytest.raises(ValueError, match="must be >= 1"):
+        ppo_rollout(0)
+
+
+def test_an_unfinished_run_is_refused_by_the_tables(tmp_path):
+    """What each evaluation writes while a run trains (``"complete": false``)."""
+    m = {"algo": "ppo", "features": "none", "scenario": "docking", "timesteps": 0,
+         "complete": False, "runs": [], "in_progress": {"seed": 0, "curve": []}}
+    (tmp_path / "metrics.json").write_text(json.dumps(m))
+    with pytest.raises(ValueError, match="an unfinished run"):
+        load_training_metrics(tmp_path)
 
 
 @pytest.mark.parametrize("features", FEATURES)
@@ -725,3 +766,39 @@ def test_training_on_the_scored_window_wraps_the_env_and_refuses_a_bad_start(tmp
     for bad in (-1.0, float("nan"), True):
         with pytest.raises(ValueError, match="reward_from_s"):
             run_training("ppo", "none", 100, 1, tmp_path, reward_from_s=bad, progress=False)
+
+
+def test_an_interrupted_run_leaves_its_curve(tmp_path, monkeypatch):
+    """Each evaluation writes metrics.json and the learning curves: a run stopped after
+    its first evaluation (at the update boundary past 1000 env steps) keeps that point."""
+    pytest.importorskip("stable_baselines3")
+    import spacecraft_lab.training as training
+
+    real, calls = training._evaluate, []
+
+    def evaluate_then_stop(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(training, "_evaluate", evaluate_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        run_training("ppo", "none", 4096, 1, tmp_path, eval_every=1000, repeat=1,
+                     progress=False, eval_seeds=(1000,))
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["complete"] is False and m["runs"] == []
+    assert [c["timesteps"] for c in m["in_progress"]["curve"]] == [2048]
+    assert (tmp_path / "learning_curves.png").exists()
+    with pytest.raises(ValueError, match="an unfinished run"):
+        load_training_metrics(tmp_path)
+
+
+def test_the_command_line_trains_on_every_core_by_default():
+    from spacecraft_lab.cli import _training_envs, build_parser
+
+    parser = build_parser()
+    ppo = parser.parse_args(["train", "--algo", "ppo"])
+    assert _training_envs(ppo) == max(1, min(os.cpu_count() or 1, 64))
+    assert _training_envs(parser.parse_args(["train", "--algo", "ars"])) == 1
+    assert _training_envs(parser.parse_args(["train", "--envs", "3"])) == 3
