@@ -644,8 +644,10 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         nominal scales, from t = 100 s, or from the middle of a shorter
         episode) and ``envelope_growth_t`` (its t-statistic: the log-peaks'
         slope over its standard error); ``saturated_share`` (share of the
-        last 10 % of steps with an actuator at its limit); ``verdict`` and
-        ``stable``; and the
+        last 10 % of steps with an actuator at its limit); ``verdict``,
+        ``verdict_reason`` (why a verdict other than stable is no fault of the law:
+        an axis the controller reported lost, kind "axis lost" in its
+        ``stats["faults"]``; else None) and ``stable``; and the
         controller's ``excitation_rms_Nm``, ``rejected_share`` and
         ``fallback_share`` and ``fallback_share_after_60s``
         (:func:`controller_shares`); for controllers with an identifier,
@@ -737,6 +739,15 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
     whole = costs.mean(axis=0) if len(costs) else nan
     cost_after_start = costs[after_start, :4].sum(axis=1).mean() if after_start.any() \
         else float("nan")
+    # a controller that reported an axis it cannot hold says why the loop is not stable
+    lost = [f for f in (traj.controller_stats or {}).get("faults", [])
+            if f.get("kind") == "axis lost"]
+    verdict_reason = None
+    if verdict != "stable" and lost:
+        axes = ", ".join(("roll", "pitch", "yaw")[f["axis"]] for f in lost)
+        verdict_reason = (f"{axes} lost: its wheel does not answer (reported at "
+                          f"{min(f['detected_s'] for f in lost):.0f} s); with one wheel per "
+                          "axis no controller can hold it")
     crashed = verdict in ("diverged", "terminated")
     if crashed:
         # a crash costs infinity whenever it happens: averaged over the steps that exist,
@@ -783,6 +794,7 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         "envelope_growth_t": growth_t,
         "saturated_share": saturated,
         "verdict": verdict,
+        "verdict_reason": verdict_reason,
         "stable": verdict == "stable",
         **controller_shares(traj.controller_stats),
     }

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from controllers import PD, ActuatorMonitor, AdaptiveLQG, FaultWarning, run_episode
+from controllers import PD, ActuatorMonitor, AdaptiveLQG, FaultWarning, episode_metrics, run_episode
 from controllers.actuator_monitor import CONFIRM_S, SMALLEST_TORQUE
 from spacecraft_env import FaultInjection, env_id, parse_fault
 
@@ -114,3 +114,38 @@ def test_the_adaptive_loop_carries_the_monitor_and_can_leave_it_out():
     env = _at_rest(steps=10)
     assert isinstance(AdaptiveLQG(env).actuator_monitor, ActuatorMonitor)
     assert AdaptiveLQG(env, monitor_actuators=False).actuator_monitor is None
+
+
+class _MonitoredPD(PD):
+    """A PD law carrying the actuator monitor, its reports in ``stats["faults"]``."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.monitor = ActuatorMonitor(env)
+        self.stats = {"faults": self.monitor.faults}
+
+    def reset(self, seed=None):
+        super().reset(seed)
+        self.monitor.reset()
+        self.stats = {"faults": self.monitor.faults}
+
+    def act(self, obs, info=None):
+        self.monitor(obs, info)
+        return super().act(obs, info)
+
+
+def test_the_verdict_says_why_when_an_axis_is_lost():
+    """A stuck pitch wheel: the PD cannot hold pitch; the verdict names the lost axis
+    (checked against the true closed loop: the attitude leaves its bound), and the same
+    law on the healthy plant gets no reason."""
+    faulted = _at_rest(["stuck_actuator,onset=5,axis=1,value=0.5"], steps=900)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FaultWarning)
+        traj = run_episode(faulted, _MonitoredPD(faulted), seed=0)
+    metrics = episode_metrics(traj, faulted.unwrapped.model)
+    assert metrics["verdict"] != "stable"
+    assert metrics["verdict_reason"].startswith("pitch lost: its wheel does not answer")
+    healthy = _at_rest(steps=900)
+    clean = episode_metrics(run_episode(healthy, _MonitoredPD(healthy), seed=0),
+                            healthy.unwrapped.model)
+    assert clean["verdict"] == "stable" and clean["verdict_reason"] is None
