@@ -30,6 +30,12 @@ from typing import Any
 import numpy as np
 
 from controllers.lqg import INTEGRAL_SETTLE_S
+from spacecraft_lab.reporting import COMPARATOR_NAMES
+from spacecraft_lab.rl_protocol import (
+    improvement_probabilities,
+    interval_estimates,
+    protocol_table,
+)
 from spacecraft_lab.score_cache import default_cache
 from spacecraft_lab.training import (
     ALGORITHMS,
@@ -42,6 +48,7 @@ from spacecraft_lab.training import (
     _score_comparators,
     _training_env_kwargs,
     algorithm_class,
+    base_comparator,
     residual_scale,
 )
 
@@ -213,7 +220,10 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
         ``_worst``, ``_per_seed``, ``worst_episode_seed``, attitude RMS,
         vibration, return, ``stable_share``; the agent under ``"agent"``) and
         ``agent_over`` (comparator -> median and worst of the agent's paired
-        per-episode cost ratios).
+        per-episode cost ratios) and ``protocol`` (:mod:`spacecraft_lab.rl_protocol`:
+        ``estimates``, name -> IQM, median and mean with 95 % intervals; ``improvement``,
+        the probability that the agent costs less than its base, where it has one, and
+        the adaptive LQG on a draw; ``draws``).
     """
     seeds = tuple(int(s) for s in seeds)
     if not seeds or min(seeds) < 0:
@@ -231,8 +241,14 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
     mine = score["cost_after_100s_per_seed"]
     agent_over = {key: paired_ratio(mine, scores[key]["cost_after_100s_per_seed"])
                   for key, _ in COMPARATORS}
+    costs = {key: score["cost_after_100s_per_seed"] for key, score in scores.items()}
+    over = list(dict.fromkeys(k for k in (base_comparator(settings["features"]),
+                                          "adaptive_lqg") if k))
+    protocol = {"estimates": interval_estimates(costs),
+                "improvement": improvement_probabilities(costs, "agent", over),
+                "draws": len(seeds)}
     return {"agent": settings, "eval_seeds": list(seeds), "scores": scores,
-            "agent_over": agent_over}
+            "agent_over": agent_over, "protocol": protocol}
 
 
 def evaluation_table(result: dict[str, Any]) -> str:
@@ -249,8 +265,17 @@ def evaluation_table(result: dict[str, Any]) -> str:
     for key, score in result["scores"].items():
         over = result["agent_over"].get(key)
         ratio = "-" if over is None else f"{over['median']:.3g} [{over['worst']:.3g}]"
-        lines.append(f"| {key.replace('_', ' ')} | {score['cost_after_100s']:.4g} | "
+        lines.append(f"| {COMPARATOR_NAMES.get(key, key)} | {score['cost_after_100s']:.4g} | "
                      f"{score['cost_after_100s_mean']:.4g} | "
                      f"{score['cost_after_100s_worst']:.4g} ({score['worst_episode_seed']}) | "
                      f"{ratio} | {100 * score['stable_share']:.0f} % |")
-    return "\n".join(lines)
+    protocol = result.get("protocol")
+    if protocol is None:
+        return "\n".join(lines)
+    names = {COMPARATOR_NAMES.get(k, k): v for k, v in protocol["estimates"].items()}
+    better = {COMPARATOR_NAMES.get(k, k): v for k, v in protocol["improvement"].items()}
+    lines += ["", "The evaluation protocol (docs/design/evaluation.md, \"RL agents\"): the "
+              "cost from 100 s over the draws, 95 % stratified-bootstrap intervals over "
+              "seeds and draws:", "",
+              protocol_table(names, better, "agent", {"agent": 1}, protocol["draws"])]
+    return "\n".join(lines).rstrip("\n")

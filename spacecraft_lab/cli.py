@@ -46,6 +46,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from controllers import LQRWeights
 from spacecraft_conventions import __version__, exit_now, sigterm_as_interrupt
 from spacecraft_env import (
@@ -63,8 +65,9 @@ from spacecraft_lab.control import CONTROLLER_KEYS, SCENARIO_NAMES, env_kwargs_f
 from spacecraft_lab.demo import MAX_DEMO_STEPS, demo_summary, run_demo
 from spacecraft_lab.identification import METHODS, PRESETS, run_identification
 from spacecraft_lab.paper import PAPER_SNR_DB
-from spacecraft_lab.plots import plot_adaptation, plot_rl_comparison
+from spacecraft_lab.plots import plot_adaptation, plot_performance_profiles, plot_rl_comparison
 from spacecraft_lab.reporting import (
+    COMPARATOR_NAMES,
     FAST_ADAPTIVE_LQG,
     control_brief,
     control_summary,
@@ -72,6 +75,7 @@ from spacecraft_lab.reporting import (
     pooled_training_runs,
     rl_table,
 )
+from spacecraft_lab.rl_protocol import performance_profiles
 from spacecraft_lab.sweeps import (
     BACKENDS,
     MAX_TASKS,
@@ -671,8 +675,18 @@ def _evaluate(args: argparse.Namespace) -> int:
     table = evaluation_table(result)
     (out / "evaluation.json").write_text(json.dumps(result, indent=2))
     (out / "table.md").write_text(table + "\n")
+    costs = {COMPARATOR_NAMES.get(k, k): s["cost_after_100s_per_seed"]
+             for k, s in result["scores"].items()}
+    finite = np.concatenate([np.asarray(c, dtype=float) for c in costs.values()])
+    finite = finite[np.isfinite(finite) & (finite > 0)]
+    if finite.size:
+        thresholds = np.geomspace(finite.min() / 2, finite.max() * 2, 60)
+        plot_performance_profiles(out / "performance_profiles.png", thresholds,
+                                  performance_profiles(costs, thresholds),
+                                  title=f"{Path(args.agent).stem} beside the LQGs, "
+                                        f"{len(seeds)} held-out draws")
     print(table)
-    print(f"wrote {out}/evaluation.json and table.md")
+    print(f"wrote {out}/evaluation.json, table.md and performance_profiles.png")
     return 0
 
 

@@ -571,3 +571,45 @@ def plot_demo_response(path: str | Path, t: np.ndarray, attitude_deg: np.ndarray
         ax.grid(alpha=0.3)
     fig.suptitle(title)
     save(fig, path, dpi=110)
+
+
+def plot_performance_profiles(path: str | Path, thresholds: np.ndarray,
+                              profiles: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                              title: str = "") -> Figure:
+    """The share of runs and draws costing at most each threshold, with 95 % bands
+    (:func:`spacecraft_lab.rl_protocol.performance_profiles`); higher and further left
+    is better.
+
+    Parameters
+    ----------
+    path : str or Path
+        The PNG written.
+    thresholds : (k,) ndarray
+        The costs on the x-axis (log scale).
+    profiles : mapping
+        Name -> ``(share, low, high)``, each ``(k,)``.
+    title : str
+        The figure's title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure (also saved to ``path``).
+    """
+    fig = Figure(figsize=(7.5, 4.5))
+    ax = fig.subplots()
+    for j, (name, (share, low, high)) in enumerate(profiles.items()):
+        line, = ax.step(thresholds, share, where="post", lw=2.0 if name == "agent" else 1.3,
+                        color=f"C{j}", label=name)
+        ax.fill_between(thresholds, low, high, step="post", color=line.get_color(),
+                        alpha=0.15)
+    ax.set_xscale("log")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("cost from 100 s (common quadratic cost), threshold")
+    ax.set_ylabel("share of runs x draws at or below it")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.legend(loc="outside right upper", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    save(fig, path)
+    return fig

@@ -16,8 +16,8 @@ import numpy as np
 
 from controllers.harness import SAME_START_S
 
-__all__ = ["CEILING", "FAST_ADAPTIVE_LQG", "SAME_START_CEILING", "SAME_START_LOOPS",
-           "WINDOW_CEILING",
+__all__ = ["CEILING", "COMPARATOR_NAMES", "FAST_ADAPTIVE_LQG", "SAME_START_CEILING",
+           "SAME_START_LOOPS", "WINDOW_CEILING",
            "control_brief", "control_summary", "control_table",
            "fallback_causes_text", "flies_the_start", "identification_brief",
            "identification_table",
@@ -177,6 +177,10 @@ WINDOW_CEILING = "window ceiling"
 #: (:func:`controllers.fast_identifier`): ``spacecraft control``'s ``adaptive-lqg-fast``, and
 #: the adaptive loop the RL agents are based on and compared with (their ``adaptive_lqg``).
 FAST_ADAPTIVE_LQG = "adaptive LQG, fast identifier"
+#: The RL comparators' keys (``metrics.json``, ``evaluation.json``) -> their names in tables.
+COMPARATOR_NAMES = {"oracle_lqg": "oracle LQG", "adaptive_lqg": FAST_ADAPTIVE_LQG,
+                    "fixed_lqg": "fixed LQG", "scheduled_lqg": "scheduled LQG",
+                    "zero_torque": "zero torque", "agent": "agent"}
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
 #: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
 #: by their names in the comparison; a loop on another identifier starts otherwise.

@@ -141,6 +141,7 @@ __all__ = [
     "NormalizedPolicy",
     "ZeroTorque",
     "algorithm_class",
+    "base_comparator",
     "fast_adaptive_lqg",
     "ppo_rollout",
     "residual_scale",
@@ -339,6 +340,25 @@ def ppo_rollout(decisions_per_env: int, envs: int = 1) -> tuple[int, int]:
     buffer = n_steps * envs
     batch = max(d for d in range(1, PPO_MINIBATCH + 1) if buffer % d == 0)
     return n_steps, (batch if batch >= 8 else PPO_MINIBATCH)
+
+
+def base_comparator(features: str) -> str | None:
+    """The key of :data:`COMPARATORS` a residual setting's base is (a fresh residual flies
+    it exactly).
+
+    Parameters
+    ----------
+    features : str
+        One of :data:`FEATURES`.
+
+    Returns
+    -------
+    str or None
+        The comparator's key, or None for a setting without a base law.
+    """
+    if features not in _RESIDUAL:
+        return None
+    return next((key for key, make in COMPARATORS if make is _RESIDUAL[features]), None)
 
 
 def algorithm_class(algo: str) -> type:
@@ -772,8 +792,7 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         "hyperparameters": hyper, "envs": envs,
         "residual_scale": residual_scale(features),
         # the comparator that is the residual's base (a fresh residual flies it exactly)
-        "base_comparator": next((key for key, make in COMPARATORS
-                                 if residual and make is _RESIDUAL[features]), None),
+        "base_comparator": base_comparator(features),
         # the residual base's integral settle time, so a loaded agent flies that base
         "base_integral_settle_s": INTEGRAL_SETTLE_S if residual else None,
         "timesteps_requested": timesteps, "seeds": seeds, "eval_seeds": list(eval_seeds),

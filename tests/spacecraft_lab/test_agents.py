@@ -69,7 +69,12 @@ def test_evaluation_scores_the_agent_and_every_comparator_on_the_same_episodes()
     assert 0.5 < result["agent_over"]["scheduled_lqg"]["median"] < 2.0
     assert result["agent_over"]["zero_torque"]["median"] < 0.01
     table = evaluation_table(result)
-    assert "| agent |" in table and "| oracle lqg |" in table and "seeds 2000-2000" in table
+    assert "| agent |" in table and "| oracle LQG |" in table and "seeds 2000-2000" in table
+    # the protocol: intervals, and the probability of beating the base and the adaptive LQG
+    assert set(result["protocol"]["estimates"]) == set(result["scores"])
+    assert set(result["protocol"]["improvement"]) == {"scheduled_lqg", "adaptive_lqg"}
+    assert "| agent | 1 |" in table and "P(agent costs less than scheduled LQG on a draw)" in table
+    assert "Below the protocol: 1 held-out draws" in table
 
 
 def test_cli_evaluate_writes_json_and_table(tmp_path, capsys):
@@ -80,6 +85,7 @@ def test_cli_evaluate_writes_json_and_table(tmp_path, capsys):
     result = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
     assert result["agent"]["scenario"] == "family" and result["eval_seeds"] == [2000]
     assert (tmp_path / "ev" / "table.md").read_text().startswith("PPO residual-scheduled")
+    assert (tmp_path / "ev" / "performance_profiles.png").stat().st_size > 10_000
     assert "wrote" in capsys.readouterr().out
 
 
