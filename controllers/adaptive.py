@@ -678,10 +678,12 @@ class AdaptiveLQG(_LQGController):
         self.stats["steps"] += 1
         self._commit(info)
         obs = self._observation(obs)
+        if self.actuator_monitor is not None:
+            # reports only; on the raw readings: a gyro bias's compensation, converging
+            # while its estimate does, would read as a torque
+            self.actuator_monitor(obs, info)
         if self.gyro_monitor is not None:
             obs = self.gyro_monitor(obs)     # a declared gyro bias subtracted
-        if self.actuator_monitor is not None:
-            self.actuator_monitor(obs, info)  # reports only
         self._collect_faults()
         if not np.isfinite(obs).all():
             self.stats["nonfinite_observations"] += 1
