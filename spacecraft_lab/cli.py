@@ -73,6 +73,7 @@ from spacecraft_lab.reporting import (
     control_summary,
     identification_brief,
     pooled_training_runs,
+    rl_protocol_report,
     rl_table,
 )
 from spacecraft_lab.rl_protocol import performance_profiles
@@ -707,6 +708,10 @@ def _adapt(args: argparse.Namespace) -> int:
 
 def _rl_table(args: argparse.Namespace) -> int:
     print(rl_table(args.dirs))
+    print("\nThe evaluation protocol (docs/design/evaluation.md, \"RL agents\"): the cost "
+          "from 100 s over training seeds x evaluation draws, 95 % stratified-bootstrap "
+          "intervals:\n")
+    print(rl_protocol_report(args.dirs))
     if args.plot is not None:
         plot_rl_comparison(args.plot, pooled_training_runs(args.dirs))
         print(f"wrote {args.plot}")

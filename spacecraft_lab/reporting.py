@@ -15,14 +15,33 @@ from typing import Any
 import numpy as np
 
 from controllers.harness import SAME_START_S
+from spacecraft_lab.rl_protocol import (
+    improvement_probabilities,
+    interval_estimates,
+    protocol_table,
+)
 
-__all__ = ["CEILING", "COMPARATOR_NAMES", "FAST_ADAPTIVE_LQG", "SAME_START_CEILING",
-           "SAME_START_LOOPS", "WINDOW_CEILING",
-           "control_brief", "control_summary", "control_table",
-           "fallback_causes_text", "flies_the_start", "identification_brief",
-           "identification_table",
-           "load_training_metrics", "paired_cost_ratio", "pooled_training_runs", "rl_table",
-           "training_metrics_problem"]
+__all__ = [
+    "CEILING",
+    "COMPARATOR_NAMES",
+    "FAST_ADAPTIVE_LQG",
+    "SAME_START_CEILING",
+    "SAME_START_LOOPS",
+    "WINDOW_CEILING",
+    "control_brief",
+    "control_summary",
+    "control_table",
+    "fallback_causes_text",
+    "flies_the_start",
+    "identification_brief",
+    "identification_table",
+    "load_training_metrics",
+    "paired_cost_ratio",
+    "pooled_training_runs",
+    "rl_protocol_report",
+    "rl_table",
+    "training_metrics_problem",
+]
 
 
 def _median(cell: dict[str, Any] | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -578,3 +597,46 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
     lines.append(f"The figure is {Path(out) / 'comparison.png'}; per-seed numbers are in "
                  f"{Path(out) / 'results.csv'}.")
     return "\n".join(lines)
+
+
+def rl_protocol_report(directories: Sequence[str | Path]) -> str:
+    """The evaluation protocol's tables (:mod:`spacecraft_lab.rl_protocol`) of several
+    ``spacecraft train`` directories: per setting (pooled as by :func:`rl_table`), the
+    agent's cost from 100 s over its training seeds x evaluation draws and the
+    comparators' on the same draws, as IQM, median and mean with 95 % intervals, and the
+    probability that the agent costs less than its base (a residual's) and the adaptive
+    LQG on a draw.
+
+    Parameters
+    ----------
+    directories : sequence of str or Path
+        ``spacecraft train`` output directories.
+
+    Returns
+    -------
+    str
+        One titled table per setting; a setting whose runs differ in their evaluation
+        draws, or whose files lack the per-draw costs, is named with the reason.
+    """
+    parts = []
+    for m in pooled_training_runs(directories):
+        title = (f"### {m['algo'].upper()} {m['features']} on {m['scenario']}, "
+                 f"{m['timesteps']:,} env steps")
+        seeds = [run["final"].get("cost_after_100s_per_seed") for run in m["runs"]]
+        comparators = {COMPARATOR_NAMES.get(key, key): m[key]["cost_after_100s_per_seed"]
+                       for key in COMPARATOR_NAMES if key in m
+                       and "cost_after_100s_per_seed" in m[key]}
+        draws = {len(s) for s in seeds if s is not None} | {len(c) for c in comparators.values()}
+        if any(s is None for s in seeds) or len(draws) != 1:
+            parts.append(f"{title}\n\nnot scored by the protocol: its runs do not all carry "
+                         "the per-draw costs of the same evaluation draws\n")
+            continue
+        costs = {"agent": np.array(seeds, dtype=float), **comparators}
+        over = [COMPARATOR_NAMES[k] for k in (m.get("base_comparator"), "adaptive_lqg")
+                if k in COMPARATOR_NAMES and COMPARATOR_NAMES[k] in costs]
+        table = protocol_table(interval_estimates(costs),
+                               improvement_probabilities(costs, "agent",
+                                                         list(dict.fromkeys(over))),
+                               "agent", {"agent": len(seeds)}, draws.pop())
+        parts.append(f"{title}\n\n{table}")
+    return "\n".join(parts)

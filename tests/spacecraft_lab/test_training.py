@@ -240,6 +240,49 @@ def test_rl_table_pools_seeds_trained_in_separate_directories(tmp_path):
     assert "bounded reward from 100 s |" in rl_table([tmp_path / n for n in "def"])
 
 
+def test_rl_table_gives_the_protocols_iqm_with_intervals(tmp_path):
+    """Per setting, the agent's seeds x draws and the comparators' draws: IQM, median and
+    mean with intervals, and the probability of beating the base and the adaptive LQG."""
+    pytest.importorskip("rliable")
+    from scipy import stats
+
+    from spacecraft_lab.reporting import rl_protocol_report
+
+    draws = 6
+    comparators = {k: {"attitude_rms_deg": 1.0, "vibration_rms_mm": 1.0, "return": 1.0,
+                       "cost_after_100s": c, "cost_after_100s_per_seed": [c] * draws}
+                   for k, c in (("oracle_lqg", 0.01), ("adaptive_lqg", 0.02),
+                                ("fixed_lqg", 0.04), ("zero_torque", 1.0))}
+    base = {"algo": "ars", "features": "residual-fixed", "scenario": "family",
+            "randomize": False, "timesteps": 1000, "repeat": 10, "reward": "cost",
+            "target_cost_after_100s": 0.04, "base_comparator": "fixed_lqg", **comparators}
+
+    def run(seed, cost):
+        final = {"attitude_rms_deg": 1.0, "vibration_rms_mm": 1.0, "return": 2.0,
+                 "cost_after_100s": cost, "cost_after_100s_per_seed": [cost] * draws}
+        return {"seed": seed, "final": final, "curve": [], "steps_to_2x_adaptive": None}
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "metrics.json").write_text(json.dumps(
+        {**base, "runs": [run(0, 0.015), run(1, 0.016), run(2, 0.03)]}))
+    text = rl_protocol_report([tmp_path / "a"])
+    assert "### ARS residual-fixed on family, 1,000 env steps" in text
+    # the IQM of the 3 seeds x 6 draws: the middle half of the 18 costs
+    iqm = stats.trim_mean([0.015] * draws + [0.016] * draws + [0.03] * draws, 0.25)
+    assert f"| agent | 3 | {iqm:.3g} [" in text
+    assert "| fixed LQG | - | 0.04 [0.04, 0.04] |" in text
+    # cheaper than its base on every draw and seed; than the adaptive LQG on 2 of 3 seeds
+    assert "P(agent costs less than fixed LQG on a draw) = 1.00 [1.00, 1.00]" in text
+    assert "P(agent costs less than adaptive LQG, fast identifier on a draw) = 0.67" in text
+    assert "Below the protocol: 6 held-out draws" in text
+    # files without the per-draw costs are named, not scored
+    (tmp_path / "b").mkdir()
+    old = {**base, "features": "none", "runs": [run(0, 0.02)]}
+    del old["runs"][0]["final"]["cost_after_100s_per_seed"]
+    (tmp_path / "b" / "metrics.json").write_text(json.dumps(old))
+    assert "not scored by the protocol" in rl_protocol_report([tmp_path / "b"])
+
+
 def test_evaluation_with_the_identifier_kept_starts_every_episode_with_a_model():
     from spacecraft_lab.training import EVAL_SEEDS, ZeroTorque, _evaluate
 
