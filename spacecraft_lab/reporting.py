@@ -199,7 +199,8 @@ FAST_ADAPTIVE_LQG = "adaptive LQG, fast identifier"
 #: The RL comparators' keys (``metrics.json``, ``evaluation.json``) -> their names in tables.
 COMPARATOR_NAMES = {"oracle_lqg": "oracle LQG", "adaptive_lqg": FAST_ADAPTIVE_LQG,
                     "fixed_lqg": "fixed LQG", "scheduled_lqg": "scheduled LQG",
-                    "zero_torque": "zero torque", "agent": "agent"}
+                    "zero_torque": "zero torque", "window_ceiling": WINDOW_CEILING,
+                    "agent": "agent"}
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
 #: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
 #: by their names in the comparison; a loop on another identifier starts otherwise.
@@ -514,12 +515,14 @@ def rl_table(directories: Sequence[str | Path]) -> str:
             "| worst episode (seed: cost) | mean / fixed LQG's mean |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     if last is not None:
-        for name, key in (("oracle LQG", "oracle_lqg"), (FAST_ADAPTIVE_LQG, "adaptive_lqg"),
-                          ("fixed LQG", "fixed_lqg"), ("scheduled LQG", "scheduled_lqg"),
-                          ("zero torque", "zero_torque")):
+        for key in ("window_ceiling", "oracle_lqg", "adaptive_lqg", "fixed_lqg",
+                    "scheduled_lqg", "zero_torque"):
+            name = COMPARATOR_NAMES[key]
             if key in last:
                 b = last[key]
-                rows.append(f"| {name} | - | - | - | - | {spread([b.get(median)], '.4f')} "
+                # the window ceiling's cost is orders below the others': shown in full
+                fmt = ".4f" if (b.get(median) or 0.0) >= 1e-4 else ".3g"
+                rows.append(f"| {name} | - | - | - | - | {spread([b.get(median)], fmt)} "
                             f"| {spread([ratio(b, last.get('oracle_lqg'))], '.2f')} "
                             f"| {spread([ratio(b, last.get('fixed_lqg'))], '.2f')} "
                             f"| {b['attitude_rms_deg']:.2f} "

@@ -100,6 +100,7 @@ from controllers import (
     fast_identifier,
     run_episode,
     set_integral_settle,
+    window_ceiling,
 )
 from controllers.features import PHYSICAL_FEATURE_NAMES
 from controllers.lqg import INTEGRAL_SETTLE_S
@@ -116,6 +117,7 @@ from spacecraft_env import (
 from spacecraft_lab.control import SCENARIO_NAMES
 from spacecraft_lab.plots import plot_learning_curves
 from spacecraft_lab.random_search import paired_ars
+from spacecraft_lab.reporting import COMPARATOR_NAMES
 from spacecraft_lab.score_cache import ScoreCache, default_cache
 from spacecraft_lab.sweeps.backends import check_workers, map_in_order
 
@@ -552,9 +554,11 @@ def _evaluate(controller: Controller | Callable[[gym.Env], Controller], scenario
 
 
 #: The LQG comparators every agent is scored beside (None: zero torque); each residual
-#: setting's base is among them.
+#: setting's base is among them. The window ceiling (:func:`controllers.window_ceiling`)
+#: is the bound of the cost from 100 s the agents are scored on: no agent can beat it.
 COMPARATORS = (("adaptive_lqg", fast_adaptive_lqg), ("fixed_lqg", FixedLQG),
-               ("oracle_lqg", OracleLQG), ("scheduled_lqg", ScheduledLQG), ("zero_torque", None))
+               ("oracle_lqg", OracleLQG), ("scheduled_lqg", ScheduledLQG), ("zero_torque", None),
+               ("window_ceiling", window_ceiling))
 
 
 def _score_comparator(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tuple[int, ...],
@@ -578,7 +582,7 @@ def _score_comparators(scenario: str, env_kwargs: dict[str, Any], eval_seeds: tu
     scores = {key: cache.get(inputs[key]) for key, _ in COMPARATORS} if cache else {}
     todo = [(key, make) for key, make in COMPARATORS if scores.get(key) is None]
     if progress:
-        names = ", ".join(key.replace("_", " ") for key, _ in todo)
+        names = ", ".join(COMPARATOR_NAMES[key] for key, _ in todo)
         found = (f"{len(COMPARATORS) - len(todo)} of the {len(COMPARATORS)} comparison "
                  f"controllers' scores on these episodes come from the cache ({cache.directory}"
                  "; --no-cache scores them again)") if len(todo) < len(COMPARATORS) else ""

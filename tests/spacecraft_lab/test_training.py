@@ -76,7 +76,7 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     steps = [c["timesteps"] for c in run["curve"]]
     assert steps == sorted(set(steps))
     # the comparators' scores are kept for the next run with these settings
-    assert len(list(Path(os.environ["SPACECRAFT_CACHE_DIR"]).glob("*.json"))) == 5
+    assert len(list(Path(os.environ["SPACECRAFT_CACHE_DIR"]).glob("*.json"))) == 6
     # the learning-speed threshold is on the score (the cost from 100 s), and every mean
     # names its worst episode
     assert m["threshold"] == "cost_after_100s"
@@ -355,7 +355,11 @@ def test_the_comparators_score_the_same_on_a_process_pool():
     serial = _score_comparators("docking", kwargs, (1000, 1001), 1, False)
     pooled = _score_comparators("docking", kwargs, (1000, 1001), 2, False)
     assert list(pooled) == ["adaptive_lqg", "fixed_lqg", "oracle_lqg", "scheduled_lqg",
-                            "zero_torque"]
+                            "zero_torque", "window_ceiling"]
+    # the window ceiling bounds every comparator's cost from 100 s on every episode
+    for key, row in serial.items():
+        assert np.all(np.asarray(serial["window_ceiling"]["cost_after_100s_per_seed"])
+                      <= np.asarray(row["cost_after_100s_per_seed"]) * 1.0001), key
     for key, row in serial.items():
         assert np.isfinite(row["cost_after_100s_per_seed"]).all()
         np.testing.assert_allclose(pooled[key]["cost_after_100s_per_seed"],
