@@ -179,6 +179,8 @@ def improvement_probabilities(costs: Mapping[str, ArrayLike], of: str, over: Seq
     ------
     KeyError
         For a name not in ``costs``.
+    ValueError
+        For two names scored over different numbers of seeds, both above one.
     """
     from rliable import metrics
 
@@ -186,10 +188,22 @@ def improvement_probabilities(costs: Mapping[str, ArrayLike], of: str, over: Seq
     missing = [n for n in (of, *over) if n not in matrices]
     if missing:
         raise KeyError(f"no costs for {missing}; have {sorted(matrices)}")
-    # rliable's probability is that X scores higher: lower cost is better, so negated
-    pairs = {name: [-matrices[of], -matrices[name]] for name in over}
+    # rliable's probability is that X scores higher: lower cost is better, so negated. The
+    # pair is stacked (seeds, draws, 2) so the bootstrap resamples the same draws for
+    # both (paired) and the seeds of each independently; a deterministic controller's
+    # one row is repeated to the other's seeds
+    pairs = {}
+    for name in over:
+        x, y = -matrices[of], -matrices[name]
+        if x.shape[0] != y.shape[0] and 1 not in (x.shape[0], y.shape[0]):
+            raise ValueError(f"{of!r} and {name!r} have {x.shape[0]} and {y.shape[0]} seeds: "
+                             "equal numbers, or one, are compared")
+        seeds = max(x.shape[0], y.shape[0])
+        pairs[name] = np.stack([np.repeat(x, seeds // x.shape[0], axis=0),
+                                np.repeat(y, seeds // y.shape[0], axis=0)], axis=-1)
     points, intervals = _bootstrap(
-        pairs, lambda x, y: np.array([metrics.probability_of_improvement(x, y)]), reps, seed)
+        pairs, lambda s: np.array([metrics.probability_of_improvement(s[..., 0], s[..., 1])]),
+        reps, seed)
     return {name: (float(points[name][0]), float(intervals[name][0, 0]),
                    float(intervals[name][1, 0])) for name in over}
 

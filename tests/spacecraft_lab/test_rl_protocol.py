@@ -44,6 +44,14 @@ def test_an_agent_that_always_costs_less_improves_with_probability_one():
     p = improvement_probabilities({"agent": AGENT, "same": AGENT}, "agent", ["same"],
                                   reps=100)
     assert p["same"][0] == pytest.approx(0.5)
+    # one seed against a deterministic law: the draws resampled, an interval that is one
+    one = AGENT[0]
+    cheaper = np.where(np.arange(one.size) % 2 == 0, one * 0.5, one * 2.0)   # half the draws
+    point, low, high = improvement_probabilities({"agent": one, "law": cheaper}, "agent",
+                                                 ["law"], reps=200)["law"]
+    assert point == pytest.approx(0.5) and low < 0.5 < high
+    with pytest.raises(ValueError, match="equal numbers, or one"):
+        improvement_probabilities({"a": AGENT, "b": AGENT[:3]}, "a", ["b"])
 
 
 def test_a_crash_costs_infinity_in_the_mean_not_in_the_iqm():
