@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -105,7 +106,7 @@ from controllers import (
 from controllers.features import PHYSICAL_FEATURE_NAMES
 from controllers.lqg import INTEGRAL_SETTLE_S
 from controllers.rewards import check_window_start
-from spacecraft_conventions import single_threaded_blas
+from spacecraft_conventions import __version__, single_threaded_blas
 from spacecraft_env import (
     ActionRepeat,
     NominalUnits,
@@ -146,6 +147,7 @@ __all__ = [
     "base_comparator",
     "fast_adaptive_lqg",
     "ppo_rollout",
+    "provenance",
     "residual_scale",
     "run_training",
 ]
@@ -342,6 +344,35 @@ def ppo_rollout(decisions_per_env: int, envs: int = 1) -> tuple[int, int]:
     buffer = n_steps * envs
     batch = max(d for d in range(1, PPO_MINIBATCH + 1) if buffer % d == 0)
     return n_steps, (batch if batch >= 8 else PPO_MINIBATCH)
+
+
+def provenance(scenario: str) -> dict[str, Any]:
+    """What a training run was made with, for its ``metrics.json``.
+
+    Parameters
+    ----------
+    scenario : str
+        The run's scenario (a name of :data:`spacecraft_lab.control.SCENARIO_NAMES`).
+
+    Returns
+    -------
+    dict
+        ``env_id`` (the registered id, its ``-vN`` the env's version), ``package_version``
+        and ``commit`` (the checkout's ``git`` commit, with ``+dirty`` when it had
+        uncommitted changes; None outside a checkout or without ``git``).
+    """
+    root = Path(__file__).resolve().parents[1]
+    commit = None
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
+                              text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=root, capture_output=True, text=True, timeout=10,
+                               check=True).stdout.strip()
+        commit = head + ("+dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"env_id": env_id(scenario), "package_version": __version__, "commit": commit}
 
 
 def base_comparator(features: str) -> str | None:
@@ -800,6 +831,8 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
         # the residual base's integral settle time, so a loaded agent flies that base
         "base_integral_settle_s": INTEGRAL_SETTLE_S if residual else None,
         "timesteps_requested": timesteps, "seeds": seeds, "eval_seeds": list(eval_seeds),
+        # what trained it: the env id (its version), the package's version and commit
+        "provenance": provenance(scenario),
         **comparators,
         "threshold": "cost_after_100s", "target_cost_after_100s": target,
     }

@@ -50,6 +50,13 @@ def test_training_job_writes_model_curves_and_metrics(tmp_path, monkeypatch):
     # curves count env steps, not decisions; the budget is trained exactly (PPO's rollout
     # set from it: 200 decisions x 10 env steps, one update, so no evaluation before it)
     assert m["timesteps_requested"] == 2000 == m["timesteps"] and m["complete"] is True
+    # what trained it: the env id and version, the package's version, the commit
+    from spacecraft_conventions import __version__
+
+    assert m["provenance"]["env_id"] == env_id("docking")
+    assert m["provenance"]["package_version"] == __version__
+    commit = m["provenance"]["commit"]
+    assert commit is None or len(commit.removesuffix("+dirty")) == 40
     assert m["hyperparameters"]["n_steps"] == 200
     assert [c["timesteps"] for c in m["runs"][0]["curve"]] == [2000]
     assert m["runs"][0]["env_steps"] == 2000
