@@ -45,8 +45,9 @@ import numpy as np
 
 from controllers.baselines import nominal_model
 from controllers.gyro_bias import FaultWarning
+from spacecraft_conventions import AXIS_NAMES
 
-__all__ = ["AVERAGE_S", "CONFIRM_S", "INERTIA_UNCERTAINTY", "LOST_RANGE", "LOST_SLOPE",
+__all__ = ["AVERAGE_S", "AXIS_LOST", "CONFIRM_S", "INERTIA_UNCERTAINTY", "LOST_RANGE", "LOST_SLOPE",
            "SMALLEST_TORQUE", "WINDOW_S", "ActuatorMonitor"]
 
 #: Length of the momentum balance's window, s.
@@ -66,7 +67,8 @@ LOST_SLOPE = 0.1
 #: ...over a command range at least this wide (N m) is reported lost.
 LOST_RANGE = 1.0
 
-_AXES = ("roll", "pitch", "yaw")
+#: The kind of the report of an axis whose wheel does not answer (no controller holds it).
+AXIS_LOST = "axis lost"
 
 
 class ActuatorMonitor:
@@ -192,17 +194,17 @@ class ActuatorMonitor:
         wide = self._range[1] - self._range[0] >= LOST_RANGE
         for axis in np.flatnonzero(on & wide & (np.abs(slope) < LOST_SLOPE)):
             self.lost[axis] = True
-            self._report("axis lost", int(axis),
-                         f"the {_AXES[axis]} wheel does not answer: it delivered "
+            self._report(AXIS_LOST, int(axis),
+                         f"the {AXIS_NAMES[axis]} wheel does not answer: it delivered "
                          f"{slope[axis]:.2f} of its command over a "
                          f"{self._range[1, axis] - self._range[0, axis]:.2g} N m range; "
-                         f"with one wheel per axis no controller can hold {_AXES[axis]}")
+                         f"with one wheel per axis no controller can hold {AXIS_NAMES[axis]}")
 
     def _declare(self) -> None:
         for axis in np.flatnonzero((self._beyond >= self._confirm) & ~self.declared):
             self.declared[axis] = True
             self._report("actuator torque", int(axis),
-                         f"the {_AXES[axis]} wheel delivers "
+                         f"the {AXIS_NAMES[axis]} wheel delivers "
                          f"{self.torque_error[axis]:+.3g} N m from what it is commanded")
 
     def _report(self, kind: str, axis: int, what: str) -> None:
@@ -215,5 +217,5 @@ class ActuatorMonitor:
         fault = {"kind": kind, "axis": axis, "onset_s": float(onset),
                  "detected_s": float(detected), "value": float(self.torque_error[axis])}
         self.faults.append(fault)
-        warnings.warn(f"{kind} on axis {axis} ({_AXES[axis]}) from about {onset:.1f} s "
+        warnings.warn(f"{kind} on axis {axis} ({AXIS_NAMES[axis]}) from about {onset:.1f} s "
                       f"(declared at {detected:.1f} s): {what}", FaultWarning, stacklevel=3)

@@ -23,9 +23,11 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
+from controllers.actuator_monitor import AXIS_LOST
 from controllers.base import Controller
 from identifiers import relative_gain_error, rigid_body_gain
 from spacecraft_conventions import (
+    AXIS_NAMES,
     COST_WEIGHTS,
     DEG_PER_RAD,
     NOMINAL_SCALE,
@@ -741,10 +743,10 @@ def episode_metrics(traj: Trajectory, model: Any, settle_tol_deg: float = 0.05,
         else float("nan")
     # a controller that reported an axis it cannot hold says why the loop is not stable
     lost = [f for f in (traj.controller_stats or {}).get("faults", [])
-            if f.get("kind") == "axis lost"]
+            if f.get("kind") == AXIS_LOST]
     verdict_reason = None
     if verdict != "stable" and lost:
-        axes = ", ".join(("roll", "pitch", "yaw")[f["axis"]] for f in lost)
+        axes = ", ".join(AXIS_NAMES[f["axis"]] for f in lost)
         verdict_reason = (f"{axes} lost: its wheel does not answer (reported at "
                           f"{min(f['detected_s'] for f in lost):.0f} s); with one wheel per "
                           "axis no controller can hold it")

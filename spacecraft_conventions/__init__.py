@@ -25,6 +25,7 @@ from spacecraft_conventions.cost import COST_WEIGHTS, CostWeights, output_cost_w
 from spacecraft_conventions.kept import KeptWhileEqual
 from spacecraft_conventions.outputs import (
     AXES,
+    AXIS_NAMES,
     LABEL_PREFIX,
     MEASURES,
     OBSERVATION_GROUPS,
@@ -41,6 +42,7 @@ from spacecraft_conventions.version import __version__
 
 __all__ = [
     "AXES",
+    "AXIS_NAMES",
     "COST_WEIGHTS",
     "DEG_PER_RAD",
     "LABEL_PREFIX",

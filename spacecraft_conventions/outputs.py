@@ -31,6 +31,7 @@ from spacecraft_conventions.sensors import NOMINAL_SCALE
 
 __all__ = [
     "AXES",
+    "AXIS_NAMES",
     "LABEL_PREFIX",
     "MEASURES",
     "OBSERVATION_GROUPS",
@@ -56,6 +57,8 @@ MEASURES: Mapping[str, str] = MappingProxyType({
 })
 #: The three body axes, roll / pitch / yaw.
 AXES: tuple[str, ...] = ("x", "y", "z")
+#: Their names in text, in the same order.
+AXIS_NAMES: tuple[str, ...] = ("roll", "pitch", "yaw")
 #: Label prefix of each group's channels.
 LABEL_PREFIX: Mapping[str, str] = MappingProxyType({
     "attitude": "psi", "rate": "omega", "deflection": "w",

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from controllers.lqg import INTEGRAL_SETTLE_S
-from spacecraft_lab.reporting import COMPARATOR_NAMES
+from spacecraft_lab.reporting import COMPARATOR_NAMES, improvement_references
 from spacecraft_lab.rl_protocol import (
     improvement_probabilities,
     interval_estimates,
@@ -242,8 +242,7 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
     agent_over = {key: paired_ratio(mine, scores[key]["cost_after_100s_per_seed"])
                   for key, _ in COMPARATORS}
     costs = {key: score["cost_after_100s_per_seed"] for key, score in scores.items()}
-    over = list(dict.fromkeys(k for k in (base_comparator(settings["features"]),
-                                          "adaptive_lqg") if k))
+    over = improvement_references(base_comparator(settings["features"]))
     protocol = {"estimates": interval_estimates(costs),
                 "improvement": improvement_probabilities(costs, "agent", over),
                 "draws": len(seeds)}

@@ -20,7 +20,7 @@ from PIL import Image
 from tqdm import tqdm
 
 from controllers import PD, Trajectory
-from spacecraft_conventions import DEG_PER_RAD
+from spacecraft_conventions import AXIS_NAMES, DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftEnv
 from spacecraft_lab.plots import plot_demo_response
 
@@ -167,7 +167,7 @@ def demo_summary(summary: dict, out: str | Path) -> str:
     ]
     if events:
         change = ", ".join(f"{axis} {a:,.0f} -> {b:,.0f} kg m^2 ({100 * (b / a - 1):+.0f} %)"
-                           for axis, a, b in zip(("roll", "pitch", "yaw"), j0, j1, strict=True))
+                           for axis, a, b in zip(AXIS_NAMES, j0, j1, strict=True))
         lines.append("Events at " + ", ".join(f"{t:.0f} s" for t in events) + " changed the "
                      f"plant: inertia {change}; first frequencies {_hz(f0)} -> {_hz(f1)} Hz.")
     else:

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from controllers import Trajectory, stage_costs
 from controllers.harness import SAME_START_S
 from identifiers import ModelSequence
-from spacecraft_conventions import DEG_PER_RAD
+from spacecraft_conventions import AXIS_NAMES, DEG_PER_RAD
 from spacecraft_env import FlexibleSpacecraftModel
 from spacecraft_lab.reporting import FAST_ADAPTIVE_LQG
 
@@ -552,7 +552,7 @@ def plot_demo_response(path: str | Path, t: np.ndarray, attitude_deg: np.ndarray
     """Attitude, tip deflections, inertia J(t) and the first system frequencies."""
     fig = Figure(figsize=(9, 10))
     axes = fig.subplots(4, 1, sharex=True)
-    for i, name in enumerate(("roll", "pitch", "yaw")):
+    for i, name in enumerate(AXIS_NAMES):
         axes[0].plot(t, attitude_deg[:, i], label=name)
     axes[0].set_ylabel("attitude (deg)")
     for i, label in enumerate(deflection_labels):

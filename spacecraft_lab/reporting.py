@@ -35,6 +35,7 @@ __all__ = [
     "flies_the_start",
     "identification_brief",
     "identification_table",
+    "improvement_references",
     "load_training_metrics",
     "paired_cost_ratio",
     "pooled_training_runs",
@@ -201,6 +202,25 @@ COMPARATOR_NAMES = {"oracle_lqg": "oracle LQG", "adaptive_lqg": FAST_ADAPTIVE_LQ
                     "fixed_lqg": "fixed LQG", "scheduled_lqg": "scheduled LQG",
                     "zero_torque": "zero torque", "window_ceiling": WINDOW_CEILING,
                     "agent": "agent"}
+
+
+def improvement_references(base: str | None) -> list[str]:
+    """The comparators an agent's probability of improvement is given over.
+
+    Parameters
+    ----------
+    base : str or None
+        The key of its base law's comparator (a residual's), or None.
+
+    Returns
+    -------
+    list of str
+        Keys of :data:`COMPARATOR_NAMES`: its base, then the adaptive LQG the agents are
+        compared with (once).
+    """
+    return list(dict.fromkeys(key for key in (base, "adaptive_lqg") if key))
+
+
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
 #: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
 #: by their names in the comparison; a loop on another identifier starts otherwise.
@@ -635,11 +655,10 @@ def rl_protocol_report(directories: Sequence[str | Path]) -> str:
                          "the per-draw costs of the same evaluation draws\n")
             continue
         costs = {"agent": np.array(seeds, dtype=float), **comparators}
-        over = [COMPARATOR_NAMES[k] for k in (m.get("base_comparator"), "adaptive_lqg")
+        over = [COMPARATOR_NAMES[k] for k in improvement_references(m.get("base_comparator"))
                 if k in COMPARATOR_NAMES and COMPARATOR_NAMES[k] in costs]
         table = protocol_table(interval_estimates(costs),
-                               improvement_probabilities(costs, "agent",
-                                                         list(dict.fromkeys(over))),
+                               improvement_probabilities(costs, "agent", over),
                                "agent", {"agent": len(seeds)}, draws.pop())
         parts.append(f"{title}\n\n{table}")
     return "\n".join(parts)
