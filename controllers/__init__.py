@@ -90,6 +90,7 @@ from controllers.lqg import (
     output_weight,
     set_integral_settle,
 )
+from controllers.noise_intensity import ProcessNoiseBank
 from controllers.residual import BaseRelativeReward, ResidualControl, ResidualObservations
 from controllers.rewards import ScoredWindowReward
 from controllers.riccati import RiccatiTracker, check_weights, dlqr, doubling_dare, spectral_radius
@@ -123,6 +124,7 @@ __all__ = [
     "PhysicalFeatures",
     "PolicyController",
     "PrivilegedFeatures",
+    "ProcessNoiseBank",
     "ResidualControl",
     "ResidualObservations",
     "RiccatiTracker",

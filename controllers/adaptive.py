@@ -4,11 +4,13 @@ Every control step k (docs/design/control.md):
 
 1. ``x_{k|k}`` from the controller's own Kalman filter on the current
    identified ``(A, B, C)`` (``rigid_state="kalman"``, the default), with
-   the noise every baseline's filter assumes
-   (:func:`controllers.baselines.process_noise`: 0.05 N m of unmodelled
-   torque; the sensors' specified noise) and the applied torque in its
-   time update: the filter the oracle LQG runs on the true model,
-   run on the identified one. The identifier's own filter (``"filter"``)
+   the sensors' specified noise and the applied torque in its time update:
+   the filter the oracle LQG runs on the true model, run on the identified
+   one. Its process noise (white torque through ``B``) is chosen online
+   from the innovations (:class:`controllers.noise_intensity.ProcessNoiseBank`,
+   ``noise_intensity=None``): 0.05 N m, what every fixed design's filter
+   assumes, while the model does not predict well, down to none on a quiet
+   plant flown on a model that fits it. The identifier's own filter (``"filter"``)
    is tuned for prediction and made the loop reject its gain 5-10x more
    often; reading attitude and rate from the sensors (``"measured"``, the
    former default) pushes the gyro noise through the rate gain (0.05-0.07
@@ -97,6 +99,7 @@ from controllers.gyro_bias import GyroBiasMonitor
 from controllers.harness import ENVELOPE_FLOOR, GROWTH_LIMIT, JUDGED_FROM_S
 from controllers.loop_identifiers import closed_loop_identifier
 from controllers.lqg import LQRWeights
+from controllers.noise_intensity import ProcessNoiseBank
 from controllers.riccati import check_iterations
 from identifiers import OnlineIdentifier
 from spacecraft_conventions import single_threaded_blas
@@ -245,7 +248,7 @@ class AdaptiveLQG(_LQGController):
     rigid_state : {"kalman", "filter", "measured"}
         Where the state comes from (see step 1 above): "kalman" (default)
         this controller's own Kalman filter on the identified model, with
-        the noise the baselines' filters assume; "filter" the identifier's
+        the process noise of ``noise_intensity``; "filter" the identifier's
         own filter (:meth:`identifiers.OnlineIdentifier.filtered_state`,
         tuned for prediction, not control); "measured" that filter with the
         attitude and rate states read from the sensors (needs an identifier
@@ -271,6 +274,14 @@ class AdaptiveLQG(_LQGController):
         is reported, and an axis whose wheel does not answer is reported lost
         (``stats["faults"]``, a :class:`controllers.gyro_bias.FaultWarning`); it
         reports only, the loop flies as without it.
+    noise_intensity : float or None
+        The white torque per axis, N m, the own Kalman filter assumes (``rigid_state=
+        "kalman"``). None (default): chosen online from the innovations among
+        :data:`controllers.noise_intensity.NOISE_LEVELS`
+        (:class:`controllers.noise_intensity.ProcessNoiseBank`, :attr:`noise_bank`;
+        the level in use at the end in ``stats["noise_intensity_Nm"]``); a number:
+        that torque, fixed (0.05, :data:`controllers.baselines.PROCESS_NOISE`: the
+        behaviour before 2026-12-07).
 
     Examples
     --------
@@ -312,8 +323,15 @@ class AdaptiveLQG(_LQGController):
                  excitation_window_s: float = EXCITATION_WINDOW_S, dwell_s: float = 10.0,
                  warmup_controller: Controller | None = None,
                  need_sigmas: float | None = NEED_SIGMAS, monitor_gyro: bool = True,
-                 monitor_actuators: bool = True) -> None:
+                 monitor_actuators: bool = True,
+                 noise_intensity: float | None = None) -> None:
         super().__init__(env, weights)
+        if noise_intensity is not None and not (np.isfinite(noise_intensity)
+                                                and noise_intensity >= 0):
+            raise ValueError(f"noise_intensity must be None (chosen online) or a torque "
+                             f">= 0 N m, got {noise_intensity}")
+        self.noise_intensity = noise_intensity
+        self.noise_bank = (ProcessNoiseBank(self.dt) if noise_intensity is None else None)
         self.gyro_monitor = GyroBiasMonitor(env) if monitor_gyro else None
         self.actuator_monitor = ActuatorMonitor(env) if monitor_actuators else None
         self.need = None if need_sigmas is None else MotionNeed(env, need_sigmas)
@@ -377,6 +395,8 @@ class AdaptiveLQG(_LQGController):
             self.gyro_monitor.reset()
         if self.actuator_monitor is not None:
             self.actuator_monitor.reset()
+        if self.noise_bank is not None:
+            self.noise_bank.reset()
         self.gain: np.ndarray | None = None
         self._k = 0
         self._bridge_until = 0
@@ -473,14 +493,20 @@ class AdaptiveLQG(_LQGController):
     def _own_filter(self, model: Any, y: np.ndarray, info: dict[str, Any] | None
                     ) -> np.ndarray | None:
         """``x_{k|k}`` from this controller's own Kalman filter on the identified model,
-        with the noise the baselines' filters assume
-        (:func:`controllers.baselines.process_noise`, the sensors' specified noise)."""
+        with the sensors' specified noise and the process noise of
+        ``noise_intensity`` (the bank's choice, or the fixed torque)."""
         a, b, c = model.A, model.B, model.C
         if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
             return None
-        noise = self._process_noise.get((b,), lambda: process_noise(b))     # per model
-        return self._filter(a, b, c, noise, self._noise_var,
-                            np.where(np.isfinite(y), y, np.nan), info)
+        y = np.where(np.isfinite(y), y, np.nan)
+        if self.noise_bank is not None:
+            torque = self._applied_torque(info)
+            x = self.noise_bank.step(a, b, c, self._noise_var, y, torque)
+            self.stats["noise_intensity_Nm"] = self.noise_bank.level
+            return x
+        level = self.noise_intensity
+        noise = self._process_noise.get((b,), lambda: process_noise(b, level))   # per model
+        return self._filter(a, b, c, noise, self._noise_var, y, info)
 
     def _remember(self, x: np.ndarray | None, y: np.ndarray, torque: np.ndarray) -> None:
         """Keep (filtered state, rates, applied torque) of the last samples; a sample

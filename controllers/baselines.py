@@ -46,11 +46,14 @@ __all__ = ["PD", "FixedLQG", "OracleLQG", "OracleLQR", "RobustLQG", "ScheduledLQ
 PROCESS_NOISE = 0.05
 
 
-def process_noise(b: np.ndarray) -> np.ndarray:
-    """The state noise covariance of every LQG filter here: :data:`PROCESS_NOISE` N m
-    of white torque per axis through ``b`` (n, 3), plus 1e-14 on the diagonal so the
-    covariance stays positive definite."""
-    return PROCESS_NOISE**2 * b @ b.T + 1e-14 * np.eye(b.shape[0])
+def process_noise(b: np.ndarray, level: float = PROCESS_NOISE) -> np.ndarray:
+    """The state noise covariance of the LQG filters here: ``level`` N m (default
+    :data:`PROCESS_NOISE`) of white torque per axis through ``b`` (n, 3), plus a
+    regularizer on the diagonal so the covariance stays positive definite: 1e-14 at
+    :data:`PROCESS_NOISE`, scaled with ``level**2`` below it down to 1e-20 (a 1e-10
+    rad attitude), so a filter that assumes a quiet plant is not held noisy by it."""
+    jitter = max(1e-14 * (level / PROCESS_NOISE) ** 2, 1e-20)
+    return level**2 * b @ b.T + jitter * np.eye(b.shape[0])
 
 
 def nominal_model(model: Any, paddle_angle_deg: float = 0.0) -> Any:
@@ -489,12 +492,23 @@ class OracleLQG(_LQGController):
         model, observation layout and ``max_torque`` are read).
     weights : LQRWeights, optional
         Weights of the design (default :class:`LQRWeights`'s defaults).
+    noise_intensity : float
+        White torque per axis, N m, its filter assumes (default
+        :data:`PROCESS_NOISE`, as every fixed design's filter). The plant's
+        true statistics are ``env.unwrapped.disturbance_std`` (0 for the
+        registered ids): that filter is the tight oracle, the optimum of the
+        same law for what it knows.
     """
 
     name = "oracle LQG"
 
-    def __init__(self, env: gym.Env, weights: LQRWeights | None = None) -> None:
+    def __init__(self, env: gym.Env, weights: LQRWeights | None = None,
+                 noise_intensity: float = PROCESS_NOISE) -> None:
         super().__init__(env, weights)
+        if not (np.isfinite(noise_intensity) and noise_intensity >= 0):
+            raise ValueError(f"noise_intensity must be a torque >= 0 N m, got "
+                             f"{noise_intensity}")
+        self.noise_intensity = float(noise_intensity)
         self.reset()
 
     @single_threaded_blas
@@ -503,7 +517,7 @@ class OracleLQG(_LQGController):
             raise ValueError("OracleLQG needs the env's info dict with 'time'")
         sys_ = self.env.model.discrete(float(info["time"]))
         a, b = sys_.A, self.env.actuator_gain * sys_.B      # the true plant, efficiency too
-        qn = process_noise(b)
+        qn = process_noise(b, self.noise_intensity)
         obs = self._observation(obs)
         x = self._filter(a, b, self._c, qn, self._noise_var, obs[self._meas_obs],
                          info)
