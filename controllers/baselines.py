@@ -52,8 +52,12 @@ def process_noise(b: np.ndarray, level: float = PROCESS_NOISE) -> np.ndarray:
     regularizer on the diagonal so the covariance stays positive definite: 1e-14 at
     :data:`PROCESS_NOISE`, scaled with ``level**2`` below it down to 1e-20 (a 1e-10
     rad attitude), so a filter that assumes a quiet plant is not held noisy by it."""
-    jitter = max(1e-14 * (level / PROCESS_NOISE) ** 2, 1e-20)
-    return level**2 * b @ b.T + jitter * np.eye(b.shape[0])
+    return level**2 * b @ b.T + regularizer(level) * np.eye(b.shape[0])
+
+
+def regularizer(level: float) -> float:
+    """The diagonal term of :func:`process_noise` at ``level`` N m, state units squared."""
+    return max(1e-14 * (level / PROCESS_NOISE) ** 2, 1e-20)
 
 
 def nominal_model(model: Any, paddle_angle_deg: float = 0.0) -> Any:
