@@ -61,7 +61,13 @@ MARGIN_GRID_POINTS = 48
 
 def margin_frequencies(dt: float, n_points: int = MARGIN_GRID_POINTS,
                        low: float = 1e-3) -> np.ndarray:
-    """Log-spaced frequencies (rad/s) from ``low`` to just below Nyquist ``pi / dt``."""
+    """Log-spaced frequencies (rad/s) from ``low`` to just below Nyquist ``pi / dt``.
+
+    Returns
+    -------
+    (n_points,) ndarray
+        The frequencies, rad/s, increasing.
+    """
     return np.geomspace(low, 0.999 * np.pi / dt, n_points)
 
 
@@ -313,6 +319,12 @@ class GainAcceptance:
         The margin test (4.) is :meth:`check_margin`: the caller evaluates
         the margin, which costs more than the rest, only for a gain that
         passes these.
+
+        Returns
+        -------
+        str or None
+            None when the gain passes; else the first test it fails: "stiffness",
+            "damping", "unstable" or "prediction".
         """
         if not np.isfinite(gain).all():
             return "non-finite gain"
@@ -358,6 +370,11 @@ class GainAcceptance:
         ``alpha >= e / (1 - e)``), or the loop was shown stable for real input
         gains ``1 -/+ e`` (``stable_over >= e``, the largest spread the caller
         checked with :func:`stable_under_input_gains`).
+
+        Returns
+        -------
+        str or None
+            None when the margins pass; else "margin" or "uncertain".
         """
         if not np.isfinite(disk_margin) or disk_margin < self.min_disk_margin:
             return "margin"
@@ -371,6 +388,13 @@ class GainAcceptance:
     @staticmethod
     def softest(a: np.ndarray, c: np.ndarray, gain_x: np.ndarray, att_rows: np.ndarray,
                 rate_rows: np.ndarray) -> tuple[float, float]:
-        """Softest effective stiffness and damping of a design (the reference)."""
+        """Softest effective stiffness and damping of a design (the reference).
+
+        Returns
+        -------
+        (float, float)
+            The smallest effective stiffness (N m/rad) and damping (N m s/rad) over the
+            three axes.
+        """
         k_p, k_d = effective_gains(a, c, gain_x, att_rows, rate_rows)
         return _softest(k_p), _softest(k_d)

@@ -154,6 +154,11 @@ class AdaptationModule:
     def predict(self, physical: ArrayLike) -> np.ndarray:
         """The privileged vector estimated from one ``(size,)`` or many ``(N, size)`` vectors.
 
+        Returns
+        -------
+        (n_targets,) or (N, n_targets) ndarray
+            The estimated privileged vector(s), in the order the module was fitted on.
+
         Raises
         ------
         RuntimeError

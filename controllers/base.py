@@ -60,7 +60,21 @@ class Controller(ABC):
 
     @abstractmethod
     def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
-        """Action for observation ``obs``; ``info`` is the env's last info dict."""
+        """The action for observation ``obs``.
+
+        Parameters
+        ----------
+        obs : (obs_dim,) ndarray
+            The env's observation, in its layout (``env.unwrapped.observation_layout``).
+        info : dict, optional
+            The env's last ``info`` (the applied torque, the time, the drive angle);
+            controllers that read privileged entries (the oracles) raise without it.
+
+        Returns
+        -------
+        (3,) ndarray of float32
+            Normalized torque per body axis, in [-1, 1] (times ``max_torque``: N m).
+        """
 
     def predict(self, observation: np.ndarray, state: Any = None,
                 episode_start: np.ndarray | None = None,
@@ -84,6 +98,26 @@ class Controller(ABC):
         evaluation through ``predict`` (e.g. SB3's ``evaluate_policy``) is
         reproducible, and env i of a batch scores what the same env scores
         alone (test).
+
+        Parameters
+        ----------
+        observation : (obs_dim,) or (n_envs, obs_dim) ndarray
+            One observation, or one per env of a vectorized env.
+        state : object, optional
+            The per-env copies a previous batched call returned (None: made here).
+        episode_start : (n_envs,) array_like of bool, optional
+            Which envs start an episode with this observation (their copies are reset).
+        deterministic : bool
+            Ignored (the controllers are deterministic given their seed); SB3's
+            signature.
+
+        Returns
+        -------
+        action : (3,) or (n_envs, 3) ndarray
+            Normalized torques in [-1, 1].
+        state : object
+            ``state`` unchanged for a single observation; the per-env copies for a
+            batch.
         """
         obs = np.asarray(observation)
         if obs.ndim == 1:

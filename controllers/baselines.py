@@ -51,12 +51,24 @@ def process_noise(b: np.ndarray, level: float = PROCESS_NOISE) -> np.ndarray:
     :data:`PROCESS_NOISE`) of white torque per axis through ``b`` (n, 3), plus a
     regularizer on the diagonal so the covariance stays positive definite: 1e-14 at
     :data:`PROCESS_NOISE`, scaled with ``level**2`` below it down to 1e-20 (a 1e-10
-    rad attitude), so a filter that assumes a quiet plant is not held noisy by it."""
+    rad attitude), so a filter that assumes a quiet plant is not held noisy by it.
+
+    Returns
+    -------
+    (n, n) ndarray
+        The state noise covariance, state units squared.
+    """
     return level**2 * b @ b.T + regularizer(level) * np.eye(b.shape[0])
 
 
 def regularizer(level: float) -> float:
-    """The diagonal term of :func:`process_noise` at ``level`` N m, state units squared."""
+    """The diagonal term of :func:`process_noise` at ``level`` N m, state units squared.
+
+    Returns
+    -------
+    float
+        The diagonal term, state units squared (1e-14 at PROCESS_NOISE, at least 1e-20).
+    """
     return max(1e-14 * (level / PROCESS_NOISE) ** 2, 1e-20)
 
 
@@ -340,7 +352,14 @@ class FixedLQG(_LQGController):
     @single_threaded_blas
     def closed_loop_radius(self, truth: Any, t: float) -> float | None:
         """Spectral radius of the fixed design's loop with the true plant frozen at ``t``
-        (> 1: the loop grows there, however slowly)."""
+        (> 1: the loop grows there, however slowly).
+
+        Returns
+        -------
+        float or None
+            The spectral radius; None when the design has no steady-state filter (noise-
+            free sensors).
+        """
         return self._loop_radius(self.a, self.b, self._c, self.gain, self.qn, self._noise_var,
                                  truth, t)
 
@@ -398,7 +417,14 @@ class ScheduledLQG(_LQGController):
     @single_threaded_blas
     def closed_loop_radius(self, truth: Any, t: float) -> float | None:
         """Spectral radius of the design in use at ``t`` (the true paddle angle's) with
-        the true plant frozen at ``t``."""
+        the true plant frozen at ``t``.
+
+        Returns
+        -------
+        float or None
+            The spectral radius; None when the design has no steady-state filter (noise-
+            free sensors).
+        """
         a, b, gain, qn = self._design({"paddle_angle": truth.scenario.paddle_angle(t)})
         return self._loop_radius(a, b, self._c, gain, qn, self._noise_var, truth, t)
 
@@ -634,6 +660,13 @@ class TrueModelIdentifier:
         return RigidGainEstimate(self.env.actuator_gain * gain, np.zeros((9, 9)))
 
     def filtered_state(self, y: ArrayLike) -> np.ndarray:
+        """``x_{k|k}``: the true model's Kalman filter corrected by the measurements ``y``.
+
+        Returns
+        -------
+        (n,) ndarray
+            The filtered true state (the filter itself unchanged).
+        """
         c = self.env.model.C[self._rows]
         y = np.asarray(y, dtype=float)
         return self.kf.filtered(c, self._noise_var, np.where(np.isfinite(y), y, np.nan))

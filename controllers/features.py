@@ -177,6 +177,13 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env; the identifier restarts (or is kept, with ``keep_identifier``).
+
+        Returns
+        -------
+        (observation, info)
+            The first observation, with this wrapper's channels, and the env's info.
+        """
         if self.keep_identifier:
             self.identifier.restart()
         else:
@@ -191,6 +198,13 @@ class IdentifiedModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructo
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
                                               dict[str, Any]]:
+        """Step the env with ``action`` (kept for the identifier's next sample).
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The env's step, the observation with this wrapper's channels.
+        """
         self._action = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
         return super().step(action)
 
@@ -271,6 +285,13 @@ class OracleModelFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArg
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env; the features of the new plant are computed afresh.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation, with this wrapper's channels, and the env's info.
+        """
         self._cache.clear()            # a randomized reset changes the plant
         return super().reset(seed=seed, options=options)
 
@@ -305,7 +326,14 @@ _CHANGE_TOLERANCE = 0.01
 
 
 def physical_feature_names(n_modes: int) -> tuple[str, ...]:
-    """Names of :class:`PhysicalFeatures`' channels, in order."""
+    """Names of :class:`PhysicalFeatures`' channels, in order.
+
+    Returns
+    -------
+    tuple of str
+        7 + 2 n_modes + 3 names: the rigid gain's, then each mode's frequency and
+        damping, then the identifier's health.
+    """
     modes = range(1, n_modes + 1)
     return ("log_gain_xx", "log_gain_yy", "log_gain_zz", "gain_xy", "gain_xz", "gain_yz",
             "gain_rel_std", *(f"log_freq_{i}" for i in modes), *(f"damping_{i}" for i in modes),
@@ -505,6 +533,13 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env and the identifier.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation, with this wrapper's channels, and the env's info.
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         self.identifier.reset()
         self._last_y = np.asarray(obs, dtype=float)[self._meas_obs]
@@ -515,6 +550,13 @@ class PhysicalFeatures(gym.Wrapper, gym.utils.RecordConstructorArgs):
     @single_threaded_blas
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
                                               dict[str, Any]]:
+        """Step the env; the identifier takes the sample.
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The env's step, the observation with this wrapper's channels.
+        """
         if self._last_y is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
@@ -599,6 +641,13 @@ class PrivilegedFeatures(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env; the privileged features of the new plant are computed afresh.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation, with this wrapper's channels, and the env's info.
+        """
         self._cache.clear()            # a new draw changes the plant
         self._steps = 0
         return super().reset(seed=seed, options=options)

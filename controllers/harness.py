@@ -139,7 +139,13 @@ class Trajectory:
 
     def save(self, path: str | Path) -> Path:
         """Write the trajectory to ``path`` (NumPy ``.npz``, the suffix added if
-        missing); :meth:`load` reads it back. Returns the path written."""
+        missing); :meth:`load` reads it back.
+
+        Returns
+        -------
+        pathlib.Path
+            The path written (with the .npz suffix).
+        """
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_suffix(path.suffix + ".npz")
@@ -160,6 +166,11 @@ class Trajectory:
     @classmethod
     def load(cls, path: str | Path) -> Trajectory:
         """A trajectory written by :meth:`save`.
+
+        Returns
+        -------
+        Trajectory
+            The trajectory as it was saved.
 
         Raises
         ------
@@ -213,6 +224,11 @@ class Trajectory:
         ``observations``, ``states`` and ``reference`` hold N + 1 rows, ``actions``,
         ``torque``, ``rewards`` and ``excitation`` N; the sampled series agree
         with their own time axis.
+
+        Returns
+        -------
+        str or None
+            A sentence naming the arrays whose lengths disagree; None when they agree.
         """
         n = len(self.time)
         expected = {"observations": n + 1, "states": n + 1, "reference": n + 1,

@@ -163,7 +163,13 @@ def equilibrium_map(a: np.ndarray, c_att: np.ndarray) -> np.ndarray:
 
 def augment_integral(a: np.ndarray, b: np.ndarray, c_att: np.ndarray,
                      dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(A_a, B_a)`` of the model augmented with the attitude-error integral."""
+    """``(A_a, B_a)`` of the model augmented with the attitude-error integral.
+
+    Returns
+    -------
+    (A_a, B_a) : ((n + k, n + k), (n + k, m)) ndarrays
+        The augmented state matrix and input matrix (k attitude outputs integrated).
+    """
     n, k = a.shape[0], c_att.shape[0]
     a_aug = np.zeros((n + k, n + k))
     a_aug[:n, :n] = a
@@ -241,7 +247,14 @@ class LQGLaw:
         self._in_band_steps = 0
 
     def weight_matrix(self, c: np.ndarray) -> np.ndarray:
-        """``Q_a`` for a model with output matrix ``c``."""
+        """``Q_a`` for a model with output matrix ``c``.
+
+        Returns
+        -------
+        (n + 3, n + 3) or (n, n) ndarray
+            The state weight of the augmented model (without the integral when it is
+            off).
+        """
         n = c.shape[1]
         q = c.T @ self.qy @ c + self.weights.eps * np.eye(n)
         if not self.integral:
@@ -254,6 +267,11 @@ class LQGLaw:
     def design(self, a: np.ndarray, b: np.ndarray, c: np.ndarray,
                c_att: np.ndarray) -> np.ndarray:
         """Gain ``[G_x, G_z]`` for the model (:class:`controllers.riccati.RiccatiTracker`).
+
+        Returns
+        -------
+        (3, n + 3) or (3, n) ndarray
+            The gain [G_x, G_z], N m per state unit (G_x alone without the integral).
 
         Raises
         ------
@@ -272,11 +290,23 @@ class LQGLaw:
     def equilibrium(self, a: np.ndarray, c_att: np.ndarray, reference: np.ndarray
                     ) -> np.ndarray:
         """:func:`equilibrium_state` of the model, its map kept while the model is
-        unchanged (:func:`equilibrium_map`)."""
+        unchanged (:func:`equilibrium_map`).
+
+        Returns
+        -------
+        (n,) ndarray
+            The model's equilibrium state at the reference attitude.
+        """
         return self._equilibrium.get((a, c_att), lambda: equilibrium_map(a, c_att)) @ reference
 
     def torque(self, gain: np.ndarray, x_hat: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
-        """``-G_x (xhat - x_ref) - G_z z``, N m."""
+        """``-G_x (xhat - x_ref) - G_z z``, N m.
+
+        Returns
+        -------
+        (3,) ndarray
+            The torque, N m, before saturation.
+        """
         n = x_hat.shape[0]
         u = -gain[:, :n] @ (x_hat - x_ref)
         if self.integral:
@@ -330,6 +360,11 @@ def set_integral_settle(controller: Any, settle_s: float) -> Any:
 
 def check_settle_time(settle_s: float) -> float:
     """``settle_s`` as a float, s.
+
+    Returns
+    -------
+    float
+        The settle time, s.
 
     Raises
     ------

@@ -92,6 +92,13 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env and the base controller.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation and the env's info.
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._seeds = np.random.default_rng(seed)
@@ -106,6 +113,14 @@ class ResidualControl(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
                                               dict[str, Any]]:
+        """Step the env with the base controller's action plus ``scale * action`` (the
+        residual, clipped to [-1, 1]; the sum clipped to the action space).
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The env's step under the base's action plus the residual.
+        """
         if self._obs is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         residual = np.asarray(action, dtype=float)
@@ -174,6 +189,13 @@ class BaseRelativeReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env and the base's twin simulation.
+
+        Returns
+        -------
+        (observation, info)
+            The env's first observation and info.
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         # the simulator is copied first: a controller's copy keeps the env it was
         # given (Controller.__deepcopy__), which must be the twin's, not this one
@@ -185,6 +207,13 @@ class BaseRelativeReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
                                               dict[str, Any]]:
+        """Step the env and the base's twin.
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The env's step, the reward minus the base's on the twin.
+        """
         obs, reward, terminated, truncated, info = self.env.step(action)
         base_reward = 0.0
         if not self._twin_done and self._twin is not None:
@@ -244,10 +273,24 @@ class ResidualObservations(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation with the base's channels, and the env's info.
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         return self._extend(obs, info), info
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, SupportsFloat, bool, bool,
                                               dict[str, Any]]:
+        """Step the env.
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The env's step, the observation with the base's channels.
+        """
         obs, reward, terminated, truncated, info = self.env.step(action)
         return self._extend(obs, info), reward, terminated, truncated, info

@@ -91,7 +91,14 @@ class ScoredWindowReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.Wrapper.__init__(self, env)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        """One env step; its reward if it ends in the window or leaves the bound, else 0."""
+        """One env step; its reward if it ends in the window or leaves the bound, else 0.
+
+        Returns
+        -------
+        tuple
+            The env's (observation, reward, terminated, truncated, info), the reward
+            replaced as above.
+        """
         obs, reward, terminated, truncated, info = self.env.step(action)
         # the env's clock is k * dt: a step that ends at start_s is in the window
         if not terminated and info["time"] < self.start_s - 1e-9:

@@ -86,6 +86,11 @@ def check_weights(q: ArrayLike, r: ArrayLike, n: int | None = None,
 def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Validate a model for LQR design: ``A`` finite (n, n), ``B`` finite (n, m).
 
+    Returns
+    -------
+    (A, B) : ((n, n), (n, m)) ndarrays
+        The model as float arrays.
+
     Raises
     ------
     ValueError
@@ -107,6 +112,11 @@ def check_model(a: ArrayLike, b: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 def check_iterations(iterations: int | None) -> int | None:
     """Validate a Riccati design mode: None (each new model solved exactly) or a
     number of warm-started iterations per re-design (an integer >= 1).
+
+    Returns
+    -------
+    int or None
+        The mode, unchanged.
 
     Raises
     ------
@@ -367,6 +377,11 @@ class RiccatiTracker:
     def design(self, a: ArrayLike, b: ArrayLike) -> np.ndarray:
         """Gain for the model ``(a, b)``: kept for an unchanged model, else solved
         (or iterated from the last solution, with ``iterations`` set).
+
+        Returns
+        -------
+        (m, n) ndarray
+            The state-feedback gain G (u = -G x).
 
         Raises
         ------
