@@ -58,7 +58,13 @@ class KeptWhileEqual(Generic[T]):
 
     def holds(self, inputs: Sequence[Any]) -> bool:
         """Whether a value is kept and every input has the bits (shape, dtype and
-        bytes) of the one it was kept for."""
+        bytes) of the one it was kept for.
+
+        Returns
+        -------
+        bool
+            True when the kept value may be handed out for ``inputs``.
+        """
         kept = self._inputs
         if kept is None or len(kept) != len(inputs):
             return False
@@ -71,13 +77,25 @@ class KeptWhileEqual(Generic[T]):
         return self._value
 
     def keep(self, inputs: Sequence[Any], value: T) -> T:
-        """Keep ``value`` for ``inputs``; returns ``value``."""
+        """Keep ``value`` for ``inputs``; returns ``value``.
+
+        Returns
+        -------
+        object
+            ``value``, unchanged.
+        """
         self._inputs = tuple(self._bits(m) for m in inputs)
         self._value = value
         return value
 
     def get(self, inputs: Sequence[Any], compute: Callable[[], T]) -> T:
-        """The kept value for ``inputs``, or ``compute()`` kept for them."""
+        """The kept value for ``inputs``, or ``compute()`` kept for them.
+
+        Returns
+        -------
+        object
+            The kept or newly computed value.
+        """
         return self._value if self.holds(inputs) else self.keep(inputs, compute())
 
     def clear(self) -> None:

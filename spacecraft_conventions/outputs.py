@@ -104,7 +104,13 @@ class OutputLayout:
 
     @classmethod
     def of(cls, groups: Sequence[str], n_sensors: int) -> OutputLayout:
-        """Layout of ``groups`` (in the order given) with ``n_sensors`` deflection channels."""
+        """Layout of ``groups`` (in the order given) with ``n_sensors`` deflection channels.
+
+        Returns
+        -------
+        OutputLayout
+            The layout, three channels per group but ``n_sensors`` for "deflection".
+        """
         if isinstance(groups, str):
             groups = (groups,)
         return cls(tuple((g, n_sensors if g == "deflection" else 3) for g in groups))
@@ -132,6 +138,11 @@ class OutputLayout:
     def slice(self, name: str) -> slice:
         """Rows of group ``name``.
 
+        Returns
+        -------
+        slice
+            The group's rows in the output vector.
+
         Raises
         ------
         KeyError
@@ -143,21 +154,45 @@ class OutputLayout:
         raise KeyError(f"no {name!r} channels in this layout; it holds {self.names}")
 
     def indices(self, name: str) -> np.ndarray:
-        """Rows of group ``name`` as an integer array."""
+        """Rows of group ``name`` as an integer array.
+
+        Returns
+        -------
+        (size,) ndarray of int
+            The group's rows in the output vector.
+        """
         rows = self.slice(name)
         return np.arange(rows.start, rows.stop)
 
     def sensor_indices(self) -> np.ndarray:
-        """Rows of the sensor groups (not the task channels), in layout order."""
+        """Rows of the sensor groups (not the task channels), in layout order.
+
+        Returns
+        -------
+        ndarray of int
+            The rows of the attitude, rate and deflection groups the layout holds.
+        """
         parts = [self.indices(name) for name in self.names if name in OUTPUT_GROUPS]
         return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
 
     def scales(self) -> np.ndarray:
-        """Nominal level of every channel, SI units (see :mod:`.sensors`)."""
+        """Nominal level of every channel, SI units (see :mod:`.sensors`).
+
+        Returns
+        -------
+        (size,) ndarray
+            Each channel's nominal level: rad, rad/s or m.
+        """
         return np.concatenate([np.full(size, NOMINAL_SCALE[name]) for name, size in self.groups])
 
     def sensors(self) -> OutputLayout:
-        """The same layout restricted to the sensor groups."""
+        """The same layout restricted to the sensor groups.
+
+        Returns
+        -------
+        OutputLayout
+            The sensor groups of this layout, in its order.
+        """
         return OutputLayout(tuple((n, s) for n, s in self.groups if n in OUTPUT_GROUPS))
 
 
