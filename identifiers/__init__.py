@@ -63,7 +63,8 @@ from identifiers.core.fit_jobs import FitCancelled, cancel_fits, cancellation_po
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.modal_basis import ModalFilterBank, Resonator
-from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
+from identifiers.core.model import Modes, StateSpaceModel, observability_basis
+from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rigid_gain import RigidGainEstimate
 from identifiers.core.rls import RecursiveLeastSquares

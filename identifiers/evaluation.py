@@ -30,7 +30,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import schur, solve_sylvester
 
-from identifiers.core.model import ModelSequence, StateSpaceModel
+from identifiers.core.model import StateSpaceModel
+from identifiers.core.model_sequence import ModelSequence
 
 __all__ = [
     "HORIZONS",

@@ -34,7 +34,7 @@ from identifiers import (
     prediction_vaf,
 )
 from identifiers.core.health import IdentifierHealthWarning, _estimators, _positive_definite
-from identifiers.core.model import ModelSequence
+from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.rls import RecursiveLeastSquares
 from spacecraft_conventions import STANDARD_OUTPUTS
 from spacecraft_env import FlexibleSpacecraftEnv, FlexibleSpacecraftModel

@@ -27,7 +27,8 @@ from identifiers.core.data_monitor import DataMonitor
 from identifiers.core.health import IdentifierHealth, IdentifierHealthWarning
 from identifiers.core.kalman import KalmanPredictor, steady_state_gain
 from identifiers.core.modal_basis import ModalFilterBank, Resonator
-from identifiers.core.model import ModelSequence, Modes, StateSpaceModel, observability_basis
+from identifiers.core.model import Modes, StateSpaceModel, observability_basis
+from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.residual_statistics import correlation_time
 from identifiers.core.rigid_gain import RigidGainEstimate

@@ -93,7 +93,13 @@ class FitTiming:
 
     def latency_samples(self, dt: float) -> int:
         """The fixed latency in samples of ``dt`` s, rounded up (0 for a fit at once;
-        a measured charge is known only once its fit has run)."""
+        a measured charge is known only once its fit has run).
+
+        Returns
+        -------
+        int
+            Samples from when the fit falls due to when its model may be used.
+        """
         return 0 if self.latency_s is None else math.ceil(round(self.latency_s / dt, 9))
 
     @property

@@ -56,7 +56,13 @@ RESOLUTION = 1e-3
 def resolved_variance(error: np.ndarray, signal: np.ndarray) -> np.ndarray:
     """``max(error, RESOLUTION^2 signal)`` elementwise: an error variance no smaller
     than :data:`RESOLUTION` of the signal's mean square allows, below which an error
-    is no evidence (the variance a change test or a noise level divides by)."""
+    is no evidence (the variance a change test or a noise level divides by).
+
+    Returns
+    -------
+    ndarray
+        The floored variance, the shape of ``error``.
+    """
     return np.maximum(error, RESOLUTION**2 * signal)
 
 #: The calm level of a statistic is tracked by a running mean of every value
@@ -305,7 +311,13 @@ class RegressionGLR:
                sample: int | None = None) -> ChangeEvent | None:
         """Feed one regressor ``phi`` (d,), a-priori error ``e`` (q,) and the
         error variances (q,) of sample ``sample`` (default: a running count);
-        returns the event if the test fired."""
+        returns the event if the test fired.
+
+        Returns
+        -------
+        ChangeEvent or None
+            The change the test declared at this sample, or None.
+        """
         k = self.k
         self.k += 1
         sample = k if sample is None else int(sample)

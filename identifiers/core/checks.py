@@ -25,7 +25,13 @@ def all_finite(x: np.ndarray) -> bool:
 
 
 def positive_int(name: str, value) -> int:
-    """``value`` as an int >= 1; ``TypeError``/``ValueError`` naming ``name`` otherwise."""
+    """``value`` as an int >= 1; ``TypeError``/``ValueError`` naming ``name`` otherwise.
+
+    Returns
+    -------
+    int
+        ``value``, at least 1.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
     if value < 1:
@@ -34,7 +40,13 @@ def positive_int(name: str, value) -> int:
 
 
 def positive_float(name: str, value: float) -> float:
-    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` otherwise."""
+    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` otherwise.
+
+    Returns
+    -------
+    float
+        ``value``, finite and > 0.
+    """
     value = float(value)
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be positive, got {value}")
@@ -42,7 +54,13 @@ def positive_float(name: str, value: float) -> float:
 
 
 def forgetting_factor(name: str, value: float) -> float:
-    """``value`` as a forgetting factor in (0, 1]; ``ValueError`` naming ``name`` otherwise."""
+    """``value`` as a forgetting factor in (0, 1]; ``ValueError`` naming ``name`` otherwise.
+
+    Returns
+    -------
+    float
+        ``value``, in (0, 1].
+    """
     value = float(value)
     if not 0.0 < value <= 1.0:
         raise ValueError(f"{name} must be in (0, 1], got {value}")
@@ -50,7 +68,13 @@ def forgetting_factor(name: str, value: float) -> float:
 
 
 def positive_scales(name: str, value) -> np.ndarray:
-    """``value`` as a 1-D array of positive finite per-channel scales."""
+    """``value`` as a 1-D array of positive finite per-channel scales.
+
+    Returns
+    -------
+    (k,) ndarray
+        The scales, positive and finite.
+    """
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.ndim != 1 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise ValueError(f"{name} must be a 1-D array of positive finite scales")
@@ -62,6 +86,11 @@ def rms_scale(samples: np.ndarray) -> np.ndarray:
 
     Computed relative to each column's peak, so data of any magnitude up to
     the largest float give a finite scale (no overflow in the squares).
+
+    Returns
+    -------
+    (k,) ndarray
+        One positive scale per column of ``samples``, in its units.
     """
     finite = np.where(np.isfinite(samples), samples, 0.0)
     count = np.isfinite(samples).sum(axis=0)

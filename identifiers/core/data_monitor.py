@@ -117,6 +117,11 @@ class DataMonitor:
             Output as received, normalized.
         skipped : bool
             Whether the identifier skipped the sample.
+
+        Returns
+        -------
+        bool
+            True when this sample closed a window (which was then assessed).
         """
         i = self._i
         self._u[i] = u

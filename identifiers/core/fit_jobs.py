@@ -100,7 +100,13 @@ class FitJob:
 
     def remaining(self) -> list[tuple[np.ndarray, np.ndarray, tuple]]:
         """The samples received that the worker's replay did not take (those past the due
-        one: a measured charge's fit adopted later than its due sample)."""
+        one: a measured charge's fit adopted later than its due sample).
+
+        Returns
+        -------
+        list of (u, y, schedule)
+            The samples, oldest first, each as it was received.
+        """
         items = []
         while True:
             try:

@@ -163,7 +163,13 @@ def _positive_semidefinite(p: np.ndarray) -> bool:
 
 
 def degenerate(matrices: tuple | None) -> str | None:
-    """Why a finite model ``(A, B, C, D, K)`` is no model at all (A or C zero), or None."""
+    """Why a finite model ``(A, B, C, D, K)`` is no model at all (A or C zero), or None.
+
+    Returns
+    -------
+    str or None
+        A sentence naming the zero matrix, or None.
+    """
     if matrices is None:
         return None
     for name, index in (("A", 0), ("C", 2)):
@@ -183,6 +189,11 @@ def state_problem(identifier: Any, matrices: tuple | None, state: np.ndarray | N
         The model ``(A, B, C, D, K)`` it would export now.
     state : ndarray or None
         Its state estimate.
+
+    Returns
+    -------
+    str or None
+        A sentence naming the problem, or None for a healthy state.
     """
     for i, est in enumerate(_estimators(identifier)):
         if isinstance(est, RecursiveLeastSquares):

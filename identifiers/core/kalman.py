@@ -209,7 +209,13 @@ class KalmanPredictor:
                        np.asarray(r, dtype=float), np.asarray(y, dtype=float), float(sigmas))
 
     def filtered(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None) -> np.ndarray:
-        """``x_{k|k}``: the prediction corrected by ``y_k``, without changing the filter."""
+        """``x_{k|k}``: the prediction corrected by ``y_k``, without changing the filter.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_{k|k}``.
+        """
         return self._correction(c, r, y)[0]
 
     def correct(self, c: np.ndarray, r: np.ndarray, y: np.ndarray | None,
@@ -218,6 +224,11 @@ class KalmanPredictor:
 
         ``a`` (the step's transition matrix) only serves to record the
         predictor gain ``K_k = A L_k`` in :attr:`gain`.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_{k|k}``.
         """
         a_key = _NO_MATRIX if a is None else a
         st = self._steady
@@ -246,7 +257,13 @@ class KalmanPredictor:
         return x
 
     def predict(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Time update with the input applied: the filter now holds ``x_{k+1|k}``."""
+        """Time update with the input applied: the filter now holds ``x_{k+1|k}``.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_{k+1|k}``.
+        """
         st = self._steady
         if st is not None and self.P is st.post and st.prediction.holds((a, b, q)):
             self.x = st.a @ self.x + st.b @ u
@@ -264,6 +281,11 @@ class KalmanPredictor:
         :meth:`correct` with this step's ``(c, r, y)`` (``a_now``: this step's transition
         matrix, for :attr:`gain`): the same numbers, in one compiled call where every
         output is seen. Returns ``x_{k|k}``.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_{k|k}``.
         """
         st = self._steady
         if (st is not None and self.P is st.post) or y is None or y.shape[0] != c.shape[0] \

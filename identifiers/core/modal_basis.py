@@ -115,7 +115,13 @@ class HighPass:
         return highpass_step(self._last, self._out, np.asarray(x, dtype=float), self.rho)
 
     def run(self, xs: np.ndarray) -> np.ndarray:
-        """Filter a record, one sample per row of ``xs`` (N, size), as N calls would."""
+        """Filter a record, one sample per row of ``xs`` (N, size), as N calls would.
+
+        Returns
+        -------
+        (N, size) ndarray
+            The filtered record, one row per sample.
+        """
         return highpass_run(self._last, self._out, np.ascontiguousarray(xs, dtype=float),
                             self.rho)
 
@@ -208,7 +214,13 @@ class ModalFilterBank:
         self._dfree = np.zeros((m, 2, 2, 2))
 
     def regressor(self) -> np.ndarray:
-        """The regressor of the current sample (states before its torque acts)."""
+        """The regressor of the current sample (states before its torque acts).
+
+        Returns
+        -------
+        (size,) ndarray
+            The bank's regressor at the current sample.
+        """
         out = np.empty(self.size)
         bank_regressor(out, self._p, self._v, self._q, self._free, self._since, self.dt)
         return out
@@ -236,6 +248,12 @@ class ModalFilterBank:
         high-passes are given, ``dq_highpass(dq.ravel())`` and
         ``dfree_highpass(dfree.ravel())`` with ``dq, dfree = sensitivity()``
         (the high-passes advance); the derivatives are None otherwise.
+
+        Returns
+        -------
+        (regressor, dq, dfree)
+            The high-passed regressor (size,) and the two high-passed sensitivities
+            (None unless both derivative high-passes are given).
         """
         derivatives = dq_highpass is not None and dfree_highpass is not None
         if derivatives and not self.sensitivities:
@@ -309,7 +327,13 @@ class ModalFilterBank:
 
 def highpass_noise_gain(rho: float) -> float:
     """Sum of the squared impulse response of ``((1 - z^-1) / (1 - rho z^-1))^2``:
-    the factor by which :class:`HighPass` scales the variance of white noise."""
+    the factor by which :class:`HighPass` scales the variance of white noise.
+
+    Returns
+    -------
+    float
+        The variance gain, at least 1.
+    """
     hp = HighPass(1, rho)
     impulse = np.zeros(4000)
     impulse[0] = 1.0

@@ -28,7 +28,8 @@ from identifiers.core.checks import (
 )
 from identifiers.core.data_monitor import DataMonitor
 from identifiers.core.health import degenerate
-from identifiers.core.model import ModelSequence, StateSpaceModel
+from identifiers.core.model import StateSpaceModel
+from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.rollback import HealthGuard
 from identifiers.core.screening import SampleScreening
 from spacecraft_conventions import KeptWhileEqual, single_threaded_blas
@@ -359,6 +360,12 @@ class OnlineIdentifier(SampleScreening, HealthGuard, ABC):
         :meth:`update` uses this instead. Identifiers with a Kalman filter
         correct the prediction with ``y_k`` (non-finite entries ignored);
         the default returns the prediction. The identifier is not changed.
+
+        Returns
+        -------
+        (n,) ndarray or None
+            ``x_{k|k}`` in the model's coordinates; None before the identifier has a
+            model.
         """
         return self.state
 

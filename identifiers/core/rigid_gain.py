@@ -73,6 +73,11 @@ class RigidGainEstimate:
             factor converting the coefficient to ``G`` (rad/s^2 per N m).
         column_scale : (3,) array_like
             Physical units of one regression unit of each regressor.
+
+        Returns
+        -------
+        RigidGainEstimate
+            The gain J^-1 (3, 3), rad/s^2 per N m, and its (9, 9) covariance.
         """
         theta = np.asarray(theta, dtype=float)
         p = np.asarray(p, dtype=float)
@@ -92,7 +97,13 @@ class RigidGainEstimate:
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0)).reshape(3, 3)
 
     def relative_std(self) -> float:
-        """``sqrt(trace(covariance)) / ||gain||_F``: the gain's relative uncertainty."""
+        """``sqrt(trace(covariance)) / ||gain||_F``: the gain's relative uncertainty.
+
+        Returns
+        -------
+        float
+            The relative standard deviation (inf for a zero gain).
+        """
         norm = float(np.linalg.norm(self.gain))
         return float(np.sqrt(max(np.trace(self.covariance), 0.0)) / norm) if norm > 0 \
             else float("inf")
@@ -101,7 +112,13 @@ class RigidGainEstimate:
         """The distance of ``gain`` from the estimate in standard deviations: the
         square root of ``d^T C^+ d`` over the entries with a positive variance
         (``C^+`` the pseudo-inverse: a constrained estimate, e.g. a symmetric one,
-        has a singular covariance)."""
+        has a singular covariance).
+
+        Returns
+        -------
+        float
+            The distance, in standard deviations.
+        """
         d, keep = self._difference(gain)
         if not keep.any():
             return float("inf") if np.any(d) else 0.0
@@ -123,6 +140,11 @@ class RigidGainEstimate:
         calibrated estimate passes with probability 0.95-1.0 depending on the
         shape of ``C`` (about 1.0 for nine equal variances): it overstated
         coverage.
+
+        Returns
+        -------
+        bool
+            True when ``gain`` lies in the region.
         """
         if not sigmas > 0:
             raise ValueError(f"sigmas must be > 0, got {sigmas}")

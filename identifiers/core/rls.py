@@ -179,7 +179,13 @@ class RecursiveLeastSquares:
         return self._scale * (upper + np.triu(upper, 1).T)
 
     def predict(self, phi: np.ndarray) -> np.ndarray:
-        """``Theta phi``."""
+        """``Theta phi``.
+
+        Returns
+        -------
+        (q,) ndarray
+            The prediction ``Theta phi``.
+        """
         return self.theta @ phi
 
     def update(self, phi: np.ndarray, y: np.ndarray) -> np.ndarray | None:

@@ -81,7 +81,13 @@ class ModelFilter:
         return self._mats[2] @ self._kf.x
 
     def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
-        """``x_{k|k}``: the Kalman filter's prediction corrected by ``y_k`` (physical units)."""
+        """``x_{k|k}``: the Kalman filter's prediction corrected by ``y_k`` (physical units).
+
+        Returns
+        -------
+        (n,) ndarray or None
+            ``x_{k|k}``; None before the filter has a model.
+        """
         if not self.ready or self._mats is None:
             return None
         y = np.asarray(y, dtype=float).reshape(-1)

@@ -145,7 +145,13 @@ class MinimalModelExport:
     def input_uncertainty(self) -> np.ndarray | None:
         """Covariance (3, 3) of the rigid gains' torque directions, from the rate
         regression's RLS (larger = less known), for shaping an excitation;
-        None before warm-up."""
+        None before warm-up.
+
+        Returns
+        -------
+        (3, 3) ndarray or None
+            The covariance, in the regression's normalized units; None before warm-up.
+        """
         if not self._fits:
             return None
         bank = self._bank

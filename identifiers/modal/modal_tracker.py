@@ -1,41 +1,36 @@
 """Tracking a structure's modal frequencies and damping from streaming data.
 
-Given the resonators' frequencies and damping ratios ``rho``, every output
-of the rigid-flexible model is linear in its gains ``Theta``
-(:mod:`identifiers.core.modal_basis`): ``y = Theta^T phi(rho) + e``. The
-frequencies enter nonlinearly. :class:`ModalTracker` estimates their
-correction ``delta`` by *variable projection* on a forgetting window: the
-gains are projected out (the least-squares ``Theta`` of the window for
-given ``rho``), and ``delta`` minimizes what is left,
+Given the resonators' frequencies and damping ratios ``rho``, every output of the
+rigid-flexible model is linear in its gains ``Theta`` (:mod:`identifiers.core.modal_basis`):
+``y = Theta^T phi(rho) + e``. The frequencies enter nonlinearly. :class:`ModalTracker`
+estimates their correction ``delta`` by *variable projection* on a forgetting window: the
+gains are projected out (the least-squares ``Theta`` of the window for given ``rho``), and
+``delta`` minimizes what is left,
 
     V(delta) = sum_k lambda^(N-k) || y_k - Theta(delta)^T phi_k(rho + delta) ||^2 .
 
 Two facts make this cheap enough to run every second:
 
-* **Taylor regressors.** ``phi(rho + delta) = phi(rho) + sum_j delta_j dphi/drho_j``
-  to first order, and the derivative filters of
-  :class:`identifiers.core.modal_basis.ModalFilterBank` give ``dphi/drho`` at
-  every sample. So the window is summarized by the exponentially weighted
-  second moments of the extended regressor ``[phi; dphi]`` and the outputs,
-  updated by one rank-1 step per sample, and ``V`` and its derivatives
-  follow from these moments for any ``delta``.
-* **Re-centring.** After each step the bank moves to ``rho + delta`` (its
-  states corrected to first order) and the moments are transformed to the
-  new linearization point (``phi <- phi + E(delta) dphi``), so ``delta``
-  stays small and the Taylor model accurate.
+* **Taylor regressors.** ``phi(rho + delta) = phi(rho) + sum_j delta_j dphi/drho_j`` to
+  first order, and the derivative filters of
+  :class:`identifiers.core.modal_basis.ModalFilterBank` give ``dphi/drho`` at every sample.
+  So the window is summarized by the exponentially weighted second moments of the extended
+  regressor ``[phi; dphi]`` and the outputs, updated by one rank-1 step per sample, and
+  ``V`` and its derivatives follow from these moments for any ``delta``.
+* **Re-centring.** After each step the bank moves to ``rho + delta`` (its states corrected
+  to first order) and the moments are transformed to the new linearization point (``phi <-
+  phi + E(delta) dphi``), so ``delta`` stays small and the Taylor model accurate.
 
-Each refinement is one Gauss-Newton step on ``V`` (Kaufman's
-approximation of the variable-projection Jacobian) with a
-Levenberg-Marquardt damping, bounded per step, accepted only if it lowers
-``V``. Parameters the window does not inform (a mode the inputs hardly
-excite) do not move. The inverse Gauss-Newton Hessian scaled by the
-window's residual variance is the reported covariance of ``rho``.
+Each refinement is one Gauss-Newton step on ``V`` (Kaufman's approximation of the
+variable-projection Jacobian) with a Levenberg-Marquardt damping, bounded per step, accepted
+only if it lowers ``V``. Parameters the window does not inform (a mode the inputs hardly
+excite) do not move. The inverse Gauss-Newton Hessian scaled by the window's residual
+variance is the reported covariance of ``rho``.
 
-The couplings change with the modes, so the projection (gains re-fitted on
-the window) is what lets the frequencies move after a change: a recursive
-estimator that updated the frequencies with the gains held at their old
-values moved them the wrong way on the docking spacecraft (measured while
-designing this, docs/design/identification.md).
+The couplings change with the modes, so the projection (gains re-fitted on the window) is
+what lets the frequencies move after a change: a recursive estimator that updated the
+frequencies with the gains held at their old values moved them the wrong way on the docking
+spacecraft (measured while designing this, docs/design/identification.md).
 """
 
 from __future__ import annotations
@@ -84,8 +79,7 @@ def _solve_lower(chol: np.ndarray, b: np.ndarray, transpose: bool = False) -> np
 def _moments_update(s: np.ndarray, z: np.ndarray, phi: np.ndarray, columns: np.ndarray,
                     deriv: np.ndarray, y: np.ndarray, rows: np.ndarray, inv: float) -> float:
     """Add ``x x^T`` and ``x y^T`` times ``inv`` to the moments (upper triangle of ``S``),
-    with ``x = [phi[columns]; deriv]`` and ``y = y[rows]``; returns ``y^T y`` times
-    ``inv``."""
+    with ``x = [phi[columns]; deriv]``, ``y = y[rows]``; returns ``y^T y`` times ``inv``."""
     d = columns.shape[0]
     n = d + deriv.shape[0]
     x = np.empty(n)
@@ -110,10 +104,9 @@ def _moments_update(s: np.ndarray, z: np.ndarray, phi: np.ndarray, columns: np.n
 def _window_update(ss, zs, yy: np.ndarray, phi: np.ndarray, columns, components: np.ndarray,
                    dphi: np.ndarray, dfree: np.ndarray, y: np.ndarray, rows,
                    inv: float) -> None:
-    """:func:`_moments_update` of every group (tuples ``ss``, ``zs``, ``columns``,
-    ``rows``; ``yy`` accumulates in place) with its derivative regressors: resonator
-    by resonator and parameter by parameter, the three axes' ``dphi[..., component]``
-    and the two ``dfree``."""
+    """:func:`_moments_update` of every group (tuples ``ss``, ``zs``, ``columns``, ``rows``;
+    ``yy`` accumulates in place) with its derivative regressors: resonator by resonator and
+    parameter by parameter, the three axes' ``dphi[..., component]`` and the two ``dfree``."""
     m = dphi.shape[0]
     derivs = np.empty((2, 10 * m))
     for component in range(2):
@@ -263,8 +256,7 @@ class ModalTracker:
         z = self._z[gi] * self._scale
         return s[:d, :d], s[:d, d:], s[d:, d:], z[:d], z[d:], self._yy[gi] * self._scale
 
-    def _projected(self, gi: int, delta: np.ndarray | None = None,
-                   blocks: tuple | None = None
+    def _projected(self, gi: int, delta: np.ndarray | None = None, blocks: tuple | None = None
                    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """Window residual ``V`` at ``delta`` (first order), the gains, the residual's
         moments with the derivative regressors, and the factor of the gains' Gram."""
@@ -297,11 +289,20 @@ class ModalTracker:
         return v, theta, zd - sfd.T @ theta, chol
 
     def refine(self, correlation_time: float = 1.0) -> np.ndarray | None:
-        """One Gauss-Newton step on the window; the correction ``delta`` (M, 2) to apply
-        to ``[log f, zeta]`` of each resonator, or None (window too short, or the step
-        did not lower the residual). Updates :attr:`covariance`. ``correlation_time``
-        (>= 1): samples per independent one in the residual, which divides the
-        window's evidence (a correlated residual is the model's misfit, not noise)."""
+        """One Gauss-Newton step on the window; updates :attr:`covariance`.
+
+        Parameters
+        ----------
+        correlation_time : float
+            Samples (>= 1) per independent one in the residual, which divides the
+            window's evidence (a correlated residual is the model's misfit, not noise).
+
+        Returns
+        -------
+        (M, 2) ndarray or None
+            The correction ``delta`` to ``[log f, zeta]`` of each resonator; None when
+            the window is too short or the step did not lower the residual.
+        """
         if not correlation_time >= 1.0 or not np.isfinite(correlation_time):
             raise ValueError(f"correlation_time must be finite and >= 1, got {correlation_time}")
         if self._count < self.min_samples or self.m == 0:
@@ -388,6 +389,12 @@ class ModalTracker:
     @staticmethod
     def clip(frequency_hz: float, damping: float, dlogf: float, dzeta: float
              ) -> tuple[float, float]:
-        """A resonator moved by ``(dlogf, dzeta)``, damping kept in range."""
+        """A resonator moved by ``(dlogf, dzeta)``, damping kept in range.
+
+        Returns
+        -------
+        (float, float)
+            The moved frequency, Hz, and damping ratio.
+        """
         return (frequency_hz * float(np.exp(dlogf)),
                 float(np.clip(damping + dzeta, MIN_DAMPING, MAX_DAMPING)))

@@ -100,6 +100,11 @@ def clearly_worse(candidate: np.ndarray, in_use: np.ndarray,
     mean error is at least ``no_skill`` (that of predicting each output by its
     mean: the number of outputs for :func:`horizon_errors`): such a model has
     no prediction to defend.
+
+    Returns
+    -------
+    bool
+        True when the candidate's errors are larger beyond their spread.
     """
     finite = np.isfinite(in_use)
     if not finite.any() or np.mean(in_use[finite]) >= no_skill:

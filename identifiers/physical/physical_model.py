@@ -97,7 +97,13 @@ class PhysicalModel:
         return int(self.frequencies_hz.size)
 
     def continuous(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, B)`` of ``x' = A x + B u``, state ``[psi (3); psi' (3); q_1; q_1'; ...]``."""
+        """``(A, B)`` of ``x' = A x + B u``, state ``[psi (3); psi' (3); q_1; q_1'; ...]``.
+
+        Returns
+        -------
+        (A, B) : ((6 + 2 N, 6 + 2 N), (6 + 2 N, 3)) ndarrays
+            The continuous-time model, SI units (rad, rad/s per N m).
+        """
         n = 6 + 2 * self.n_modes
         a = np.zeros((n, n))
         b = np.zeros((n, 3))
@@ -112,7 +118,13 @@ class PhysicalModel:
         return a, b
 
     def output_matrix(self, layout: OutputLayout) -> np.ndarray:
-        """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection)."""
+        """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection).
+
+        Returns
+        -------
+        (m, 6 + 2 N) ndarray
+            The output matrix C.
+        """
         n = 6 + 2 * self.n_modes
         c = np.zeros((layout.size, n))
         q = np.arange(6, n, 2)
@@ -135,7 +147,13 @@ class PhysicalModel:
     def discrete(self, dt: float, layout: OutputLayout) -> StateSpaceModel:
         """The zero-order-hold model at sample time ``dt`` (s) with the outputs of
         ``layout``; ``D = 0`` and ``K = 0`` (no predictor gain: a filter on it is the
-        user's)."""
+        user's).
+
+        Returns
+        -------
+        StateSpaceModel
+            The discrete model (A, B, C, 0, 0) at ``dt``.
+        """
         a, b = self.continuous()
         n = a.shape[0]
         block = np.zeros((n + 3, n + 3))
@@ -148,7 +166,13 @@ class PhysicalModel:
 
     def rate_response(self, frequencies_hz: ArrayLike) -> np.ndarray:
         """The torque-to-rate frequency response ``G / s + sum phi phi^T s / (...)``,
-        (F, 3, 3) complex, rad/s per N m, at ``s = 2 pi j f`` (continuous time)."""
+        (F, 3, 3) complex, rad/s per N m, at ``s = 2 pi j f`` (continuous time).
+
+        Returns
+        -------
+        (F, 3, 3) complex ndarray
+            The response at each frequency, rad/s per N m.
+        """
         s = 2j * np.pi * np.asarray(frequencies_hz, dtype=float).reshape(-1)
         w = 2 * np.pi * self.frequencies_hz
         modal = s[:, None] / (s[:, None] ** 2 + 2 * self.damping * w * s[:, None] + w**2)
@@ -160,7 +184,13 @@ def mode_response(ad: np.ndarray, bd: np.ndarray, force: np.ndarray,
                    s0: np.ndarray) -> np.ndarray:
     """States ``[q, q']`` (T, 2) of ``s_{t+1} = ad s_t + bd f_t`` from ``s_0``: ``s_t``
     sees the forces before t. By the recursion, vectorized over nothing but cheap:
-    two multiply-adds per sample in a compiled filter."""
+    two multiply-adds per sample in a compiled filter.
+
+    Returns
+    -------
+    (T, 2) ndarray
+        The mode's displacement and velocity at each sample.
+    """
     # transfer functions from f to q and q' (one-sample delay), and the free response
     den = np.array([1.0, -np.trace(ad), np.linalg.det(ad)])
     adj = np.array([[ad[1, 1], -ad[0, 1]], [-ad[1, 0], ad[0, 0]]])   # det(zI - ad) (zI - ad)^-1

@@ -1,21 +1,17 @@
 """Fitting a :class:`identifiers.physical.scheduled_model.ScheduledPhysicalModel`
 to a record of torques, outputs and drive angles by output error.
 
-Two stages. Equation-error starts
-(:mod:`identifiers.physical.scheduled_start`): each appendage's mode and
-coupling from a linear regression of its deflection's second derivative, then
-the inertia and couplings from the hub's torque balance, on signals passed
-through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then,
-from each start, every parameter, the initial state and a constant disturbance
-torque included, by bounded nonlinear least squares on the weighted simulation
-error (the model re-discretized per
-:data:`identifiers.physical.scheduled_simulation.RESOLUTION` of drive
-travel; the tip gains solved linearly inside every evaluation, variable
-projection), the best kept; a torque whose Wald statistic is below the
-Bayesian information criterion's penalty is dropped and the model refined
-without it. Output
-error needs nothing but the torques that acted, so closed-loop data do not
-bias it.
+Two stages. Equation-error starts (:mod:`identifiers.physical.scheduled_start`): each
+appendage's mode and coupling from a linear regression of its deflection's second
+derivative, then the inertia and couplings from the hub's torque balance, on signals passed
+through a state-variable filter ``1 / (tau s + 1)^3`` at several ``tau``. Then, from each
+start, every parameter, the initial state and a constant disturbance torque included, by
+bounded nonlinear least squares on the weighted simulation error (the model re-discretized
+per :data:`identifiers.physical.scheduled_simulation.RESOLUTION` of drive travel; the tip
+gains solved linearly inside every evaluation, variable projection), the best kept; a torque
+whose Wald statistic is below the Bayesian information criterion's penalty is dropped and
+the model refined without it. Output error needs nothing but the torques that acted, so
+closed-loop data do not bias it.
 """
 
 from __future__ import annotations
@@ -96,10 +92,14 @@ class ScheduledFit:
     disturbance_statistic: float = float("nan")
 
     def gain_covariance(self, angle: float) -> np.ndarray:
-        """(9, 9) covariance of ``J(a)^-1``'s row-major entries at drive angle ``a``
-        (rad), (rad/s^2 per N m)^2: :attr:`inertia_covariance` through the
-        gain's derivative (central differences), so the band widens where the
-        fitted anisotropy is extrapolated."""
+        """:attr:`inertia_covariance` through the gain's derivative (central differences) at
+        drive angle ``a`` (rad): the band widens where the fitted anisotropy is extrapolated.
+
+        Returns
+        -------
+        (9, 9) ndarray
+            Covariance of ``J(a)^-1``'s row-major entries, (rad/s^2 per N m)^2.
+        """
         d = _gain_derivative(self.model, angle)
         return d @ self.inertia_covariance @ d.T
 

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identifiers.core.checks import positive_float, positive_int
-from identifiers.core.model import ModelSequence
+from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rigid_gain import RigidGainEstimate
 from identifiers.physical.scheduled_fit import fit_scheduled_model

@@ -46,7 +46,13 @@ __all__ = ["ScheduledPhysicalModel", "drive_rotation", "plane_basis"]
 def drive_rotation(axis: ArrayLike, angle: ArrayLike) -> np.ndarray:
     """``R(a)``: rotation by ``angle`` (rad) about the unit vector ``axis`` (Rodrigues);
     about the body y axis ``[[c, 0, s], [0, 1, 0], [-s, 0, c]]``. ``angle`` of shape
-    (K,) gives the K rotations, (K, 3, 3)."""
+    (K,) gives the K rotations, (K, 3, 3).
+
+    Returns
+    -------
+    (3, 3) or (K, 3, 3) ndarray
+        The rotation matrices.
+    """
     x, y, z = np.asarray(axis, dtype=float)
     cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     a = np.asarray(angle, dtype=float)[..., None, None]
@@ -55,7 +61,13 @@ def drive_rotation(axis: ArrayLike, angle: ArrayLike) -> np.ndarray:
 
 def plane_basis(axis: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors ``(e1, e2)`` spanning the plane perpendicular to ``axis`` with
-    ``e1 x e2 = axis`` (for the y axis: z and x)."""
+    ``e1 x e2 = axis`` (for the y axis: z and x).
+
+    Returns
+    -------
+    (e1, e2) : (3,) ndarrays
+        Orthonormal, with e1 x e2 = axis.
+    """
     k = np.asarray(axis, dtype=float)
     seed = np.eye(3)[int(np.argmin(np.abs(k)))]
     e1 = _cross(k, seed)
@@ -196,7 +208,13 @@ class ScheduledPhysicalModel:
         return np.hypot(p0, p1) * plane + anisotropy
 
     def coupling(self, angle: ArrayLike) -> np.ndarray:
-        """``F(a)`` (3, N), kg^1/2 m; (K, 3, N) for K angles."""
+        """``F(a)`` (3, N), kg^1/2 m; (K, 3, N) for K angles.
+
+        Returns
+        -------
+        (3, N) or (K, 3, N) ndarray
+            The couplings at the angle(s), kg^1/2 m.
+        """
         a = np.asarray(angle, dtype=float)
         f = np.broadcast_to(self.couplings.T, (*a.shape, 3, self.n_modes)).copy()
         if self.turning.any():
@@ -205,12 +223,24 @@ class ScheduledPhysicalModel:
         return f
 
     def inertia(self, angle: float) -> np.ndarray:
-        """``J(a)`` (3, 3), kg m^2: the whole spacecraft's inertia at drive angle ``a``."""
+        """``J(a)`` (3, 3), kg m^2: the whole spacecraft's inertia at drive angle ``a``.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            J(a), kg m^2, symmetric positive definite.
+        """
         f = self.coupling(angle)
         return self.rest_inertia + f @ f.T + self._turned(angle)
 
     def gain(self, angle: float) -> np.ndarray:
-        """``J(a)^-1``, rad/s^2 per N m: the rigid-body gain at drive angle ``a``."""
+        """``J(a)^-1``, rad/s^2 per N m: the rigid-body gain at drive angle ``a``.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            J(a)^-1, rad/s^2 per N m.
+        """
         return np.linalg.inv(self.inertia(angle))
 
     def _turned(self, angle: ArrayLike) -> np.ndarray:
@@ -223,6 +253,11 @@ class ScheduledPhysicalModel:
 
         ``J(a) - F F^T = S + R^T (|P| Pi + P) R`` is positive definite at every
         angle by construction.
+
+        Returns
+        -------
+        (A, B) : ndarrays
+            (6 + 2 N, 6 + 2 N) and (6 + 2 N, 3), or (K, ...) stacks; SI units.
         """
         n, size = self.n_modes, self.order
         lead = np.shape(angle)
@@ -247,7 +282,13 @@ class ScheduledPhysicalModel:
 
     def zoh(self, angle: ArrayLike, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Zero-order-hold ``(A_d, B_d)`` at sample time ``dt`` (s) and angle ``a``; for
-        K angles, (K, ...) stacks (one exponential call for the stack)."""
+        K angles, (K, ...) stacks (one exponential call for the stack).
+
+        Returns
+        -------
+        (A_d, B_d) : ndarrays
+            (6 + 2 N, 6 + 2 N) and (6 + 2 N, 3), or (K, ...) stacks.
+        """
         a, b = self.continuous(angle)
         size = a.shape[-1]
         block = np.zeros((*a.shape[:-2], size + 3, size + 3))
@@ -257,7 +298,13 @@ class ScheduledPhysicalModel:
         return e[..., :size, :size], e[..., :size, size:]
 
     def output_matrix(self, layout: OutputLayout) -> np.ndarray:
-        """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection)."""
+        """``C`` (m, 6 + 2 N) for the groups of ``layout`` (attitude, rate, deflection).
+
+        Returns
+        -------
+        (m, 6 + 2 N) ndarray
+            The output matrix C.
+        """
         c = np.zeros((layout.size, self.order))
         for name, rows in layout:
             if name == "attitude":
@@ -275,7 +322,13 @@ class ScheduledPhysicalModel:
 
     def discrete(self, angle: float, dt: float, layout: OutputLayout) -> StateSpaceModel:
         """The zero-order-hold model at drive angle ``a`` (rad), sample time ``dt`` (s),
-        outputs of ``layout``; ``D = 0`` and ``K = 0``."""
+        outputs of ``layout``; ``D = 0`` and ``K = 0``.
+
+        Returns
+        -------
+        StateSpaceModel
+            The discrete model (A, B, C, 0, 0) at ``dt`` and the angle.
+        """
         a, b = self.zoh(angle, dt)
         c = self.output_matrix(layout)
         return StateSpaceModel(a, b, c, np.zeros((layout.size, 3)),

@@ -26,7 +26,13 @@ RESOLUTION = np.deg2rad(0.25)
 
 def segments(angle: np.ndarray, resolution: float = RESOLUTION) -> list[tuple[int, int]]:
     """``[(start, stop), ...]``: consecutive samples whose angle stays within
-    ``resolution`` (rad) of their block's first one."""
+    ``resolution`` (rad) of their block's first one.
+
+    Returns
+    -------
+    list of (int, int)
+        The blocks' [start, stop) sample ranges, covering the record in order.
+    """
     bounds, start = [], 0
     for t in range(1, angle.size):
         if abs(angle[t] - angle[start]) > resolution:
@@ -42,7 +48,13 @@ def simulate_scheduled(model: ScheduledPhysicalModel, u: np.ndarray, angle: np.n
                        blocks: list[tuple[int, int]] | None = None) -> np.ndarray:
     """States (T, 6 + 2 N) before each torque ``u_t`` acts, from ``x0``; the model is
     discretized once per block of :func:`segments` (default), at its middle angle
-    (all blocks' exponentials in one call, the recursion in one compiled pass)."""
+    (all blocks' exponentials in one call, the recursion in one compiled pass).
+
+    Returns
+    -------
+    (T, 6 + 2 N) ndarray
+        The state at each sample, SI units.
+    """
     cancellation_point()                  # a background fit nobody wants stops here
     bounds = _block_bounds(angle, blocks)
     states = np.empty((u.shape[0], model.order))

@@ -49,7 +49,13 @@ def equation_error_start(problem: Any, y: np.ndarray, tau: float) -> np.ndarray:
     """Packed parameters of the equation-error start at filter constant ``tau`` (s)
     for ``problem`` (the output-error problem of
     :mod:`identifiers.physical.scheduled_fit`: its record, layout, appendages and
-    ``pack``); see the module docstring."""
+    ``pack``); see the module docstring.
+
+    Returns
+    -------
+    ndarray
+        The packed parameter vector (``problem.pack``'s layout).
+    """
     n, rot = problem.n, problem.turning
     y = np.where(np.isfinite(y), y, 0.0)
     first = [int(np.flatnonzero(problem.sensors == k)[0]) for k in range(n)]

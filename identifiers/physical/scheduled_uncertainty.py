@@ -23,7 +23,14 @@ def noise_floor(y: np.ndarray, weights: np.ndarray) -> float:
     ``sigma_i`` from the median absolute deviation of the second differences
     (``var(y_{t+1} - 2 y_t + y_{t-1}) = 6 sigma^2`` for white noise; the
     slow signals of a 0.1 s sample contribute little), rows with a non-finite
-    entry left out."""
+    entry left out.
+
+    Returns
+    -------
+    float
+        The weighted mean square noise, in the weights' units squared (1 at the assumed
+        noise level).
+    """
     good = y[np.all(np.isfinite(y), axis=1)]
     if good.shape[0] < 8:
         return 0.0

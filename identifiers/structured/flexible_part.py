@@ -93,7 +93,13 @@ class FlexiblePart:
     def matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """``(A_f, B_f, C_f)`` in the units of ``u`` and ``w``, ``C_f`` with every row of
         ``w``; the last ones while the method has none (after :meth:`restart`); None
-        before its first model."""
+        before its first model.
+
+        Returns
+        -------
+        (A_f, B_f, C_f) or None
+            The flexible part's matrices; None before the first model.
+        """
         model = self.identifier.model
         if model is not None:
             c = np.zeros((self.n_outputs, model.A.shape[0]))

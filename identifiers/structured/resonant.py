@@ -43,6 +43,11 @@ def resonant_part(a: np.ndarray, b: np.ndarray, c: np.ndarray, dt: float, min_hz
     ``P = V_k W_k`` (``A P`` when nothing is reflected; same order, the removed
     eigenvalues become 0). Returned unchanged when no eigenvalue is removed or
     reflected, or the eigenvectors are too ill-conditioned to project with.
+
+    Returns
+    -------
+    (A, B, C) : ndarrays
+        The projected model, same shapes as the input.
     """
     lam, vec = np.linalg.eig(a)
     hz = np.abs(np.angle(lam)) / (2.0 * np.pi * dt)

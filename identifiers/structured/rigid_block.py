@@ -31,7 +31,13 @@ N_RIGID_REGRESSORS = 8
 
 def highpass_offset(hp: HighPass) -> np.ndarray:
     """What :class:`HighPass` adds to its next input: ``F(x_k) = x_k + offset``
-    (the filter's leading coefficient is 1), from its past alone."""
+    (the filter's leading coefficient is 1), from its past alone.
+
+    Returns
+    -------
+    (size,) ndarray
+        The offset the high-pass adds to its next input.
+    """
     last, out, rho = hp._last, hp._out, hp.rho
     return rho * (out[0] + out[1]) - last[0] - last[1]
 
@@ -92,11 +98,23 @@ class RigidBlock:
         self._hp = HighPass(N_RIGID_REGRESSORS, self.highpass)
 
     def regressor(self) -> np.ndarray:
-        """The scaled high-passed regressor of the current sample (the high-pass advances)."""
+        """The scaled high-passed regressor of the current sample (the high-pass advances).
+
+        Returns
+        -------
+        (8,) ndarray
+            The scaled high-passed rigid regressor.
+        """
         return self._bank.highpassed(self._hp)[0] / self.scale
 
     def peek(self) -> np.ndarray:
-        """:meth:`regressor` without advancing anything."""
+        """:meth:`regressor` without advancing anything.
+
+        Returns
+        -------
+        (8,) ndarray
+            The regressor the next call of :meth:`regressor` would return.
+        """
         raw = self._bank.regressor()
         return (raw + highpass_offset(self._hp)) / self.scale
 
@@ -110,7 +128,13 @@ class RigidBlock:
 
     def gain(self, theta: np.ndarray) -> np.ndarray:
         """``G`` in normalized units (rate output per integrated torque) from the
-        regression's rigid coefficients ``theta`` (m x 8): the rate rows' block."""
+        regression's rigid coefficients ``theta`` (m x 8): the rate rows' block.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            The gain G in normalized units.
+        """
         return theta[np.ix_(self._rate, np.arange(3, 6))] / self.scale[3:6]
 
     def estimate(self, theta: np.ndarray, p: np.ndarray, error_variance: np.ndarray,
@@ -128,6 +152,11 @@ class RigidBlock:
             Variance of each output's regression errors (normalized units).
         output_scale, input_scale : (m,), (3,) ndarray
             Physical units of one normalized output and torque unit.
+
+        Returns
+        -------
+        RigidGainEstimate
+            The gain J^-1 (rad/s^2 per N m) and its (9, 9) covariance.
         """
         rate, cols = self._rate, np.arange(3, 6)
         return RigidGainEstimate.from_regression(

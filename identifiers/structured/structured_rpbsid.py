@@ -8,20 +8,18 @@ Physics fixes that block up to the inverse inertia ``G = J^-1``, so
 (:class:`identifiers.structured.rigid_block.RigidBlock`):
 
 1. **One regression** (the paper's VARX, Eq. 20-24, extended):
-   ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k`` on high-passed signals,
-   ``rho`` the rigid regressors (``G`` is the rate rows' block of ``Theta_r``,
-   its covariance the gain's calibrated band); no attitude or rate *level*
-   in the past window. A change test on the rate rows discounts the rigid
-   block at an alarm (a docking).
-2. **The flexible part**: a recursive PBSID on ``w = y_f - Theta_r rho``, by
-   default a classical RPBSID on the tip deflections
-   (:class:`identifiers.structured.flexible_part.FlexiblePart`), or the
-   paper's improved RPBSID (Eq. 25-55) on every row (``flexible="improved"``,
-   the paper preset); its stable resonances above the high-pass's corner,
-   damped at most 0.3, are exported (:func:`identifiers.structured.resonant.resonant_part`).
-3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``,
-   ``C = [C_r, C_f]``; a Kalman filter on it and the raw signals gives the
-   state and ``K``.
+   ``y_f,k = Theta_r rho_k + sum_i Xi_i z_{k-i} + e_k`` on high-passed signals, ``rho``
+   the rigid regressors (``G`` is the rate rows' block of ``Theta_r``, its covariance the
+   gain's calibrated band); no attitude or rate *level* in the past window. A change test
+   on the rate rows discounts the rigid block at an alarm (a docking).
+2. **The flexible part**: a recursive PBSID on ``w = y_f - Theta_r rho``, by default a
+   classical RPBSID on the tip deflections
+   (:class:`identifiers.structured.flexible_part.FlexiblePart`), or the paper's improved
+   RPBSID (Eq. 25-55) on every row (``flexible="improved"``, the paper preset); its stable
+   resonances above the high-pass's corner, damped at most 0.3, are exported
+   (:func:`identifiers.structured.resonant.resonant_part`).
+3. **The model**: ``A = diag(A_r, A_f)``, ``B = [B_r(G); B_f]``, ``C = [C_r, C_f]``; a
+   Kalman filter on it and the raw signals gives the state and ``K``.
 
 Design and measurements: ``docs/design/identification.md``.
 """
@@ -196,7 +194,13 @@ class StructuredRPBSID(ImprovedRPBSID):
     def paper(cls, layout: OutputLayout = STANDARD_OUTPUTS, *, n: int = 22,
               **overrides: Any) -> StructuredRPBSID:
         """The flexible part by the paper's improved RPBSID with its constants (p = 15,
-        every forgetting 0.98, the sign step alone), the rigid block unchanged."""
+        every forgetting 0.98, the sign step alone), the rigid block unchanged.
+
+        Returns
+        -------
+        StructuredRPBSID
+            A new identifier with those settings.
+        """
         return cls(layout, n=n, **{"flexible": "improved", **cls.PAPER_SETTINGS, **overrides})
 
     # ------------------------------------------------------------ lifecycle
@@ -365,8 +369,6 @@ class StructuredRPBSID(ImprovedRPBSID):
         return slice(0, 3), slice(3, 6)
 
     def filtered_state(self, y: ArrayLike) -> np.ndarray | None:
-        """``x_{k|k}``: the Kalman filter's prediction corrected by ``y`` (physical
-        units, non-finite entries ignored); the identifier is not changed."""
         if self._combined is None or self._sy is None:
             return self.state
         y_n = np.asarray(y, dtype=float) / self._sy

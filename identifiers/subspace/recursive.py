@@ -40,6 +40,11 @@ def state_horizon(f: int | None, n: int, m: int, basis: str) -> int:
     the minimum, which measured best on the ETS-VIII model) and
     ``ceil(n / m)`` for the plain selection ``W = [I_n 0]``.
 
+    Returns
+    -------
+    int
+        The horizon f, in samples.
+
     Raises
     ------
     ValueError
@@ -103,7 +108,13 @@ class RecursiveVARXIdentifier(OnlineIdentifier):
     @classmethod
     def paper(cls, n: int, **overrides: Any) -> RecursiveVARXIdentifier:
         """The method with the source paper's constants (:attr:`PAPER_SETTINGS`), to
-        reproduce its tables; ``overrides`` change single settings (e.g. ``dt``)."""
+        reproduce its tables; ``overrides`` change single settings (e.g. ``dt``).
+
+        Returns
+        -------
+        RecursiveVARXIdentifier
+            A new identifier of order ``n`` with the paper's settings.
+        """
         return cls(n, **{**cls.PAPER_SETTINGS, **overrides})
 
     def __init__(self, n: int, p: int = 15, forgetting: float = 0.9995, *, dt: float = 0.1,

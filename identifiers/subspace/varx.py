@@ -167,6 +167,11 @@ def toeplitz_windows(zbar: np.ndarray, p: int) -> np.ndarray:
         ``[z_k, ..., z_{k+q-1}]`` oldest first.
     p : int
         VARX lags (window length of each row).
+
+    Returns
+    -------
+    (q, p (r + m)) ndarray
+        The stacked windows, one row per step of the future window.
     """
     q, zr = zbar.shape
     padded = np.zeros((q + p - 1, zr))
