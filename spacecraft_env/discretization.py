@@ -136,6 +136,11 @@ class AnglePanels:
 
         The same rows, bit for bit, as ``evaluate([key] * len(thetas), thetas)``,
         without hashing the configuration once per angle.
+
+        Returns
+        -------
+        (len(thetas), n, n + m) ndarray
+            ``[A_d, B_d]`` at each angle.
         """
         thetas = np.asarray(thetas, dtype=float)
         out = np.empty((thetas.shape[0], self._n, self._n + 3))

@@ -98,7 +98,13 @@ StateSpaceMatrices.__new__.__annotations__.update(
 
 
 def skew(r: np.ndarray) -> np.ndarray:
-    """Cross-product matrix ``S(r)`` with ``S(r) v = r x v``."""
+    """Cross-product matrix ``S(r)`` with ``S(r) v = r x v``.
+
+    Returns
+    -------
+    (3, 3) ndarray
+        ``S(r)``, antisymmetric.
+    """
     x, y, z = r
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
@@ -115,6 +121,11 @@ def rotation_pitch(theta: float) -> np.ndarray:
     direction ``d0`` appears in the body frame as ``T^T d0``. With this
     convention 50 deg of rotation moves J_xz from +1708 to about -2213 kg m^2,
     as docs/design/model.md records.
+
+    Returns
+    -------
+    (3, 3) ndarray
+        The rotation matrix ``T_s(theta)``.
     """
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
@@ -329,7 +340,13 @@ class FlexibleSpacecraftModel:
 
     # --------------------------------------------------------- configuration
     def configuration(self, t: float) -> Configuration:
-        """The scenario's configuration at time ``t`` (s)."""
+        """The scenario's configuration at time ``t`` (s).
+
+        Returns
+        -------
+        Configuration
+            The paddle angle and the modules docked at ``t``.
+        """
         return self.scenario.configuration(float(t))
 
     def _paddle_inertia(self, theta: float) -> np.ndarray:
@@ -401,11 +418,23 @@ class FlexibleSpacecraftModel:
         return f
 
     def inertia(self, t: float) -> np.ndarray:
-        """Total inertia J(t) about the system mass centre, (3, 3), kg m^2."""
+        """Total inertia J(t) about the system mass centre, (3, 3), kg m^2.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            J(t), kg m^2, symmetric positive definite.
+        """
         return self._inertia(self.configuration(t))
 
     def coupling(self, t: float) -> np.ndarray:
-        """Coupling matrix F(t) = [F_1, ..., F_N], (3, sum k_i), kg^(1/2) m."""
+        """Coupling matrix F(t) = [F_1, ..., F_N], (3, sum k_i), kg^(1/2) m.
+
+        Returns
+        -------
+        (3, sum k_i) ndarray
+            F(t), kg^(1/2) m.
+        """
         return self._coupling(self.configuration(t))
 
     def _mass_matrix(self, cfg: Configuration) -> np.ndarray:
@@ -419,6 +448,11 @@ class FlexibleSpacecraftModel:
 
     def mass_matrix(self, t: float) -> np.ndarray:
         """Generalized mass matrix M(t), (n_dof, n_dof); checked positive definite.
+
+        Returns
+        -------
+        (n_dof, n_dof) ndarray
+            M(t), symmetric positive definite.
 
         Raises
         ------
@@ -482,7 +516,13 @@ class FlexibleSpacecraftModel:
         return aug[:, :self.n].copy(), aug[:, self.n:].copy()
 
     def continuous(self, t: float) -> StateSpaceMatrices:
-        """True continuous-time ``(A_c, B_c, C, D)`` at time ``t`` (s)."""
+        """True continuous-time ``(A_c, B_c, C, D)`` at time ``t`` (s).
+
+        Returns
+        -------
+        (A_c, B_c, C, D) : ndarrays
+            (n, n), (n, 3), (m, n), (m, 3); SI units.
+        """
         a, b = self._continuous(self.configuration(t), t)
         return StateSpaceMatrices(a, b, self.C.copy(), self.D.copy(), None)
 
@@ -493,6 +533,11 @@ class FlexibleSpacecraftModel:
         ``|s| / 2 pi`` and ``-Re(s) / |s|``, sorted by frequency (the rigid-body
         poles at 0 are left out). The same definitions as
         ``identifiers.StateSpaceModel.modal`` uses for identified models.
+
+        Returns
+        -------
+        (frequencies, damping) : ndarrays
+            Frequencies (Hz) and damping ratios, sorted by frequency.
         """
         a, _ = self._continuous(self.configuration(t), t)
         s = np.linalg.eigvals(a)
@@ -595,12 +640,24 @@ class FlexibleSpacecraftModel:
                                              for c in cfgs], [c.paddle_angle for c in cfgs])
 
     def discrete(self, t: float) -> StateSpaceMatrices:
-        """True zero-order-hold ``(A_d, B_d, C, D)`` for the step starting at ``t``."""
+        """True zero-order-hold ``(A_d, B_d, C, D)`` for the step starting at ``t``.
+
+        Returns
+        -------
+        StateSpaceModel
+            ``(A_d, B_d, C, D)`` of the step (``K`` zero), sample time ``dt``.
+        """
         ad, bd = self._discrete_ab(t)
         return StateSpaceMatrices(ad.copy(), bd.copy(), self.C.copy(), self.D.copy(), self.dt)
 
     def with_scenario(self, scenario: str | Scenario) -> FlexibleSpacecraftModel:
-        """A copy sharing the constant matrices but following another scenario."""
+        """A copy sharing the constant matrices but following another scenario.
+
+        Returns
+        -------
+        FlexibleSpacecraftModel
+            The copy.
+        """
         new = object.__new__(FlexibleSpacecraftModel)
         new.__dict__.update(self.__dict__)
         new.scenario = make_scenario(scenario)
@@ -610,7 +667,13 @@ class FlexibleSpacecraftModel:
 
     def nominal(self, paddle_angle_deg: float = 0.0) -> FlexibleSpacecraftModel:
         """The design model of a fixed controller: this spacecraft with nothing docked
-        and the paddles at ``paddle_angle_deg`` (0: the nominal configuration), constant."""
+        and the paddles at ``paddle_angle_deg`` (0: the nominal configuration), constant.
+
+        Returns
+        -------
+        FlexibleSpacecraftModel
+            A constant model of the same spacecraft.
+        """
         return self.with_scenario(ConstantScenario(paddle_angle_deg=float(paddle_angle_deg)))
 
     def clear_cache(self) -> None:
@@ -620,7 +683,13 @@ class FlexibleSpacecraftModel:
 
     # ------------------------------------------------------------ simulation
     def step(self, x: np.ndarray, u: np.ndarray, t: float) -> np.ndarray:
-        """Exact ZOH step from time ``t``: ``x(t + dt)`` for constant torque ``u``."""
+        """Exact ZOH step from time ``t``: ``x(t + dt)`` for constant torque ``u``.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x(t + dt)``.
+        """
         ad, bd = self._discrete_ab(t)
         return ad @ x + bd @ u
 
@@ -662,7 +731,13 @@ class FlexibleSpacecraftModel:
 
     def capture_steps(self) -> frozenset[int]:
         """Steps ``k`` (from t = 0) whose configuration first holds a module that
-        brings its own angular momentum (:meth:`capture` applies there)."""
+        brings its own angular momentum (:meth:`capture` applies there).
+
+        Returns
+        -------
+        frozenset of int
+            The steps.
+        """
         steps = set()
         for module in self.configuration(math.inf).modules:
             if module.angular_momentum is None:
@@ -711,7 +786,13 @@ class FlexibleSpacecraftModel:
         return out
 
     def energy(self, x: np.ndarray, t: float) -> float:
-        """Mechanical energy ``1/2 delta'^T M delta' + 1/2 delta^T K delta``, J."""
+        """Mechanical energy ``1/2 delta'^T M delta' + 1/2 delta^T K delta``, J.
+
+        Returns
+        -------
+        float
+            The energy, J.
+        """
         nd = self.n_dof
         m = self._mass_matrix(self.configuration(t))
         q, v = x[:nd], x[nd:]

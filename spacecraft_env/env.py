@@ -109,7 +109,13 @@ class RewardWeights(CostWeights):
 
     def log_reward(self, cost: float) -> float:
         """``reward="log"`` for a stage cost: ``1 - log(1 + cost / precision) / log(1 +
-        saturation / precision)``, clipped at 0."""
+        saturation / precision)``, clipped at 0.
+
+        Returns
+        -------
+        float
+            The reward, in [0, 1].
+        """
         return max(1.0 - math.log1p(cost / self.precision) / self._log_span, 0.0)
 
 
@@ -667,6 +673,11 @@ class FlexibleSpacecraftEnv(gym.Env):
         registered 2500 without a spec) at the stage cost of an attitude
         error of ``max_attitude_deg`` on all three axes: more than any policy
         that stays within the bound can lose by staying.
+
+        Returns
+        -------
+        float
+            The cost charged (dimensionless, the stage cost's units).
         """
         spec = getattr(self, "spec", None)
         limit = spec.max_episode_steps if spec is not None and spec.max_episode_steps \
@@ -677,6 +688,14 @@ class FlexibleSpacecraftEnv(gym.Env):
 
     # -------------------------------------------------------------- rendering
     def render(self) -> np.ndarray | None:
+        """The current state drawn: the hub, the paddles and the reflectors, in two views.
+
+        Returns
+        -------
+        (400, 720, 3) uint8 ndarray or None
+            The frame with ``render_mode="rgb_array"``; None otherwise (shown in a
+            window with "human").
+        """
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode="
                             "'rgb_array' or 'human' to the constructor")

@@ -88,7 +88,13 @@ class PlantDraw:
             object.__setattr__(self, name, check_parameter(key, getattr(self, name), name))
 
     def parameters(self, base: SpacecraftParameters) -> SpacecraftParameters:
-        """``base`` with the hub inertia and the modal stiffness of this draw."""
+        """``base`` with the hub inertia and the modal stiffness of this draw.
+
+        Returns
+        -------
+        SpacecraftParameters
+            The drawn spacecraft's parameters.
+        """
         hub = tuple(tuple(self.inertia_scale * v for v in row) for row in base.hub_inertia)
         factor = float(np.sqrt(self.stiffness_scale))
         appendages = tuple(dataclasses.replace(a, frequencies_hz=tuple(
@@ -96,7 +102,13 @@ class PlantDraw:
         return dataclasses.replace(base, hub_inertia=hub, appendages=appendages)
 
     def scenario(self) -> CombinedScenario:
-        """The docking and paddle rotation of this draw (modules of zero mass left out)."""
+        """The docking and paddle rotation of this draw (modules of zero mass left out).
+
+        Returns
+        -------
+        Scenario
+            The drawn scenario.
+        """
         modules = tuple(DockingModule(mass=m, time=t, position=(0.0, 0.0, z))
                         for m, t, z in zip(self.module_masses_kg, self.docking_times_s,
                                            (3.0, -3.0), strict=True) if m > 0)
@@ -105,7 +117,13 @@ class PlantDraw:
                                                       initial_angle_deg=self.paddle_angle_deg))
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready values (what ``info["plant"]`` holds)."""
+        """JSON-ready values (what ``info["plant"]`` holds).
+
+        Returns
+        -------
+        dict
+            Plain floats and lists, keyed by the draw's fields.
+        """
         return {f.name: (list(getattr(self, f.name))
                          if isinstance(getattr(self, f.name), tuple) else getattr(self, f.name))
                 for f in dataclasses.fields(self)}
@@ -113,6 +131,11 @@ class PlantDraw:
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PlantDraw:
         """A draw from :meth:`as_dict`'s keys (missing ones take the defaults).
+
+        Returns
+        -------
+        PlantDraw
+            The draw.
 
         Raises
         ------
@@ -166,7 +189,13 @@ class TaskFamily:
                                                     _LIMIT_OF[f.name]))
 
     def draw(self, rng: np.random.Generator) -> PlantDraw:
-        """One plant, from ``rng`` (its draws in a fixed order: reproducible)."""
+        """One plant, from ``rng`` (its draws in a fixed order: reproducible).
+
+        Returns
+        -------
+        PlantDraw
+            The drawn plant.
+        """
         u = lambda r: float(rng.uniform(*r))  # noqa: E731
         return PlantDraw(
             inertia_scale=u(self.inertia_scale), stiffness_scale=u(self.stiffness_scale),

@@ -106,7 +106,13 @@ class Fault:
             raise ValueError(f"axis must be a channel index >= 0 or None, got {self.axis!r}")
 
     def active(self, t: float) -> bool:
-        """Whether the fault acts at time ``t`` (s)."""
+        """Whether the fault acts at time ``t`` (s).
+
+        Returns
+        -------
+        bool
+            True from the onset for the fault's duration.
+        """
         return self.onset_s <= t + 1e-9 < self.onset_s + self.duration_s
 
 
@@ -252,6 +258,14 @@ class FaultInjection(gym.Wrapper, gym.utils.RecordConstructorArgs):
     # ------------------------------------------------------------ gym
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env; no fault acts before its onset.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation and the env's info (``info["faults"]`` lists the
+            faults acting).
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         # the noise bursts' own generator: the env's noise stream is left as it is, so a
         # faulted episode and a fault-free one of the same seed stay paired
@@ -263,6 +277,15 @@ class FaultInjection(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._observe(obs, 0.0), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Step the env with the faults acting at this time applied to the action and the
+        observation.
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The step of the faulted plant (``info["faults"]`` lists the faults acting;
+            for scoring, not for controllers).
+        """
         base = self.env.unwrapped
         self._time = float(base.time)          # the step's start: the actuators' time
         base.actuator_fault = self._deliver

@@ -54,13 +54,24 @@ class Limit:
     low_open: bool = False
 
     def describe(self) -> str:
-        """``"a number in [-10, 10] deg/s"``, the range in words."""
+        """``"a number in [-10, 10] deg/s"``, the range in words.
+
+        Returns
+        -------
+        str
+            The range in words.
+        """
         kind = "an integer" if self.integer else "a number"
         unit = f" {self.unit}" if self.unit else ""
         return f"{kind} in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}]{unit}"
 
     def check(self, name: str, value: Any) -> float | int:
         """``value`` as a float (an int when ``integer``) if it is in range.
+
+        Returns
+        -------
+        float or int
+            ``value``.
 
         Raises
         ------

@@ -192,7 +192,13 @@ class AppendageParameters:
         return _readonly(self.position)
 
     def with_modes(self, n_modes: int) -> AppendageParameters:
-        """Return a copy keeping the first ``n_modes`` frequencies."""
+        """Return a copy keeping the first ``n_modes`` frequencies.
+
+        Returns
+        -------
+        AppendageParameters
+            The copy.
+        """
         if not 1 <= n_modes <= len(self.frequencies_hz):
             raise ValueError(
                 f"n_modes must be in [1, {len(self.frequencies_hz)}] for {self.name}, "
@@ -253,6 +259,11 @@ class DockingModule:
 
         Computed once per module: the truth model adds it at every
         interpolation node of a docked configuration.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            The inertia, kg m^2 (read-only).
         """
         cached = self.__dict__.get("_inertia_cache")
         if cached is None:
@@ -320,17 +331,35 @@ class SpacecraftParameters:
         return 2 * self.n_dof
 
     def with_modes(self, n_modes: int) -> SpacecraftParameters:
-        """Copy keeping ``n_modes`` modes on every appendage (1..8)."""
+        """Copy keeping ``n_modes`` modes on every appendage (1..8).
+
+        Returns
+        -------
+        SpacecraftParameters
+            The copy.
+        """
         if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)):
             raise TypeError(f"n_modes must be an int, got {type(n_modes).__name__}")
         return replace(self, appendages=tuple(a.with_modes(int(n_modes)) for a in self.appendages))
 
     def without_coupling(self) -> SpacecraftParameters:
-        """Copy with the coupling matrices F_i switched off."""
+        """Copy with the coupling matrices F_i switched off.
+
+        Returns
+        -------
+        SpacecraftParameters
+            The copy.
+        """
         return replace(self, coupling=False)
 
     def with_damping(self, damping: float) -> SpacecraftParameters:
-        """Copy with every modal damping ratio set to ``damping``."""
+        """Copy with every modal damping ratio set to ``damping``.
+
+        Returns
+        -------
+        SpacecraftParameters
+            The copy.
+        """
         return replace(self, appendages=tuple(replace(a, damping=damping) for a in self.appendages))
 
 

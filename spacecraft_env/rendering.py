@@ -61,7 +61,13 @@ class SpacecraftRenderer:
 
     def draw(self, x: np.ndarray, t: float, model: FlexibleSpacecraftModel,
              reference: np.ndarray) -> np.ndarray:
-        """Return a ``(400, 720, 3)`` uint8 frame of state ``x`` at time ``t`` (s)."""
+        """Return a ``(400, 720, 3)`` uint8 frame of state ``x`` at time ``t`` (s).
+
+        Returns
+        -------
+        (400, 720, 3) uint8 ndarray
+            The frame.
+        """
         img = Image.new("RGB", (_W, _H), _BG)
         draw = ImageDraw.Draw(img)
         cfg = model.configuration(t)

@@ -89,11 +89,23 @@ class Scenario(ABC):
 
     @abstractmethod
     def configuration(self, t: float) -> Configuration:
-        """Configuration at time ``t`` (s)."""
+        """Configuration at time ``t`` (s).
+
+        Returns
+        -------
+        Configuration
+            The paddle angle and the modules docked at ``t``.
+        """
 
     def paddle_angle(self, t: float) -> float:
         """Paddle angle (rad) at time ``t`` (s): ``configuration(t).paddle_angle``,
-        without building the configuration where a subclass can."""
+        without building the configuration where a subclass can.
+
+        Returns
+        -------
+        float
+            The angle, rad.
+        """
         return self.configuration(t).paddle_angle
 
     def event_times(self) -> tuple[float, ...]:
@@ -102,16 +114,33 @@ class Scenario(ABC):
         Between two of them only the paddle angle may change; the truth
         model relies on it to interpolate a block of steps from one
         configuration (a block holding an event is evaluated step by step).
+
+        Returns
+        -------
+        tuple of float
+            The instants, s, increasing (empty without dockings).
         """
         return ()
 
     def randomized(self, rng: np.random.Generator) -> Scenario:
-        """A concrete random variant drawn from ``rng`` (default: self)."""
+        """A concrete random variant drawn from ``rng`` (default: self).
+
+        Returns
+        -------
+        Scenario
+            The variant (``self`` for a scenario that draws nothing).
+        """
         return self
 
     def parameters(self) -> dict:
         """The concrete values of this scenario (JSON-ready; the env reports
-        them in ``reset``'s info, so a randomized draw is on record)."""
+        them in ``reset``'s info, so a randomized draw is on record).
+
+        Returns
+        -------
+        dict
+            The scenario's name and values.
+        """
         return {"name": self.name}
 
 
@@ -217,7 +246,13 @@ class DockingScenario(Scenario):
                 "mass_centre_shift": self.mass_centre_shift}
 
     def randomized(self, rng: np.random.Generator) -> DockingScenario:
-        """Draw docking times, module masses and off-axis offsets (two modules, +-z)."""
+        """Draw docking times, module masses and off-axis offsets (two modules, +-z).
+
+        Returns
+        -------
+        DockingScenario
+            The drawn scenario.
+        """
         t1 = rng.uniform(*self.first_window)
         t2 = max(rng.uniform(*self.second_window), t1 + 20.0)
         m1, m2 = rng.uniform(*self.mass_range, size=2)
@@ -270,7 +305,13 @@ class SolarRotationScenario(Scenario):
                 "initial_angle_deg": float(self.initial_angle_deg)}
 
     def randomized(self, rng: np.random.Generator) -> SolarRotationScenario:
-        """Draw the rotation rate uniformly from ``rate_range``."""
+        """Draw the rotation rate uniformly from ``rate_range``.
+
+        Returns
+        -------
+        SolarRotationScenario
+            The drawn scenario.
+        """
         return dataclasses.replace(self, rate_deg_s=float(rng.uniform(*self.rate_range)))
 
 

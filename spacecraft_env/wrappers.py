@@ -62,6 +62,13 @@ class ActionRepeat(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.Wrapper.__init__(self, env)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Hold ``action`` for up to ``repeat`` env steps (fewer when the episode ends).
+
+        Returns
+        -------
+        (observation, reward, terminated, truncated, info)
+            The last step's, the reward summed over the steps taken.
+        """
         total, steps = 0.0, 0
         while True:
             obs, reward, terminated, truncated, info = self.env.step(action)
@@ -144,7 +151,13 @@ class NominalUnits(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
             dtype=np.float32)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        """``observation`` over the nominal levels (float32)."""
+        """``observation`` over the nominal levels (float32).
+
+        Returns
+        -------
+        ndarray of float32
+            The observation in nominal units.
+        """
         return (np.asarray(observation, dtype=np.float64) / self.scales).astype(np.float32)
 
 
@@ -189,11 +202,24 @@ class ObservationAverage(gym.ObservationWrapper, gym.utils.RecordConstructorArgs
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env; the average restarts.
+
+        Returns
+        -------
+        (observation, info)
+            The first observation (its own mean) and the env's info.
+        """
         self._recent.clear()
         return super().reset(seed=seed, options=options)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        """The mean of this observation and the ``window - 1`` before it since the reset."""
+        """The mean of this observation and the ``window - 1`` before it since the reset.
+
+        Returns
+        -------
+        ndarray
+            The average, in the env's dtype.
+        """
         self._recent.append(np.asarray(observation, dtype=np.float64))
         mean = np.mean(self._recent, axis=0)
         return mean.astype(self.observation_space.dtype)
@@ -255,7 +281,13 @@ class ObservationGroups(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
                                                 dtype=space.dtype)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        """The channels of :attr:`groups`, then any appended ones (the env's dtype)."""
+        """The channels of :attr:`groups`, then any appended ones (the env's dtype).
+
+        Returns
+        -------
+        ndarray
+            The selected channels.
+        """
         return np.asarray(observation)[self.rows]
 
 
@@ -321,7 +353,13 @@ class ObservationProducts(gym.ObservationWrapper, gym.utils.RecordConstructorArg
                                                 high.astype(space.dtype), dtype=space.dtype)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        """``[x, outer(x, s).ravel()]`` (the env's dtype)."""
+        """``[x, outer(x, s).ravel()]`` (the env's dtype).
+
+        Returns
+        -------
+        ndarray
+            The observation and the products.
+        """
         obs = np.asarray(observation, dtype=np.float64)
         x = obs[:self.state]
         return np.concatenate([x, np.outer(x, obs[self.schedule]).ravel()]).astype(
