@@ -249,7 +249,13 @@ def run_adaptation(agents: Sequence[str | Path], episodes: int = 20,
 
 
 def adaptation_table(result: dict[str, Any]) -> str:
-    """Markdown tables of :func:`run_adaptation`'s result."""
+    """Markdown tables of :func:`run_adaptation`'s result.
+
+    Returns
+    -------
+    str
+        Markdown: one table per setting.
+    """
     seeds = result["eval_seeds"]
     lines = [f"RMA comparison: {result['features']} on {result['scenario']}, "
              f"{len(result['agents'])} policies, episodes {seeds[0]}-{seeds[-1]}, adaptation "

@@ -251,7 +251,13 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
 
 
 def evaluation_table(result: dict[str, Any]) -> str:
-    """Markdown table of :func:`evaluate_agent`'s result."""
+    """Markdown table of :func:`evaluate_agent`'s result.
+
+    Returns
+    -------
+    str
+        Markdown: one row per controller or agent.
+    """
     settings = result["agent"]
     lines = [f"{settings['algo'].upper()} {settings['features']} on {settings['scenario']} "
              f"({Path(settings['path']).name}), {len(result['eval_seeds'])} episodes "

@@ -291,7 +291,13 @@ def _metavar(action: argparse.Action) -> str:
 
 def synopsis(parser: argparse.ArgumentParser | None = None, width: int = 100) -> str:
     """One usage block per command, as the README shows it (generated, so it cannot
-    drift from the parser; ``tests/test_docs.py`` compares them)."""
+    drift from the parser; ``tests/test_docs.py`` compares them).
+
+    Returns
+    -------
+    str
+        The usage blocks, one per command.
+    """
     parser = parser or build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     names = list(sub.choices)
@@ -326,7 +332,13 @@ def synopsis(parser: argparse.ArgumentParser | None = None, width: int = 100) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with one sub-parser per command."""
+    """The argument parser with one sub-parser per command.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser.
+    """
     fmt = _HelpFormatter
     description = ("The flexible-spacecraft lab: rendered demo, identification, closed-loop "
                    "control, RL training and Monte-Carlo sweeps. 'spacecraft COMMAND --help' "
@@ -764,6 +776,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     exit status 2; Ctrl-C ends with one line and status 130 (``control``
     first writes the table of the seeds it completed); anything else is a
     bug and keeps its traceback.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
     """
     parser = build_parser()
     args = parser.parse_args(argv)

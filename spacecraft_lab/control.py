@@ -184,7 +184,13 @@ def CONTROLLERS(weights: LQRWeights, integral_settle_s: float | None = None) -> 
     """Name -> factory ``env -> Controller`` for every controller of
     :data:`ALL_CONTROLLER_NAMES` (picklable, so the comparison can run its seeds on a
     process pool); ``integral_settle_s``: the LQG laws' integral settle time, s
-    (:func:`controllers.set_integral_settle`; None: the default)."""
+    (:func:`controllers.set_integral_settle`; None: the default).
+
+    Returns
+    -------
+    dict
+        Display name -> picklable factory ``env -> Controller``.
+    """
     return {name: partial(_build, name, weights, integral_settle_s=integral_settle_s)
             for name in ALL_CONTROLLER_NAMES}
 
@@ -238,6 +244,11 @@ def env_kwargs_for(scenario: str, *, task: str = "slew", module_mass: float | No
         Standard deviation of a white external torque on every axis, N m (default 0:
         no process noise). The ceiling's filter knows it; with it the stationary
         cost has a floor above zero.
+
+    Returns
+    -------
+    dict
+        The keywords, checked against the parameter limits.
 
     Raises
     ------
@@ -433,6 +444,12 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
     faults : sequence of spacecraft_env.Fault
         Faults injected on schedule (:class:`spacecraft_env.FaultInjection`; default
         none). The ceilings do not know them: under a fault they are no bound.
+
+    Returns
+    -------
+    dict
+        What ``metrics.json`` holds: the table per controller, the settings and the
+        files written.
     """
     if scenario not in SCENARIO_NAMES:
         raise ValueError(f"scenario must be one of {sorted(SCENARIO_NAMES)}, got {scenario!r}")

@@ -153,7 +153,13 @@ def _hz(freqs: list[float]) -> str:
 
 
 def demo_summary(summary: dict, out: str | Path) -> str:
-    """Plain sentences on a demo rollout, numbers rounded, and where the figures are."""
+    """Plain sentences on a demo rollout, numbers rounded, and where the figures are.
+
+    Returns
+    -------
+    str
+        The sentences, one per line.
+    """
     events = summary["docking_events_s"]
     j0, j1 = summary["inertia_diag_start"], summary["inertia_diag_end"]
     f0, f1 = summary["first_frequencies_hz_start"], summary["first_frequencies_hz_end"]

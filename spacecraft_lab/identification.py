@@ -117,7 +117,13 @@ TRACK_EVERY = 10
 
 def nominal_scales(truth: FlexibleSpacecraftModel) -> dict[str, np.ndarray]:
     """The identifiers' fixed normalization: the nominal level of every torque
-    axis and output channel of ``truth``, known before any data."""
+    axis and output channel of ``truth``, known before any data.
+
+    Returns
+    -------
+    dict of str to ndarray
+        "u" (3,), N m, and "y" (m,), the outputs' units.
+    """
     return {"input_scale": np.full(truth.n_inputs, NOMINAL_TORQUE),
             "output_scale": truth.output_layout.scales()}
 
@@ -168,6 +174,11 @@ def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "re
                     **options: Any) -> OnlineIdentifier:
     """Build a method of :data:`METHODS` for ``truth``'s outputs.
 
+    Returns
+    -------
+    OnlineIdentifier
+        A new identifier.
+
     Raises
     ------
     ValueError
@@ -214,6 +225,11 @@ def identification_records(truth: FlexibleSpacecraftModel, seed: int, n_samples:
     channel's RMS, as in the paper), drawn in this order from
     ``np.random.default_rng(seed)``: the same seed gives the same records in
     any process.
+
+    Returns
+    -------
+    IdentificationRecord
+        The torques, outputs, drive angles and the truth's model sequence.
     """
     rng = np.random.default_rng(seed)
     u = identification_inputs(n_samples, rng, truth.dt)
@@ -262,20 +278,38 @@ def env_record(scenario: str, seed: int, snr_db: float | None, rms: float = 1.0,
 def drive_angles(model: FlexibleSpacecraftModel, steps: int) -> np.ndarray:
     """The drive's angle at each of the first ``steps`` samples of a record of
     ``model`` (rad; the env's ``info["paddle_angle"]``), the schedule
-    :class:`identifiers.ScheduledPhysicalIdentifier` is fed."""
+    :class:`identifiers.ScheduledPhysicalIdentifier` is fed.
+
+    Returns
+    -------
+    (steps,) ndarray
+        The angles, rad.
+    """
     return np.array([model.scenario.paddle_angle(k * model.dt) for k in range(steps)])
 
 def paper_test_response(truth: FlexibleSpacecraftModel,
                         n_samples: int = 2500) -> tuple[np.ndarray, np.ndarray]:
     """The paper's test torques and the true plant's noise-free response
-    from rest, ``(n_samples, 3)`` and ``(n_samples, n_outputs)``."""
+    from rest, ``(n_samples, 3)`` and ``(n_samples, n_outputs)``.
+
+    Returns
+    -------
+    (u, y) : ndarrays
+        (n_samples, 3) torques, N m, and the true model's (n_samples, m) outputs.
+    """
     u_test = paper_test_inputs(n_samples, truth.dt)
     return u_test, truth.simulate(u_test)[1]
 
 
 def truth_sequence(truth: FlexibleSpacecraftModel, states: np.ndarray) -> ModelSequence:
     """The ceiling: the true model of each sample with the true next state
-    ``x_{k+1}`` (what an identifier's ``x_{k+1|k}`` estimates)."""
+    ``x_{k+1}`` (what an identifier's ``x_{k+1|k}`` estimates).
+
+    Returns
+    -------
+    ModelSequence
+        The true models, one per sample.
+    """
     n_samples = states.shape[0] - 1
     mats = [truth.discrete(k * truth.dt) for k in range(n_samples)]
     a = np.array([m.A for m in mats])
@@ -290,7 +324,13 @@ def truth_sequence(truth: FlexibleSpacecraftModel, states: np.ndarray) -> ModelS
 def dominant_modes(truth: FlexibleSpacecraftModel, t: float,
                    min_weight: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies and damping of the modes the torques excite (input-output
-    weight >= ``min_weight``; the first paddle and antenna modes here)."""
+    weight >= ``min_weight``; the first paddle and antenna modes here).
+
+    Returns
+    -------
+    (frequencies, damping) : ndarrays
+        The dominant modes' frequencies (Hz) and damping ratios.
+    """
     freq, zeta, weight = truth.modal_residues(t)
     keep = weight >= min_weight
     return freq[keep], zeta[keep]
@@ -360,7 +400,13 @@ def _tracks(seq: ModelSequence, truth: FlexibleSpacecraftModel,
 def score_identifier(ident: OnlineIdentifier, record: IdentificationRecord,
                      truth: FlexibleSpacecraftModel, test: tuple[np.ndarray, np.ndarray],
                      k_conv: int, horizons: Sequence[int] = HORIZONS) -> IdentificationScore:
-    """Run a fresh ``ident`` on ``record`` and score it (see the module docstring)."""
+    """Run a fresh ``ident`` on ``record`` and score it (see the module docstring).
+
+    Returns
+    -------
+    IdentificationScore
+        The identifier's scores on the record.
+    """
     start = time.perf_counter()
     seq = ident.fit(record.u, record.y)
     elapsed = time.perf_counter() - start
@@ -413,7 +459,13 @@ def summarize_score(score: IdentificationScore, truth: FlexibleSpacecraftModel,
                     end_s: float, convergence_s: float) -> dict[str, Any]:
     """Scalar metrics of one score (JSON-able): VAF by horizon and output group,
     gain error before the first event and from 20 s after each, dominant-mode
-    frequency error, unstable share, test error, held-out VAF, run time."""
+    frequency error, unstable share, test error, held-out VAF, run time.
+
+    Returns
+    -------
+    dict
+        The score's numbers over the window, JSON-ready.
+    """
     layout = truth.output_layout
     groups = {name: rows for name, rows in layout}
     out: dict[str, Any] = {"h_step_vaf": {

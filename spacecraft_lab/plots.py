@@ -88,7 +88,13 @@ def plot_identification_responses(path: str | Path, u_test: np.ndarray, y_test: 
 def plot_identification_modal(path: str | Path, truth: FlexibleSpacecraftModel,
                               scores: Mapping[str, Any], scenario: str) -> Figure:
     """Identified modal frequencies (dots) against the truth's (lines), zoomed to
-    the first paddle and antenna modes; true events dashed, detected ones marked."""
+    the first paddle and antenna modes; true events dashed, detected ones marked.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+    """
     from matplotlib.lines import Line2D
 
     n_samples = len(next(iter(scores.values())).models)
@@ -169,7 +175,13 @@ def plot_prediction_horizons(path: str | Path, metrics: Mapping[str, Any],
     """VAF against prediction horizon per output group: median and interquartile band
     over seeds for at most five methods (:data:`PREDICTION_SERIES`), persistence grey
     dashed and the frozen truth black dashed; each panel's axis starts just below the
-    lowest median it shows (values below are drawn at the axis' edge)."""
+    lowest median it shows (values below are drawn at the axis' edge).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+    """
     dt = metrics["dt"]
     horizons = [str(h) for h in metrics["horizons_samples"]]
     hs = np.array([int(h) * dt for h in horizons])
@@ -379,6 +391,11 @@ def plot_rl_comparison(path: str | Path, runs: Sequence[Mapping[str, Any]]) -> F
     the legend outside the data. An evaluation with an infinite cost (an episode
     that left the attitude bound) sits on a marked "crashed" level ten times
     above the largest finite value.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
     """
     shown = list(runs[:MAX_AGENT_SERIES])
     fig = Figure(figsize=(13, 4.8), layout="constrained")
@@ -474,6 +491,11 @@ def plot_adaptation(path: str | Path, result: Mapping[str, Any]) -> Figure:
     episodes (grey lines). Right: the parameter error from 60 s (RMS, frame
     units) of the adaptation module's estimate, the identifier's raw vector
     and the nominal one, per channel group and policy.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
     """
     sources = ("true", "estimated", "nominal")
     agents = result["agents"]
@@ -536,7 +558,13 @@ _APPENDAGES = {"s": "solar paddle", "a": "antenna"}
 
 def sensor_name(label: str) -> str:
     """A deflection channel's label in words: ``"w_s1_1.00"`` -> ``"solar paddle 1, tip"``
-    (``w_<appendage><number>_<position along the span>``); other labels unchanged."""
+    (``w_<appendage><number>_<position along the span>``); other labels unchanged.
+
+    Returns
+    -------
+    str
+        The label.
+    """
     parts = label.split("_")
     if len(parts) != 3 or parts[0] != "w" or parts[1][:1] not in _APPENDAGES:
         return label

@@ -90,7 +90,13 @@ def identification_brief(metrics: dict[str, Any], width: int = 100) -> str:
     attitude, rate and deflection beside persistence's and the frozen truth's rows, the
     rigid-body gain's error 20 s after events, the dominant mode's error, the paper's
     test error and the run time; a diverged model reads "diverged". The full tables
-    are in ``table.md``."""
+    are in ``table.md``.
+
+    Returns
+    -------
+    str
+        Plain text, lines at most ``width`` columns.
+    """
     last = str(metrics["horizons_samples"][-1])
     ahead = int(last) * metrics["dt"]
     rows = [("method", "VAF att", "VAF rate", "VAF defl", "J^-1 err", "mode err",
@@ -123,7 +129,13 @@ def identification_brief(metrics: dict[str, Any], width: int = 100) -> str:
 
 def identification_table(metrics: dict[str, Any]) -> str:
     """Markdown tables of ``spacecraft identify``: h-step prediction VAF beside
-    persistence and the frozen truth, then model quality, then the paper's metric."""
+    persistence and the frozen truth, then model quality, then the paper's metric.
+
+    Returns
+    -------
+    str
+        Markdown tables.
+    """
     dt = metrics["dt"]
     head = (f"{metrics['scenario']}, preset `{metrics['preset']}`, SNR {metrics['snr_db']} dB, "
             f"n = {metrics['order_n']}, {metrics['seeds']} seeds; median [min, max] over "
@@ -229,7 +241,13 @@ SAME_START_LOOPS = ("adaptive LQG", "adaptive LQG, scheduled physical fit")
 
 def flies_the_start(name: str) -> bool:
     """Whether the controller ``name`` flies the default adaptive loop's start, so the
-    same-start ceiling bounds its cost from the end of that start (:data:`SAME_START_LOOPS`)."""
+    same-start ceiling bounds its cost from the end of that start (:data:`SAME_START_LOOPS`).
+
+    Returns
+    -------
+    bool
+        True for the loops that fly that start.
+    """
     return name in SAME_START_LOOPS or name == SAME_START_CEILING
 
 
@@ -256,6 +274,11 @@ def control_table(table: dict[str, dict], ceiling: str | None = CEILING,
     of the truth from 60 s (pooled over the seeds' samples; controllers with an
     identifier), the share of steps the fallback flew from 60 s (after the warm-up) and
     over the episode, and why it flew from 60 s (:func:`fallback_causes_text`).
+
+    Returns
+    -------
+    str
+        Markdown: one row per controller.
     """
     def cell(row: dict, key: str, digits: int) -> str:
         return (f"{row['median'][key]:.{digits}g} "
@@ -335,7 +358,13 @@ def control_brief(table: dict[str, dict], ceiling: str | None = CEILING,
     and its ratio to ``same_start`` (for the loops that fly that start), the stationary
     cost from 100 s and its ratio to ``window``, how many seeds were judged stable (the
     other verdicts are in ``table.md``) and the fallback's share from 60 s, aligned in
-    plain text."""
+    plain text.
+
+    Returns
+    -------
+    str
+        Plain text: one row per controller.
+    """
     rows = [("controller", "cost", "/ceil", f"from {SAME_START_S:g}s", "/start", "from 100s",
              "/window", "stable", "fallback")]
     for name, row in table.items():
@@ -371,7 +400,13 @@ _COMPARATORS = ("oracle_lqg", "adaptive_lqg", "fixed_lqg", "scheduled_lqg", "zer
 
 def training_metrics_problem(m: Any) -> str | None:
     """What makes ``m`` not the ``metrics.json`` of a ``spacecraft train`` run (the
-    fields :func:`rl_table` and the RL plots read, with their types), or None."""
+    fields :func:`rl_table` and the RL plots read, with their types), or None.
+
+    Returns
+    -------
+    str or None
+        A sentence naming the problem, or None for a valid record.
+    """
     if not isinstance(m, dict):
         return f"not a JSON object but {type(m).__name__}"
     for key in ("algo", "features", "scenario"):
@@ -420,6 +455,11 @@ def training_metrics_problem(m: Any) -> str | None:
 def load_training_metrics(directory: str | Path) -> dict[str, Any]:
     """The ``metrics.json`` of a ``spacecraft train`` directory, checked.
 
+    Returns
+    -------
+    dict
+        The metrics.
+
     Raises
     ------
     ValueError
@@ -446,6 +486,11 @@ def pooled_training_runs(directories: Sequence[str | Path]) -> list[dict[str, An
     counts) are one
     setting: their seeds' runs are pooled (seeds trained in separate processes
     with ``--first-seed``). Order of first appearance.
+
+    Returns
+    -------
+    list of dict
+        One pooled record per setting.
     """
     settings: dict[tuple, dict[str, Any]] = {}
     for directory in directories:
@@ -481,6 +526,11 @@ def rl_table(directories: Sequence[str | Path]) -> str:
     the oracle, adaptive and fixed LQG and zero torque (the trivial
     baseline) on the same evaluation episodes (taken from the last
     directory).
+
+    Returns
+    -------
+    str
+        Markdown: one table per setting.
     """
     def spread(values: list[float], fmt: str) -> str:
         # inf is a result (an episode that left the bound before 100 s), NaN is not
@@ -557,7 +607,13 @@ def paired_cost_ratio(table: dict[str, dict], name: str, ref: str,
                       key: str = "cost_after_100s") -> float | None:
     """Median over paired seeds of ``name``'s ``key`` (a cost of
     :func:`controllers.episode_metrics`) over ``ref``'s (None if either is missing or no
-    seed has a finite ratio)."""
+    seed has a finite ratio).
+
+    Returns
+    -------
+    float or None
+        The median of the per-seed ratios; None without a finite pair.
+    """
     if name not in table or ref not in table:
         return None
     a = np.array([m[key] for m in table[name]["per_seed"]], dtype=float)
@@ -572,7 +628,13 @@ def control_summary(table: dict[str, dict], scenario: str, out: str | Path) -> s
     """Plain sentences on a comparison: how the adaptive LQG did against the ceiling over
     the whole episode, against the same-start ceiling from the end of its start, and
     against the robust fixed design, in the common cost, and where to look. Each figure
-    is the table's (the same rounding)."""
+    is the table's (the same rounding).
+
+    Returns
+    -------
+    str
+        The sentences.
+    """
     lines = []
     seeds = max(row["runs"] for row in table.values())
     adaptive, robust = "adaptive LQG", "robust LQG"

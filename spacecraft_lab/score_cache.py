@@ -112,6 +112,11 @@ class ScoreCache:
     def key(self, inputs: dict[str, Any]) -> str:
         """SHA-256 (hex) of ``inputs`` (JSON-serializable) with :func:`code_fingerprint`.
 
+        Returns
+        -------
+        str
+            The key, 64 hex digits.
+
         Raises
         ------
         TypeError
@@ -125,7 +130,13 @@ class ScoreCache:
         return self.directory / f"{self.key(inputs)}.json"
 
     def get(self, inputs: dict[str, Any]) -> dict[str, Any] | None:
-        """The score stored for ``inputs``, or None (never stored, or unreadable)."""
+        """The score stored for ``inputs``, or None (never stored, or unreadable).
+
+        Returns
+        -------
+        dict or None
+            The stored score, or None.
+        """
         try:
             with open(self._path(inputs), encoding="utf-8") as fh:
                 entry = json.load(fh)
@@ -156,7 +167,13 @@ class ScoreCache:
 
 def default_cache() -> ScoreCache | None:
     """The cache at ``$SPACECRAFT_CACHE_DIR`` (None when set empty), else under
-    ``$XDG_CACHE_HOME`` or ``~/.cache``, in ``flexible-spacecraft``."""
+    ``$XDG_CACHE_HOME`` or ``~/.cache``, in ``flexible-spacecraft``.
+
+    Returns
+    -------
+    ScoreCache or None
+        The cache, or None when disabled.
+    """
     chosen = os.environ.get(CACHE_ENV)
     if chosen is not None:
         return ScoreCache(chosen) if chosen.strip() else None

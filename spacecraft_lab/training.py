@@ -740,6 +740,11 @@ def run_training(algo: str = "ppo", features: str = "none", timesteps: int = 100
     training throughput (``env_steps_per_s``: env steps trained per second of
     ``learn``, evaluations included).
 
+    Returns
+    -------
+    dict
+        The metrics, as written to ``metrics.json``.
+
     Raises
     ------
     ImportError

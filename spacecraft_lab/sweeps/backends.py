@@ -67,6 +67,13 @@ class SerialBackend:
 
     def imap_unordered(self, fn: Callable[[Any], Any],
                        items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, fn(item) or exception)`` as tasks finish.
+
+        Yields
+        ------
+        (item, result)
+            Each item with its result, in the order they finish.
+        """
         for item in items:
             try:
                 yield item, fn(item)
@@ -121,6 +128,11 @@ class LocalBackend:
         every task in flight at that moment is yielded with the
         ``BrokenProcessPool`` error (re-run them with ``retry_errors``) and
         a fresh pool takes the remaining tasks.
+
+        Yields
+        ------
+        (item, result)
+            Each item with its result, in the order they finish.
         """
         if self._pool is None:
             raise RuntimeError("use LocalBackend as a context manager")
@@ -212,6 +224,13 @@ class RayBackend:
 
     def imap_unordered(self, fn: Callable[[Any], Any],
                        items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, fn(item) or exception)`` as tasks finish.
+
+        Yields
+        ------
+        (item, result)
+            Each item with its result, in the order they finish.
+        """
         ray = self._ray
         if ray is None:
             raise RuntimeError("use RayBackend as a context manager")
@@ -243,6 +262,11 @@ BACKENDS = {"serial": SerialBackend, "local": LocalBackend, "ray": RayBackend}
 def check_workers(workers: int | None) -> int | None:
     """``workers`` if it is None or a positive integer.
 
+    Returns
+    -------
+    int or None
+        ``workers``.
+
     Raises
     ------
     ValueError
@@ -261,6 +285,11 @@ def map_in_order(fn: Callable[[Any], Any], items: Iterable[Any], workers: int | 
     (:class:`SerialBackend`) for one. ``fn`` must be picklable (a module-level
     function or a :func:`functools.partial` of one). ``on_done`` is called as each
     item finishes (a progress bar). The first exception an item met is raised.
+
+    Returns
+    -------
+    list
+        The results, in the order of ``items``.
     """
     items = list(items)
     workers = min((os.cpu_count() or 1) if check_workers(workers) is None else workers,

@@ -117,7 +117,13 @@ class Task:
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form (what a worker receives)."""
+        """JSON form (what a worker receives).
+
+        Returns
+        -------
+        dict
+            The task's fields, JSON-ready.
+        """
         return {"task_id": self.task_id, "kind": self.kind, "params": self.params,
                 "label": self.label, "timeout_s": self.timeout_s}
 
@@ -178,6 +184,14 @@ class SummarySpec:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None) -> SummarySpec:
+        """The summary settings of a sweep file's ``[summary]`` table (unknown keys
+        refused).
+
+        Returns
+        -------
+        SummarySpec
+            The spec.
+        """
         data = dict(data or {})
         unknown = set(data) - _SUMMARY_KEYS
         if unknown:
@@ -206,6 +220,13 @@ class SummarySpec:
                    plot_rows=None if plot_rows is None else tuple(plot_rows))
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON form (what a worker receives).
+
+        Returns
+        -------
+        dict
+            The spec's fields, JSON-ready.
+        """
         return {"rows": self.rows, "columns": self.columns,
                 "metrics": None if self.metrics is None else list(self.metrics),
                 "ratio_to": self.ratio_to,
@@ -310,6 +331,11 @@ class SweepConfig:
         max_tasks : int
             Refuse a sweep of more tasks (default :data:`MAX_TASKS`).
 
+        Returns
+        -------
+        SweepConfig
+            The configuration, checked.
+
         Raises
         ------
         ValueError, TypeError
@@ -395,7 +421,13 @@ class SweepConfig:
             raise ValueError("two cases give identical tasks; make their parameters differ")
 
     def tasks(self) -> list[Task]:
-        """Every task, in order case -> grid point -> seed."""
+        """Every task, in order case -> grid point -> seed.
+
+        Returns
+        -------
+        list of Task
+            The tasks.
+        """
         out = []
         axes = list(self.grid)
         for case in self.cases:
@@ -411,7 +443,13 @@ class SweepConfig:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form, written next to the results (``sweep.json``)."""
+        """JSON form, written next to the results (``sweep.json``).
+
+        Returns
+        -------
+        dict
+            The configuration's fields, JSON-ready.
+        """
         return {"name": self.name, "task": self.task, "description": self.description,
                 "timeout_s": self.timeout_s,
                 "seeds": list(self.seeds), "params": self.params,

@@ -55,6 +55,11 @@ def record_problem(record: Any) -> str | None:
     the types its task writes (numbers or null, except those of
     :data:`spacecraft_lab.sweeps.tasks.METRIC_TYPES`); a custom kind's are
     JSON scalars or lists of them.
+
+    Returns
+    -------
+    str or None
+        A sentence naming the problem, or None.
     """
     if not isinstance(record, dict):
         return "not a JSON object"
@@ -178,7 +183,13 @@ class ResultStore:
             return "interrupted write or corrupt bytes"
 
     def load(self) -> dict[str, dict[str, Any]]:
-        """Task id -> its last record."""
+        """Task id -> its last record.
+
+        Returns
+        -------
+        dict
+            Task id -> its last complete record.
+        """
         return {r["task_id"]: r for r in self}
 
     def repair(self) -> int:
@@ -186,6 +197,11 @@ class ResultStore:
 
         Returns how many. The rewrite goes through a temporary file and an
         atomic rename, so an interruption here loses nothing.
+
+        Returns
+        -------
+        int
+            The number of lines moved.
         """
         good, torn = [], []
         for _, line in self._lines():

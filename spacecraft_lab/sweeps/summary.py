@@ -361,7 +361,13 @@ _CLIP_FACTOR = 1e3
 
 
 def metric_label(key: str) -> str:
-    """A panel title for a metric key: :data:`METRIC_LABELS` or the key in words."""
+    """A panel title for a metric key: :data:`METRIC_LABELS` or the key in words.
+
+    Returns
+    -------
+    str
+        The title.
+    """
     return METRIC_LABELS.get(key, key.replace("_", " "))
 
 

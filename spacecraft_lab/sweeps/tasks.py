@@ -111,7 +111,13 @@ def resolve_task(kind: str, allow_custom: bool = False) -> Callable[..., dict]:
 
 
 def jsonable(value: Any) -> Any:
-    """``value`` as strict JSON: numpy scalars/arrays to Python, non-finite floats to None."""
+    """``value`` as strict JSON: numpy scalars/arrays to Python, non-finite floats to None.
+
+    Returns
+    -------
+    object
+        ``value`` with every part JSON-serializable.
+    """
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -154,7 +160,13 @@ def _now() -> str:
 
 
 def identity(task: dict[str, Any]) -> dict[str, Any]:
-    """The fields every record of ``task`` starts with: id, kind, label, params."""
+    """The fields every record of ``task`` starts with: id, kind, label, params.
+
+    Returns
+    -------
+    dict
+        The fields.
+    """
     return {"task_id": task["task_id"], "kind": task["kind"], "label": task.get("label"),
             "params": task["params"]}
 
