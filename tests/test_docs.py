@@ -233,6 +233,45 @@ def test_every_public_object_documents_its_parameters_and_returns():
         "\n".join(offenders)
 
 
+def _public_methods():
+    """(qualified name, function) of every public method an exported class defines
+    (properties aside), each once."""
+    import inspect
+
+    seen = set()
+    for name, cls in _public_objects():
+        if not inspect.isclass(cls):
+            continue
+        for attr, member in vars(cls).items():
+            func = member.__func__ if isinstance(member, (classmethod, staticmethod)) \
+                else member
+            if attr.startswith("_") or not inspect.isfunction(func) or id(func) in seen:
+                continue
+            seen.add(id(func))
+            yield f"{name}.{attr}", func
+
+
+def test_every_public_method_says_what_it_returns():
+    """A method that returns something has ``Returns`` (or ``Yields``) in its docstring,
+    its own or the one it inherits (an override of a documented method, gymnasium's
+    ``step`` and ``reset`` included, says nothing new)."""
+    import inspect
+
+    methods = list(_public_methods())
+    assert len(methods) > 200
+    offenders = []
+    for name, func in methods:
+        returns = inspect.signature(func).return_annotation
+        if returns in (None, "None", inspect.Signature.empty):
+            continue
+        doc = inspect.getdoc(func) or ""
+        if func.__doc__ is None and "Returns:" in doc:
+            continue                     # gymnasium's (Google-style) docstring, inherited
+        if not _sections(doc) & {"Returns", "Yields"}:
+            offenders.append(name)
+    assert not offenders, "public methods without Returns:\n" + "\n".join(offenders)
+
+
 def test_entry_point_examples_run():
     """The ``Examples`` of the main entry points are doctests, and they pass."""
     import doctest
