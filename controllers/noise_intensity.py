@@ -5,8 +5,8 @@ A Kalman filter is optimal only for the noise it assumes. Every LQG filter of
 the package assumes :data:`controllers.baselines.PROCESS_NOISE` (0.05 N m) of
 white torque; a plant without such a disturbance, flown on a model that fits it,
 is then estimated with a gain several times too large, and the sensor noise that
-gain lets through is most of the stationary cost (a quiet spacecraft: 55x the
-same law with the plant's true statistics). The intensity the data support
+gain lets through is most of the stationary cost (a quiet spacecraft: 45x the
+same law with the plant's true statistics, median of 10 seeds). The intensity the data support
 depends on the plant's disturbances *and* on how well the identified model fits
 (a model's error acts as process noise), so it cannot be fixed in advance.
 
