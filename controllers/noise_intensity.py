@@ -59,8 +59,10 @@ SWITCH_NATS = 2.0
 #: filter by hundreds of nats) is not carried for several memories after it ends.
 LAG_NATS = 20.0
 
+
 class ProcessNoiseBank:
-    """Kalman filters at several process-noise intensities; the likeliest one's state.
+    """Kalman filters at several process-noise intensities; the state of the quietest
+    one the innovations do not reject.
 
     Parameters
     ----------
@@ -114,6 +116,9 @@ class ProcessNoiseBank:
             raise ValueError(f"dt must be > 0 s, got {dt}")
         if not (np.isfinite(memory_s) and memory_s > 0):
             raise ValueError(f"memory_s must be > 0 s, got {memory_s}")
+        if not (np.isfinite(initial_covariance) and initial_covariance >= 0):
+            raise ValueError(f"initial_covariance must be finite and >= 0, got "
+                             f"{initial_covariance}")
         self.levels = levels
         self.dt = float(dt)
         self.memory_s = float(memory_s)
@@ -129,7 +134,8 @@ class ProcessNoiseBank:
         self.chosen = 0
         self._evidence = 0
         self.switches = 0
-        self._pending: tuple[np.ndarray, list[np.ndarray]] | None = None
+        #: the last step's (A, B, the levels' noise covariances), for the time update
+        self._pending: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None
         self._noise_b: np.ndarray | None = None
         self._noise: list[np.ndarray] = []
         self._c: np.ndarray | None = None

@@ -83,6 +83,7 @@ def test_a_sample_with_a_missing_output_is_not_scored():
 @pytest.mark.parametrize("kwargs, match", [
     ({"levels": (0.01, 0.05)}, "decreasing"), ({"levels": ()}, "decreasing"),
     ({"levels": (0.05, -1.0)}, ">= 0"), ({"memory_s": 0.0}, "memory_s"),
+    ({"initial_covariance": -1.0}, "initial_covariance"),
 ])
 def test_bad_settings_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
