@@ -280,6 +280,7 @@ def test_entry_point_examples_run():
         AdaptiveLQG,
         IdentifiedModelFeatures,
         PhysicalFeatures,
+        ProcessNoiseBank,
         Trajectory,
         closed_loop_identifier,
         compare,
@@ -297,7 +298,8 @@ def test_entry_point_examples_run():
     for obj in (FlexibleSpacecraftEnv, default_identifier, ImprovedRPBSID, ClassicalRPBSID,
                 StateSpaceModel.modal, AdaptiveLQG, run_episode, compare, Trajectory,
                 PhysicalFeatures, IdentifiedModelFeatures, check_parameter, ScoreCache,
-                closed_loop_identifier, fast_identifier, scheduled_identifier):
+                closed_loop_identifier, fast_identifier, scheduled_identifier,
+                ProcessNoiseBank):
         tests = [t for t in finder.find(obj) if t.examples]
         assert tests, f"{obj.__qualname__} has no doctest examples"
         for test in tests:
