@@ -40,6 +40,7 @@ from numba import njit
 
 from controllers.baselines import process_noise, regularizer
 from identifiers import KalmanPredictor
+from spacecraft_conventions import KeptWhileEqual
 
 __all__ = ["LAG_NATS", "NOISE_LEVELS", "SWITCH_NATS", "ProcessNoiseBank"]
 
@@ -136,9 +137,10 @@ class ProcessNoiseBank:
         self.switches = 0
         #: the last step's (A, B, the levels' noise covariances), for the time update
         self._pending: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None
-        self._noise_b: np.ndarray | None = None
-        self._noise: list[np.ndarray] = []
-        self._c: np.ndarray | None = None
+        #: every level's state noise covariance, for the last input matrix
+        self._noise: KeptWhileEqual[list[np.ndarray]] = KeptWhileEqual()
+        #: the output matrix the filters' states are in
+        self._output: KeptWhileEqual[bool] = KeptWhileEqual()
 
     def _restart_quiet(self) -> None:
         """Every filter from the noisiest one's estimate and covariance, scores level:
@@ -160,15 +162,14 @@ class ProcessNoiseBank:
     def _covariances(self, b: np.ndarray) -> list[np.ndarray]:
         """:func:`controllers.baselines.process_noise` of every level, for input matrix
         ``b`` (n, 3)."""
-        if self._noise_b is None or self._noise_b.shape != b.shape \
-                or not np.array_equal(self._noise_b, b):
+        def compute() -> list[np.ndarray]:
             # the first level as every fixed design's filter (the same bits); the others
             # from one product
             bbt = b @ b.T
-            self._noise = [process_noise(b, self.levels[0])] + [
-                _quiet_noise(bbt, v) for v in self.levels[1:]]
-            self._noise_b = np.array(b, copy=True)
-        return self._noise
+            return [process_noise(b, self.levels[0])] + [_quiet_noise(bbt, v)
+                                                         for v in self.levels[1:]]
+
+        return self._noise.get((b,), compute)
 
     def step(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, noise_var: np.ndarray,
              y: np.ndarray, torque: np.ndarray) -> np.ndarray:
@@ -201,14 +202,14 @@ class ProcessNoiseBank:
             self.scores[:] = 0.0
             self.chosen = 0
             self._evidence = 0
-            self._c = np.array(c, copy=True)
+            self._output.keep((c,), True)
             for kf in self.filters:
                 kf.correct(c, noise_var, y, a=a)
             return self.filters[self.chosen].x
         a0, b0, noise0 = pending
-        if self._c is not None and (self._c.shape != c.shape or not np.array_equal(self._c, c)):
+        if not self._output.holds((c,)):
             self._restart_quiet()
-        self._c = np.array(c, copy=True)
+            self._output.keep((c,), True)
         scored = np.isfinite(y).all()
         for j, kf in enumerate(self.filters):
             kf.advance(a0, b0, noise0[j], torque, c, noise_var, y, a_now=a)
