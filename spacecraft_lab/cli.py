@@ -395,13 +395,13 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--out", type=_output_directory, default="results/control",
                      help="output directory")
     ctl.add_argument("--controllers", nargs="+", choices=sorted(CONTROLLER_KEYS), default=None,
-                     help="controllers to run (default: all but the three options "
+                     help="controllers to run (default: all but the two options "
                           "adaptive-lqg-physical, the adaptive LQG on a physical model "
-                          "fitted to its warm-up and held, adaptive-lqg-scheduled, the same "
-                          "loop as adaptive-lqg (whose default identifier is that fit, "
-                          "scheduled on the paddle angle), and adaptive-lqg-structured-rpbsid, "
+                          "fitted to its warm-up and held, and adaptive-lqg-structured-rpbsid, "
                           "on a recursive PBSID with an exact rigid block (StructuredRPBSID); "
-                          "adaptive-lqg-fast flies the structured recursive identifier)")
+                          "adaptive-lqg flies the drive-scheduled physical fit, "
+                          "adaptive-lqg-fast the rigid-flexible identifier with closed-loop "
+                          "settings)")
     ctl.add_argument("--task", choices=("slew", "regulation"), default="slew",
                      help="slew to a random reference within +-10 deg, or regulate from "
                           "+-2 deg")

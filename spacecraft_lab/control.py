@@ -42,7 +42,6 @@ from controllers import (
     fast_identifier,
     run_episode,
     same_start_ceiling,
-    scheduled_identifier,
     set_integral_settle,
     structured_identifier,
     window_ceiling,
@@ -68,7 +67,6 @@ from spacecraft_lab.reporting import (
     CEILING,
     FAST_ADAPTIVE_LQG,
     SAME_START_CEILING,
-    SAME_START_LOOPS,
     WINDOW_CEILING,
     control_table,
 )
@@ -86,7 +84,6 @@ __all__ = [
     "SAME_LAW",
     "SAME_START_CEILING",
     "SCENARIO_NAMES",
-    "SCHEDULED_PHYSICAL",
     "STRUCTURED_RPBSID",
     "WINDOW_CEILING",
     "control_task",
@@ -131,8 +128,6 @@ def _construct(name: str, weights: LQRWeights, env: gym.Env) -> Any:
         layout = env.unwrapped.observation_layout.sensors()
         return AdaptiveLQG(env, weights=weights, identifier=PhysicalFitIdentifier(
             layout, dt=env.unwrapped.model.dt))
-    if name == SCHEDULED_PHYSICAL:
-        return AdaptiveLQG(env, weights=weights, identifier=scheduled_identifier(env))
     if name == STRUCTURED_RPBSID:
         return AdaptiveLQG(env, weights=weights, identifier=structured_identifier(env))
     if name == SAME_LAW:
@@ -155,12 +150,6 @@ def _construct(name: str, weights: LQRWeights, env: gym.Env) -> Any:
 #: (:class:`identifiers.PhysicalFitIdentifier`): not in the default comparison (it
 #: does not follow turning paddles; docs/results/control.md).
 PHYSICAL = "adaptive LQG, physical fit"
-#: The adaptive law on the hub-plus-appendage model fitted to its warm-up, its
-#: paddle couplings and inertia turned with the drive's encoder
-#: (:func:`controllers.scheduled_identifier`): since 2026-11-28 the adaptive LQG's
-#: default identifier, so the same loop as "adaptive LQG"; kept under its own name
-#: so that the commands of the results measured before reproduce them.
-SCHEDULED_PHYSICAL = SAME_START_LOOPS[1]
 #: The adaptive law on the structured recursive identifier
 #: (:func:`controllers.fast_identifier`): the adaptive LQG's default until
 #: 2026-11-28, about 0.5 s of computation per 250 s episode against 11-32 s.
@@ -177,7 +166,7 @@ CONTROLLER_NAMES = ("fixed LQG", "robust LQG", "scheduled LQG", "PD", "adaptive 
                     SAME_LAW, ORACLE, "full-state oracle", WINDOW_CEILING, SAME_START_CEILING,
                     CEILING)
 #: Every controller the comparison can fly: the default ones and the options.
-ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, SCHEDULED_PHYSICAL, STRUCTURED_RPBSID)
+ALL_CONTROLLER_NAMES = (*CONTROLLER_NAMES, PHYSICAL, STRUCTURED_RPBSID)
 
 
 def CONTROLLERS(weights: LQRWeights, integral_settle_s: float | None = None) -> dict[str, Any]:
@@ -199,7 +188,6 @@ def CONTROLLERS(weights: LQRWeights, integral_settle_s: float | None = None) -> 
 CONTROLLER_KEYS = {"fixed-lqg": "fixed LQG", "robust-lqg": "robust LQG",
                    "scheduled-lqg": "scheduled LQG", "pd": "PD", "adaptive-lqg": "adaptive LQG",
                    "adaptive-lqg-fast": FAST, "adaptive-lqg-physical": PHYSICAL,
-                   "adaptive-lqg-scheduled": SCHEDULED_PHYSICAL,
                    "adaptive-lqg-structured-rpbsid": STRUCTURED_RPBSID, "same-law-oracle": SAME_LAW,
                    "oracle-lqg": ORACLE, "oracle-lqr": "full-state oracle",
                    "ceiling": CEILING, "same-start-ceiling": SAME_START_CEILING,
@@ -427,8 +415,7 @@ def run_control(scenario: str = "paddle_rotation", seeds: int = 10,
         LQR weights shared by the LQG designs.
     controllers : sequence of str, optional
         Keys of :data:`CONTROLLER_KEYS` (default: those of :data:`CONTROLLER_NAMES`,
-        i.e. all but ``adaptive-lqg-physical``, ``adaptive-lqg-scheduled`` and
-        ``adaptive-lqg-structured-rpbsid``).
+        i.e. all but ``adaptive-lqg-physical`` and ``adaptive-lqg-structured-rpbsid``).
     steps : int, optional
         Episode length, steps of 0.1 s (default: the registered 2500).
     save_trajectories : bool

@@ -236,7 +236,7 @@ def improvement_references(base: str | None) -> list[str]:
 #: The loops that fly the start the same-start ceiling flies (the default adaptive LQG's:
 #: its identifier's warm-up behind the PD and excitation, then the first fit's latency),
 #: by their names in the comparison; a loop on another identifier starts otherwise.
-SAME_START_LOOPS = ("adaptive LQG", "adaptive LQG, scheduled physical fit")
+SAME_START_LOOPS = ("adaptive LQG",)
 
 
 def flies_the_start(name: str) -> bool:

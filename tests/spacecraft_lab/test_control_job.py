@@ -14,7 +14,6 @@ from spacecraft_lab.control import (
     CONTROLLER_NAMES,
     PHYSICAL,
     SCENARIO_NAMES,
-    SCHEDULED_PHYSICAL,
     STRUCTURED_RPBSID,
     env_kwargs_for,
 )
@@ -66,19 +65,18 @@ def test_the_physical_fit_option_flies_and_stays_out_of_the_default_comparison(t
     assert PHYSICAL in json.dumps(table)
 
 
-def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendages():
-    """``--controllers adaptive-lqg-scheduled`` builds the adaptive LQG on a scheduled
-    identifier that knows the env's appendages (its fit is flown in the slow test
-    below)."""
+def test_the_adaptive_lqg_flies_the_scheduled_fit_on_the_envs_appendages():
+    """``--controllers adaptive-lqg`` builds the adaptive LQG on the drive-scheduled
+    physical fit that knows the env's appendages, under one name only; ``adaptive-lqg-fast``
+    is the same law on the rigid-flexible identifier."""
     import gymnasium as gym
 
-    from controllers import AdaptiveLQG, LQRWeights
+    from controllers import AdaptiveLQG, LQRWeights, scheduled_identifier
     from identifiers import ScheduledPhysicalIdentifier
     from spacecraft_lab.control import CONTROLLERS, env_id, env_kwargs_for
 
-    assert SCHEDULED_PHYSICAL not in CONTROLLER_NAMES
     env = gym.make(env_id("paddle_rotation"), **env_kwargs_for("paddle_rotation"))
-    ctrl = CONTROLLERS(LQRWeights())[SCHEDULED_PHYSICAL](env)
+    ctrl = CONTROLLERS(LQRWeights())[CONTROLLER_KEYS["adaptive-lqg"]](env)
     assert isinstance(ctrl, AdaptiveLQG)
     assert isinstance(ctrl.identifier, ScheduledPhysicalIdentifier)
     model = env.unwrapped.model
@@ -88,34 +86,18 @@ def test_the_scheduled_physical_option_is_the_adaptive_law_on_the_envs_appendage
     # the warm-up excites at the amplitude the identifier asks for (0.5 N m), the
     # fast identifier's loop at 1 N m
     assert ctrl.excitation.warmup_amplitude == ctrl.identifier.warmup_amplitude == 0.5
-    # since 2026-11-28 the same loop is the default adaptive LQG; the previous default
-    # is the option "fast", in the default comparison
-    default = CONTROLLERS(LQRWeights())["adaptive LQG"](env)
-    assert isinstance(default.identifier, ScheduledPhysicalIdentifier)
-    assert default.identifier.turning == ctrl.identifier.turning
-    assert default.excitation.warmup_amplitude == 0.5
+    # one key per controller: no other name builds the same loop
+    assert sorted(CONTROLLER_KEYS.values()) == sorted(set(CONTROLLER_KEYS.values()))
+    assert "adaptive-lqg-scheduled" not in CONTROLLER_KEYS
     fast = CONTROLLERS(LQRWeights())[CONTROLLER_KEYS["adaptive-lqg-fast"]](env)
     assert fast.name == "adaptive LQG" and fast.excitation.warmup_amplitude == 1.0
     assert type(fast.identifier).__name__ == "RigidFlexibleIdentifier"
     assert CONTROLLER_KEYS["adaptive-lqg-fast"] in CONTROLLER_NAMES
     # its fit accumulates by default; the factory passes the identifier's options on
-    from controllers import scheduled_identifier
-
     assert ctrl.identifier.accumulate
     held = scheduled_identifier(env, accumulate=False, max_record=600)
     assert not held.accumulate and held.max_record == 600
     assert held.turning == ctrl.identifier.turning
-
-
-@pytest.mark.slow
-def test_the_scheduled_physical_option_flies_on_turning_paddles(tmp_path):
-    """The whole CLI run, its 10-50 s fit included (slow)."""
-    assert SCHEDULED_PHYSICAL not in CONTROLLER_NAMES
-    main(["control", "--scenario", "paddle_rotation", "--seeds", "1", "--steps", "400",
-          "--controllers", "adaptive-lqg-scheduled", "--workers", "1",
-          "--out", str(tmp_path / "scheduled")])
-    table = json.loads((tmp_path / "scheduled" / "metrics.json").read_text())
-    assert SCHEDULED_PHYSICAL in json.dumps(table)
 
 
 def test_the_structured_rpbsid_option_flies_its_identified_design(tmp_path):
