@@ -53,6 +53,42 @@ def test_healthy_wheels_at_rest_and_in_a_slew_declare_nothing():
         assert monitor.faults == []
 
 
+@pytest.mark.parametrize("inertia_scale, gain", [(1.5, 0.7), (0.7, 0.7), (0.7, 1.3), (1.5, 1.3)])
+def test_the_plant_familys_healthy_extremes_declare_nothing(inertia_scale, gain):
+    """The family's corners (hub inertia 0.7-1.5x, wheels delivering 0.7-1.3 of their
+    command) with both 800 kg modules docked, a sustained torque commanded on every axis
+    (1 N m on pitch, one way then the other): the gain from command to momentum is down
+    to 0.33x the nominal one on pitch, and healthy."""
+    from spacecraft_env import PlantDraw
+
+    env = gym.make(env_id("family"), task="regulation", initial_attitude_deg=0.0,
+                   max_episode_steps=600)
+    env.reset(seed=0)
+    command = np.array([0.3, 1.0, -0.5]) / env.unwrapped.max_torque
+    plant = PlantDraw(inertia_scale=inertia_scale, actuator_gain=gain,
+                      module_masses_kg=(800.0, 800.0), docking_times_s=(1.0, 2.0))
+    monitor = ActuatorMonitor(env)
+    obs, info = env.reset(seed=0, options={"plant": plant})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FaultWarning)
+        for k in range(600):
+            monitor(obs, info)
+            obs, *_, info = env.step((command if k < 300 else -command).astype(np.float32))
+    assert monitor.faults == []
+    # the balance does see the plant off its nominal gain, by up to 0.66 N m of 1 N m
+    assert np.abs(monitor.torque_error).max() > 0.2
+
+
+def test_a_wheel_at_ten_percent_under_a_sustained_command_is_declared():
+    """The same sustained command on the nominal plant, the pitch wheel at 10 %: beyond
+    any healthy plant of the family (gain 0.1), declared."""
+    env = _at_rest(["loss_of_effectiveness,onset=0,axis=1,value=0.1"])
+    command = np.array([0.3, 1.0, -0.5]) / env.unwrapped.max_torque
+    with pytest.warns(FaultWarning, match="actuator torque on axis 1"):
+        monitor = _fly(env, lambda k: command if k < 300 else -command, ActuatorMonitor(env))
+    assert [(f["kind"], f["axis"]) for f in monitor.faults][:1] == [("actuator torque", 1)]
+
+
 def test_a_wheel_bias_is_declared_dated_and_valued():
     """0.5 N m added on pitch from 20 s, nothing commanded: the balance misses 0.5 N m."""
     env = _at_rest(["actuator_bias,onset=20,axis=1,value=0.5"])
