@@ -8,7 +8,9 @@ onset (180 s) over its own fault-free cost and over the oracle's on the faulted 
 (the oracle knows the nominal plant, not the fault: a reference, not a bound), and
 what the loop reported: the share of seeds with a fault declared for the struck
 channel and the median delay from the onset. Then the false alarms: the faults the
-adaptive loop declares on fault-free episodes of every registered scenario.
+adaptive loop declares on fault-free episodes of every registered scenario, and those
+the loop on the fast identifier (the RL agents' base) declares on five times as many
+family draws.
 
 With ``--out FILE.json`` every per-seed figure is kept; ``--markdown FILE.json`` prints
 the table of docs/results/control.md from such a file without flying anything.
@@ -31,7 +33,7 @@ import numpy as np
 
 from controllers import LQRWeights, compare, stage_costs
 from spacecraft_env import ENV_IDS, env_id, parse_fault
-from spacecraft_lab.control import CONTROLLERS, _make_env
+from spacecraft_lab.control import CONTROLLERS, FAST, _make_env
 
 #: Onset of every fault, s, and the start of the window judged after it.
 ONSET_S = 120.0
@@ -50,6 +52,8 @@ FAULTS = {
 #: The controllers flown on each faulted plant.
 FLOWN = ("adaptive LQG", "oracle LQG", "robust LQG")
 SCENARIOS = ("paddle_rotation", "docking")
+#: Family draws the fast identifier's loop flies fault-free, per ``--alarm-seeds``.
+FAMILY_DRAWS_PER_SEED = 5
 
 
 def _late_costs(runs: list, model: Any) -> list[float]:
@@ -105,6 +109,15 @@ def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
                                             for m in table["adaptive LQG"]["per_seed"]]
         alarms = sum(len(d) for d in report["false_alarms"][scenario])
         print(f"fault-free {scenario}, {alarm_seeds} seeds: {alarms} declared", flush=True)
+    # the fast identifier's loop (the RL agents' base and comparator) on many family
+    # draws: its slews command several N m through wheels and inertias off the nominal
+    draws = FAMILY_DRAWS_PER_SEED * alarm_seeds
+    make_env = partial(_make_env, env_id("family"), (), {})
+    table, _ = compare({FAST: factories[FAST]}, make_env, list(range(draws)), progress=True,
+                       workers=workers)
+    report["false_alarms_fast_family"] = [_declared(m) for m in table[FAST]["per_seed"]]
+    alarms = sum(len(d) for d in report["false_alarms_fast_family"])
+    print(f"fault-free family, {FAST}, {draws} draws: {alarms} declared", flush=True)
     return report
 
 
@@ -154,6 +167,11 @@ def markdown(report: dict) -> str:
     lines.append("")
     lines.append(f"Faults declared on fault-free episodes ({report['alarm_seeds']} seeds "
                  f"each): {alarms}.")
+    fast = report.get("false_alarms_fast_family")
+    if fast is not None:
+        lines.append("")
+        lines.append(f"Faults declared by the {FAST} on {len(fast)} fault-free family draws: "
+                     f"{sum(len(d) for d in fast)}.")
     return "\n".join(lines) + "\n"
 
 
