@@ -62,4 +62,7 @@ def test_the_fault_table_counts_declarations_and_their_delays(load_benchmark):
     assert "| docking | gyro bias | 1 / 1 / 1 (of 2) | 2 | 1 | 1 | 2/2 (gyro bias) | 7.0 |" \
         in text
     assert "(3 seeds each): constant 1." in text
+    assert "fault-free family draws" not in text
+    text = bench.markdown(dict(report, false_alarms_fast_family=[[], [{"kind": "a"}] * 2]))
+    assert "on 2 fault-free family draws: 2." in text
     assert np.isnan(bench._detection(dict(row, declared=[[], []]))[1])
