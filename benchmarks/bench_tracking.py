@@ -24,7 +24,7 @@ Usage: ``python benchmarks/bench_tracking.py [--seeds 3] [--first-seed 0]
 (a condition is ``SNR:RMS``, SNR in dB of the env's nominal levels or ``none``, RMS in
 N m; ``--drift-reference`` sets the default identifier's ``drift_reference``, the noise
 level at which its drifts are stated; ``--coupling-drift`` overrides its modal couplings' random
-walk, for the ablation in docs/results/identification.md; ``--rediscover`` its re-search
+walk, for the ablation in docs/history/identification-log.md; ``--rediscover`` its re-search
 period in samples, ``none`` for no re-search after the warm-up's, for the cost ablation in
 docs/benchmarks.md).
 """
