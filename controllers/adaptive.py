@@ -685,6 +685,14 @@ class AdaptiveLQG(_LQGController):
         monitors = (self.gyro_monitor, self.actuator_monitor)
         found = [f for m in monitors if m is not None for f in m.faults]
         if len(found) != len(self.stats["faults"]):
+            known = {(f["kind"], f["axis"]) for f in self.stats["faults"]}
+            if any(f["kind"] == "gyro bias" and (f["kind"], f["axis"]) not in known
+                   for f in found):
+                # the attitude walked while the bias went uncompensated: its walk back
+                # is a transient the integrals must not charge on
+                for law in (self.law, getattr(self.fallback, "law", None)):
+                    if law is not None:
+                        law.restart_settle()
             self.stats["faults"] = sorted(found, key=lambda f: f["detected_s"])
 
     def _watch_events(self) -> None:

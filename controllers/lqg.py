@@ -246,6 +246,13 @@ class LQGLaw:
         self.z = np.zeros(3)
         self._in_band_steps = 0
 
+    def restart_settle(self) -> None:
+        """Start the settling clock again, the integral kept: it integrates again only
+        once every attitude error has stayed ``settle_s`` in the band from now (after a
+        sensor fault is compensated, the attitude's walk back is a transient, not a
+        constant disturbance)."""
+        self._in_band_steps = 0
+
     def weight_matrix(self, c: np.ndarray) -> np.ndarray:
         """``Q_a`` for a model with output matrix ``c``.
 

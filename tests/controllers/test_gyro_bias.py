@@ -101,3 +101,36 @@ def test_the_loop_reports_a_gyro_bias_and_flies_as_before_without_one():
     np.testing.assert_array_equal(on.torque, off.torque)
     env.close()
     clean.close()
+
+
+def test_a_declared_gyro_bias_restarts_the_integrals_settling():
+    """The attitude walked while the bias went uncompensated: its walk back must not
+    charge the integrals, so on the declaration both laws (the identified design's and
+    the fallback's) wait ``settle_s`` in the band again, their integrals kept."""
+    env = gym.make(env_id("paddle_rotation"))
+    ctrl = AdaptiveLQG(env)
+    laws = (ctrl.law, ctrl.fallback.law)
+    error = np.full(3, 1e-4)
+    for law in laws:
+        law.z = np.array([1.0, 2.0, 3.0])
+        law._in_band_steps = 10 * law._settle_steps     # long settled: integrating
+        law.integrate(error, saturated=False)
+        assert law.z[0] > 1.0
+    kept = [law.z.copy() for law in laws]
+    ctrl.gyro_monitor.faults.append({"kind": "gyro bias", "axis": 0, "onset_s": 1.0,
+                                     "detected_s": 7.0, "value": 1e-4})
+    ctrl._collect_faults()
+    for law, z in zip(laws, kept, strict=True):
+        np.testing.assert_array_equal(law.z, z)
+        for _ in range(law._settle_steps - 1):
+            law.integrate(error, saturated=False)
+        np.testing.assert_array_equal(law.z, z)          # still settling
+        law.integrate(error, saturated=False)
+        assert law.z[0] > z[0]                           # settled again: integrating
+    # an actuator report does not restart them
+    ctrl.law._in_band_steps = 10 * ctrl.law._settle_steps
+    ctrl.actuator_monitor.faults.append({"kind": "actuator torque", "axis": 1,
+                                         "onset_s": 1.0, "detected_s": 9.0, "value": 0.1})
+    ctrl._collect_faults()
+    assert ctrl.law._in_band_steps == 10 * ctrl.law._settle_steps
+    env.close()
