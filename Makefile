@@ -8,7 +8,7 @@ SOURCES := spacecraft_conventions spacecraft_env identifiers controllers spacecr
 PEERS_VENV  ?= .venv-peers
 PEERS_STAMP := $(PEERS_VENV)/.installed
 
-.PHONY: demo docs test test-all test-peers lint bench bench-peers clean
+.PHONY: demo docs test test-all test-peers lint bench bench-peers results results-short clean
 
 # the demo needs the main dependencies only; the tests add the RL and dev extras
 MAIN_STAMP := $(VENV)/.installed-main
@@ -63,6 +63,15 @@ test-peers: $(PEERS_STAMP)
 
 bench-peers: $(PEERS_STAMP)
 	$(PEERS_VENV)/bin/python benchmarks/bench_peers.py
+
+# the results pages' tables, each written by the command printed above it
+# (spacecraft_lab/results_pages.py): `results` runs every command (hours) and writes the
+# pages; `results-short` renders them again from the data kept in docs/results/data
+results: $(STAMP)
+	$(BIN)/python -m spacecraft_lab.results_pages --run
+
+results-short: $(STAMP)
+	$(BIN)/python -m spacecraft_lab.results_pages
 
 lint: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)

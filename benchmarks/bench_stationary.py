@@ -12,7 +12,7 @@ median cost over the whole episode and from 500 s, and the paired median ratio o
 each to the tight oracle from 500 s (min-max over the seeds).
 
 Usage: ``python benchmarks/bench_stationary.py [--seeds 3] [--snr-db 40 20] [--workers N]
-[--out results/stationary.json]``
+[--out results/stationary.json] [--markdown results/stationary.json]``
 """
 
 from __future__ import annotations
@@ -98,7 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--snr-db", type=float, nargs="+", default=[40.0, 20.0])
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=None, help="JSON of every figure")
+    parser.add_argument("--markdown", type=Path, default=None,
+                        help="print the tables of a --out file and stop")
     args = parser.parse_args(argv)
+    if args.markdown is not None:
+        print(markdown(json.loads(args.markdown.read_text())))
+        return 0
     report = {"seeds": args.seeds, "runs": {}}
     for snr in args.snr_db:
         report["runs"][f"{snr:g}"] = fly(args.seeds, snr, args.workers)
