@@ -54,6 +54,7 @@ from identifiers import (
     MomentRefitRPBSID,
     OnlineIdentifier,
     PredictorRPBSID,
+    ScheduledPhysicalIdentifier,
     StructuredRPBSID,
     WindowedPBSID,
     add_measurement_noise,
@@ -147,6 +148,16 @@ def _structured(truth: FlexibleSpacecraftModel, preset: str,
     return build(truth.output_layout, n=truth.n, **kwargs)
 
 
+def _scheduled_physical(truth: FlexibleSpacecraftModel, preset: str,
+                        **options: Any) -> OnlineIdentifier:
+    """The adaptive LQG's identifier (:func:`controllers.scheduled_identifier` builds the same
+    from an env): told which appendages the drive turns and fed the drive's angle at
+    every sample (:func:`score_identifier`); it has no paper preset."""
+    return ScheduledPhysicalIdentifier(truth.output_layout, turning=truth.appendage_turns,
+                                       sensor_appendage=truth.sensor_appendage,
+                                       drive_axis=truth.drive_axis, dt=truth.dt, **options)
+
+
 def _windowed(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> OnlineIdentifier:
     kwargs = {**nominal_scales(truth), "dt": truth.dt, **options}
     if preset != "paper":
@@ -157,6 +168,7 @@ def _windowed(truth: FlexibleSpacecraftModel, preset: str, **options: Any) -> On
 #: Method name (the class's name in kebab case) -> builder ``(truth, preset, **options) ->
 #: identifier``. The paper's method is ``improved-rpbsid`` (its "improved RPBSID").
 METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
+    "scheduled-physical": _scheduled_physical,
     "rigid-flexible": _rigid_flexible,
     "moment-refit-rpbsid": _recursive(MomentRefitRPBSID),
     "predictor-rpbsid": _recursive(PredictorRPBSID),
@@ -166,8 +178,9 @@ METHODS: dict[str, Callable[..., OnlineIdentifier]] = {
     "windowed-pbsid": _windowed,
 }
 #: Methods run when none are named (the sliding-window SVD takes ~30 s a run).
-DEFAULT_METHODS = ("rigid-flexible", "structured-rpbsid", "moment-refit-rpbsid",
-                   "predictor-rpbsid", "improved-rpbsid", "classical-rpbsid")
+DEFAULT_METHODS = ("scheduled-physical", "rigid-flexible", "structured-rpbsid",
+                   "moment-refit-rpbsid", "predictor-rpbsid", "improved-rpbsid",
+                   "classical-rpbsid")
 
 
 def make_identifier(name: str, truth: FlexibleSpacecraftModel, preset: str = "recommended",
@@ -407,8 +420,11 @@ def score_identifier(ident: OnlineIdentifier, record: IdentificationRecord,
     IdentificationScore
         The identifier's scores on the record.
     """
+    # the drive-scheduled fit is told the drive's angle at every sample, as the env tells it
+    schedule = ({"schedule": drive_angles(truth, len(record.u))}
+                if isinstance(ident, ScheduledPhysicalIdentifier) else {})
     start = time.perf_counter()
-    seq = ident.fit(record.u, record.y)
+    seq = ident.fit(record.u, record.y, **schedule)
     elapsed = time.perf_counter() - start
     u_test, y_test = test
     with np.errstate(all="ignore"):
