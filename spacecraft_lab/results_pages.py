@@ -23,6 +23,9 @@ What a block's table is rendered from depends on its last command:
 ``spacecraft evaluate ... --out DIR``      :func:`spacecraft_lab.agents.evaluation_table`
                                            of ``DIR/evaluation.json`` (kept in
                                            ``DATA/evaluate/``)
+``spacecraft identify ... --out DIR``      :func:`spacecraft_lab.reporting.identification_table`
+                                           of ``DIR/metrics.json`` (its summaries, kept in
+                                           ``DATA/identify/``)
 ``python benchmarks/X.py ... --markdown F``  what that command prints (``F`` in :data:`DATA`)
 =========================================  =============================================
 """
@@ -42,15 +45,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from spacecraft_lab.agents import evaluation_table
-from spacecraft_lab.reporting import control_brief
+from spacecraft_lab.reporting import control_brief, identification_table
 
-__all__ = ["BEGIN", "DATA", "END", "PAGES", "ROOT", "Block", "blocks", "check", "main",
-           "render", "write_pages"]
+__all__ = ["BEGIN", "DATA", "END", "PAGES", "ROOT", "WHOLLY_WRITTEN", "Block", "blocks", "check",
+           "main", "render", "write_pages"]
 
 #: The repository's root (the commands run from it).
 ROOT = Path(__file__).resolve().parent.parent
 #: The pages whose tables are written here.
-PAGES = ("docs/results/control.md", "docs/results/rl.md")
+PAGES = ("docs/results/control.md", "docs/results/identification.md", "docs/results/rl.md")
+#: The pages every table of which is written here (identification.md's tracking tables
+#: are not yet: they combine several runs of ``benchmarks/bench_tracking.py``).
+WHOLLY_WRITTEN = ("docs/results/control.md", "docs/results/rl.md")
 #: Where the figures the tables are rendered from are kept (committed).
 DATA = Path("docs/results/data")
 #: The date each block's data were printed, by data file.
@@ -81,16 +87,19 @@ class Block:
 
     @property
     def kind(self) -> str:
-        """``"control"``, ``"evaluate"`` or ``"markdown"``: what renders the table."""
+        """``"control"``, ``"evaluate"``, ``"identify"`` or ``"markdown"``: what renders
+        the table."""
         argv = shlex.split(self.commands[-1])
         if argv[:2] == ["spacecraft", "control"]:
             return "control"
         if argv[:2] == ["spacecraft", "evaluate"]:
             return "evaluate"
+        if argv[:2] == ["spacecraft", "identify"]:
+            return "identify"
         if argv[0] == "python" and "--markdown" in argv:
             return "markdown"
         raise ValueError(f"{self.page}: a block's last command must be `spacecraft control "
-                         f"... --out DIR`, `spacecraft evaluate ... --out DIR` or `python "
+                         f"... --out DIR` (or evaluate, identify) or `python "
                          f"benchmarks/X.py ... --markdown FILE`, got {self.commands[-1]!r}")
 
     @property
@@ -110,7 +119,8 @@ class Block:
 
     @property
     def output(self) -> Path:
-        """The directory the last command writes (``control`` and ``evaluate``)."""
+        """The directory the last command writes (``control``, ``evaluate`` and
+        ``identify``)."""
         argv = shlex.split(self.commands[-1])
         return Path(argv[argv.index("--out") + 1])
 
@@ -173,6 +183,8 @@ def render(block: Block) -> str:
         table = "```text\n" + control_brief(json.loads(data.read_text())["controllers"]) + "```"
     elif block.kind == "evaluate":
         table = evaluation_table(json.loads(data.read_text())).rstrip("\n")
+    elif block.kind == "identify":
+        table = identification_table(json.loads(data.read_text())).rstrip("\n")
     else:
         table = _run(block.commands[-1], capture=True).rstrip("\n")
     date = _printed().get(str(block.data), "an unrecorded date")
@@ -215,6 +227,11 @@ def _keep(block: Block) -> None:
                                       metrics["scenario"], "controllers": kept}, indent=1) + "\n")
     elif block.kind == "evaluate":
         target.write_text((ROOT / block.output / "evaluation.json").read_text())
+    elif block.kind == "identify":
+        metrics = json.loads((ROOT / block.output / "metrics.json").read_text())
+        for method in metrics["methods"].values():   # the tables read the summaries
+            method.pop("per_seed", None)
+        target.write_text(json.dumps(metrics, indent=1) + "\n")
     _date(block)
 
 

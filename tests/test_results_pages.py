@@ -18,16 +18,19 @@ def test_every_block_is_what_its_data_render():
     assert rp.check() == []
 
 
-@pytest.mark.parametrize("page", rp.PAGES)
+@pytest.mark.parametrize("page", rp.WHOLLY_WRITTEN)
 def test_every_table_of_a_results_page_is_in_a_block_with_its_command_and_date(page):
     text = (rp.ROOT / page).read_text()
     head, *chunks = text.split(rp.BEGIN + "\n")
     outside = head + "".join(chunk.split(rp.END, 1)[1] for chunk in chunks)
     assert "```text" not in outside and "|---" not in outside
-    found = rp.blocks(page)
-    assert len(found) == len(chunks) >= 3
+    assert len(rp.blocks(page)) == len(chunks) >= 3
+
+
+@pytest.mark.parametrize("page", rp.PAGES)
+def test_every_block_names_its_data_and_its_date(page):
     printed = json.loads((rp.ROOT / rp.PRINTED).read_text())
-    for block in found:
+    for block in rp.blocks(page):
         assert block.commands and (rp.ROOT / block.data).exists()
         assert f"Printed {printed[str(block.data)]} by the command above." in block.body
 
@@ -50,3 +53,27 @@ def test_blocks_are_parsed_and_bad_ones_refused():
         _ = outside.data
     with pytest.raises(FileNotFoundError, match="make results"):
         rp.render(rp.Block("page.md", ("spacecraft control --out results/none/here",), ""))
+
+
+def test_the_readmes_headline_table_is_the_control_pages_first_block():
+    """The README's table of the main comparison shows, per controller it lists, the cells
+    `spacecraft control --scenario paddle_rotation --seeds 3` printed on the results page
+    (from the same kept data)."""
+    import re
+
+    from spacecraft_lab.reporting import control_brief
+
+    (block,) = [b for b in rp.blocks("docs/results/control.md")
+                if b.commands == ("spacecraft control --scenario paddle_rotation --seeds 3 "
+                                  "--out results/ceiling/paddle_rotation",)]
+    brief = control_brief(json.loads((rp.ROOT / block.data).read_text())["controllers"])
+    printed = {cells[0]: cells[1:7] for cells in
+               (re.split(r"\s{2,}", line.strip()) for line in brief.splitlines()[1:])}
+    readme = (rp.ROOT / "README.md").read_text()
+    assert "`spacecraft control --scenario paddle_rotation --seeds 3`" in readme
+    rows = [line.strip("|").split("|") for line in readme.splitlines()
+            if line.startswith("| ") and "cost, whole episode" not in line
+            and line.split("|")[1].strip() in printed]
+    assert len(rows) >= 6
+    for name, *cells in ([c.strip() for c in row] for row in rows):
+        assert cells == printed[name], name
