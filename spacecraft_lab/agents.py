@@ -192,15 +192,24 @@ def paired_ratio(mine: Sequence[float], theirs: Sequence[float]) -> dict[str, fl
     return {"median": float(np.median(ratio)), "worst": float(np.max(ratio))}
 
 
-def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
+#: Settings every training seed of one evaluation must share.
+_SHARED = ("algo", "features", "scenario", "randomize", "reward", "repeat", "env_kwargs",
+           "base_integral_settle_s")
+
+
+def evaluate_agent(agent: str | Path | Sequence[str | Path],
+                   seeds: tuple[int, ...] = HELD_OUT_SEEDS,
                    workers: int | None = None, progress: bool = True,
                    cache: bool = True) -> dict[str, Any]:
-    """Score a saved agent and the LQG comparators on the same episodes.
+    """Score a saved agent (one or several training seeds of one setting) and the LQG
+    comparators on the same episodes.
 
     Parameters
     ----------
-    agent : str or Path
-        See :func:`load_agent`.
+    agent : str, Path or sequence of them
+        See :func:`load_agent`; several: the training seeds of one setting (the same
+        algorithm, observations, scenario, reward and environment), scored together by
+        the protocol (a ``(training seeds, draws)`` matrix).
     seeds : tuple of int
         Episode seeds (default :data:`HELD_OUT_SEEDS`), all >= 0.
     workers : int, optional
@@ -215,39 +224,78 @@ def evaluate_agent(agent: str | Path, seeds: tuple[int, ...] = HELD_OUT_SEEDS,
     Returns
     -------
     dict
-        ``agent`` (the :func:`load_agent` settings), ``eval_seeds``, ``scores``
-        (name -> the harness's scores: ``cost_after_100s`` median, ``_mean``,
-        ``_worst``, ``_per_seed``, ``worst_episode_seed``, attitude RMS,
-        vibration, return, ``stable_share``; the agent under ``"agent"``) and
-        ``agent_over`` (comparator -> median and worst of the agent's paired
-        per-episode cost ratios) and ``protocol`` (:mod:`spacecraft_lab.rl_protocol`:
-        ``estimates``, name -> IQM, median and mean with 95 % intervals; ``improvement``,
-        the probability that the agent costs less than its base, where it has one, and
-        the adaptive LQG on a draw; ``draws``).
+        ``agent`` (the first seed's :func:`load_agent` settings), ``agents`` (every seed's
+        model path), ``eval_seeds``, ``scores`` (name -> the harness's scores:
+        ``cost_after_100s`` median, ``_mean``, ``_worst``, ``_per_seed``,
+        ``worst_episode_seed``, attitude RMS, vibration, return, ``stable_share``; the
+        agent's under ``"agent"``, each draw's cost the mean over its training seeds, and
+        per training seed under ``agent_runs``) and ``agent_over`` (comparator -> median
+        and worst of the agent's paired per-episode cost ratios) and ``protocol``
+        (:mod:`spacecraft_lab.rl_protocol`: ``estimates``, name -> IQM, median and mean
+        with 95 % intervals over training seeds and draws; ``improvement``, the
+        probability that the agent costs less than its base, where it has one, and the
+        adaptive LQG on a draw; ``draws``; ``training_seeds``).
+
+    Raises
+    ------
+    ValueError
+        For no episode seed, a negative one, or training seeds of different settings.
     """
     seeds = tuple(int(s) for s in seeds)
     if not seeds or min(seeds) < 0:
         raise ValueError(f"seeds must be one or more integers >= 0, got {seeds}")
-    policy, settings = load_agent(agent)
+    agents = [agent] if isinstance(agent, str | Path) else list(agent)
+    if not agents:
+        raise ValueError("agent must name at least one saved model")
+    loaded = [load_agent(a) for a in agents]
+    settings = loaded[0][1]
+    for _, other in loaded[1:]:
+        differ = [key for key in _SHARED if other[key] != settings[key]]
+        if differ:
+            raise ValueError(f"{other['path']} was trained otherwise than {settings['path']} "
+                             f"({', '.join(differ)}): the seeds of one evaluation must share "
+                             "their setting")
     import torch
 
     with _one_torch_thread(torch):      # as in training: results independent of the cores
-        score = _evaluate(policy, settings["scenario"], settings["features"],
+        runs = [_evaluate(policy, settings["scenario"], settings["features"],
                           settings["env_kwargs"], seeds,
                           base_settle_s=settings["base_integral_settle_s"])
-    scores = {"agent": score, **_score_comparators(settings["scenario"], settings["env_kwargs"],
-                                                   seeds, workers, progress, when="Then",
-                                                   cache=default_cache() if cache else None)}
-    mine = score["cost_after_100s_per_seed"]
+                for policy, _ in loaded]
+    matrix = np.array([run["cost_after_100s_per_seed"] for run in runs], dtype=float)
+    scores = {"agent": runs[0] if len(runs) == 1 else _pooled(runs, seeds),
+              **_score_comparators(settings["scenario"], settings["env_kwargs"],
+                                   seeds, workers, progress, when="Then",
+                                   cache=default_cache() if cache else None)}
+    mine = scores["agent"]["cost_after_100s_per_seed"]
     agent_over = {key: paired_ratio(mine, scores[key]["cost_after_100s_per_seed"])
                   for key, _ in COMPARATORS}
     costs = {key: score["cost_after_100s_per_seed"] for key, score in scores.items()}
+    costs["agent"] = matrix
     over = improvement_references(base_comparator(settings["features"]))
     protocol = {"estimates": interval_estimates(costs),
                 "improvement": improvement_probabilities(costs, "agent", over),
-                "draws": len(seeds)}
-    return {"agent": settings, "eval_seeds": list(seeds), "scores": scores,
-            "agent_over": agent_over, "protocol": protocol}
+                "draws": len(seeds), "training_seeds": len(runs)}
+    result = {"agent": settings, "agents": [s["path"] for _, s in loaded],
+              "eval_seeds": list(seeds), "scores": scores, "agent_over": agent_over,
+              "protocol": protocol}
+    if len(runs) > 1:
+        result["agent_runs"] = runs
+    return result
+
+
+def _pooled(runs: list[dict[str, Any]], seeds: tuple[int, ...]) -> dict[str, Any]:
+    """The harness's scores of several training seeds as one controller's: each draw's
+    cost the mean over the seeds (infinite if any crashed), the other figures averaged."""
+    with np.errstate(invalid="ignore"):
+        costs = np.mean([run["cost_after_100s_per_seed"] for run in runs], axis=0)
+    return {"cost_after_100s": float(np.median(costs)),
+            "cost_after_100s_mean": float(np.mean(costs)),
+            "cost_after_100s_worst": float(np.max(costs)),
+            "worst_episode_seed": int(seeds[int(np.argmax(costs))]),
+            "cost_after_100s_per_seed": costs.tolist(),
+            **{key: float(np.mean([run[key] for run in runs]))
+               for key in ("attitude_rms_deg", "vibration_rms_mm", "return", "stable_share")}}
 
 
 def evaluation_table(result: dict[str, Any]) -> str:
@@ -259,8 +307,11 @@ def evaluation_table(result: dict[str, Any]) -> str:
         Markdown: one row per controller or agent.
     """
     settings = result["agent"]
+    models = [Path(p).name for p in result.get("agents", [settings["path"]])]
+    pooled = (f"; the agent's row: each episode's cost the mean over its {len(models)} "
+              "training seeds" if len(models) > 1 else "")
     lines = [f"{settings['algo'].upper()} {settings['features']} on {settings['scenario']} "
-             f"({Path(settings['path']).name}), {len(result['eval_seeds'])} episodes "
+             f"({', '.join(models)}){pooled}, {len(result['eval_seeds'])} episodes "
              f"(seeds {result['eval_seeds'][0]}-{result['eval_seeds'][-1]}); common cost "
              "from 100 s",
              "",
@@ -282,5 +333,6 @@ def evaluation_table(result: dict[str, Any]) -> str:
     lines += ["", "The evaluation protocol (docs/design/evaluation.md, \"RL agents\"): the "
               "cost from 100 s over the draws, 95 % stratified-bootstrap intervals over "
               "seeds and draws:", "",
-              protocol_table(names, better, "agent", {"agent": 1}, protocol["draws"])]
+              protocol_table(names, better, "agent",
+                             {"agent": protocol.get("training_seeds", 1)}, protocol["draws"])]
     return "\n".join(lines).rstrip("\n")

@@ -520,10 +520,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="TensorBoard log directory (default: none)")
 
     evaluate = command("evaluate", help="a saved agent beside the LQGs on any episodes")
-    evaluate.add_argument("agent", metavar="AGENT",
+    evaluate.add_argument("agent", metavar="AGENT", nargs="+",
                           help=f"a model saved by 'train' (.zip, with its _vecnormalize.pkl "
                                f"and the run's metrics.json beside it) or a shipped agent: "
-                               f"{', '.join(sorted(SHIPPED_AGENTS))}")
+                               f"{', '.join(sorted(SHIPPED_AGENTS))}; several: the training "
+                               f"seeds of one setting, scored together")
     evaluate.add_argument("--episodes", type=_integer(1), default=len(HELD_OUT_SEEDS), metavar="N",
                           help="episodes, seeds first-seed, first-seed + 1, ...")
     evaluate.add_argument("--first-seed", type=_integer(0), default=HELD_OUT_SEEDS[0],
@@ -690,13 +691,15 @@ def _evaluate(args: argparse.Namespace) -> int:
     (out / "table.md").write_text(table + "\n")
     costs = {COMPARATOR_NAMES.get(k, k): s["cost_after_100s_per_seed"]
              for k, s in result["scores"].items()}
-    finite = np.concatenate([np.asarray(c, dtype=float) for c in costs.values()])
+    if "agent_runs" in result:          # every training seed's run, not their mean
+        costs["agent"] = [run["cost_after_100s_per_seed"] for run in result["agent_runs"]]
+    finite = np.concatenate([np.asarray(c, dtype=float).ravel() for c in costs.values()])
     finite = finite[np.isfinite(finite) & (finite > 0)]
     if finite.size:
         thresholds = np.geomspace(finite.min() / 2, finite.max() * 2, 60)
         plot_performance_profiles(out / "performance_profiles.png", thresholds,
                                   performance_profiles(costs, thresholds),
-                                  title=f"{Path(args.agent).stem} beside the LQGs, "
+                                  title=f"{Path(args.agent[0]).stem} beside the LQGs, "
                                         f"{len(seeds)} held-out draws")
     print(table)
     print(f"wrote {out}/evaluation.json, table.md and performance_profiles.png")

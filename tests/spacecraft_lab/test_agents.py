@@ -128,3 +128,17 @@ def test_evaluation_refuses_empty_or_negative_seeds():
         evaluate_agent(SHIPPED, seeds=())
     with pytest.raises(ValueError, match="seeds"):
         evaluate_agent(SHIPPED, seeds=(-1,))
+
+
+def test_training_seeds_of_one_setting_are_scored_together():
+    """Several models of one setting: the protocol's (training seeds, draws) matrix; the
+    agent's row pools them (each draw's mean over the seeds); another setting refused."""
+    pytest.importorskip("stable_baselines3")
+    result = evaluate_agent([SHIPPED, SHIPPED], seeds=(2000,), workers=1, progress=False)
+    assert result["protocol"]["training_seeds"] == 2 and len(result["agent_runs"]) == 2
+    one = result["agent_runs"][0]["cost_after_100s_per_seed"]
+    assert result["scores"]["agent"]["cost_after_100s_per_seed"] == pytest.approx(one)
+    table = evaluation_table(result)
+    assert "| agent | 2 |" in table and "the mean over its 2 training seeds" in table
+    with pytest.raises(ValueError, match="trained otherwise"):
+        evaluate_agent([SHIPPED, "ars-averaged-family"], seeds=(2000,), progress=False)
