@@ -13,10 +13,12 @@ the loop on the fast identifier (the RL agents' base) declares on five times as 
 family draws.
 
 With ``--out FILE.json`` every per-seed figure is kept; ``--markdown FILE.json`` prints
-the table of docs/results/control.md from such a file without flying anything.
+the table of docs/results/control.md from such a file without flying anything;
+``--only TEXT --extend FILE.json`` flies again only the faults whose label holds the text
+and replaces their rows of that file (for a change that acts only on them).
 
 Usage: ``python benchmarks/bench_faults.py [--seeds 5] [--alarm-seeds 10] [--workers N]
-[--out results/faults.json] [--markdown results/faults.json]``
+[--out results/faults.json] [--markdown results/faults.json] [--only TEXT --extend FILE]``
 """
 
 from __future__ import annotations
@@ -73,11 +75,14 @@ def _declared(metrics: dict) -> list[dict]:
     return list(metrics["controller_stats"].get("faults", []))
 
 
-def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
-    """Every figure of the table, per seed."""
+def fly(seeds: int, alarm_seeds: int, workers: int, only: str | None = None,
+        report: dict | None = None) -> dict:
+    """Every figure of the table, per seed; with ``only``, the faults whose label holds it
+    alone (no false alarms), replacing their rows of ``report``."""
     factories = CONTROLLERS(LQRWeights())
-    report: dict = {"seeds": seeds, "alarm_seeds": alarm_seeds, "faults": {},
-                    "false_alarms": {}}
+    if report is None:
+        report = {"seeds": seeds, "alarm_seeds": alarm_seeds, "faults": {},
+                  "false_alarms": {}}
     loop = {"adaptive LQG": factories["adaptive LQG"]}
     for scenario in SCENARIOS:
         clean_env = partial(_make_env, env_id(scenario), (), {})
@@ -88,6 +93,8 @@ def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
                           workers=workers)
         clean = _late_costs(runs["adaptive LQG"], model)
         for label, spec in FAULTS.items():
+            if only is not None and only not in label:
+                continue
             fault = parse_fault(spec)
             make_env = partial(_make_env, env_id(scenario), (fault,), {})
             table, runs = compare({name: factories[name] for name in FLOWN}, make_env,
@@ -101,6 +108,8 @@ def fly(seeds: int, alarm_seeds: int, workers: int) -> dict:
             row["declared"] = [_declared(m) for m in table["adaptive LQG"]["per_seed"]]
             report["faults"][f"{scenario}/{label}"] = row
             print(f"{scenario}, {label}: " + summary(row), flush=True)
+    if only is not None:
+        return report
     for scenario in sorted(ENV_IDS.values()):
         make_env = partial(_make_env, env_id(scenario), (), {})
         table, _ = compare(loop, make_env, list(range(alarm_seeds)), progress=True,
@@ -183,11 +192,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="JSON of every figure")
     parser.add_argument("--markdown", type=Path, default=None,
                         help="print the markdown table of a --out file and stop")
+    parser.add_argument("--only", default=None,
+                        help="fly only the faults whose label holds this text (no false "
+                             "alarms); with --extend, replace their rows of that file")
+    parser.add_argument("--extend", type=Path, default=None,
+                        help="a --out file whose other rows and false alarms are kept")
     args = parser.parse_args(argv)
     if args.markdown is not None:
         print(markdown(json.loads(args.markdown.read_text())), end="")
         return 0
-    report = fly(args.seeds, args.alarm_seeds, args.workers)
+    if args.extend is not None and args.only is None:
+        parser.error("--extend replaces the rows of --only")
+    old = None if args.extend is None else json.loads(args.extend.read_text())
+    if old is not None and old["seeds"] != args.seeds:
+        parser.error(f"{args.extend} holds {old['seeds']} seeds, not {args.seeds}")
+    report = fly(args.seeds, args.alarm_seeds, args.workers, args.only, old)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1))

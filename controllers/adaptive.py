@@ -686,13 +686,20 @@ class AdaptiveLQG(_LQGController):
         found = [f for m in monitors if m is not None for f in m.faults]
         if len(found) != len(self.stats["faults"]):
             known = {(f["kind"], f["axis"]) for f in self.stats["faults"]}
-            if any(f["kind"] == "gyro bias" and (f["kind"], f["axis"]) not in known
-                   for f in found):
+            new = [f for f in found
+                   if f["kind"] == "gyro bias" and (f["kind"], f["axis"]) not in known]
+            if new:
                 # the attitude walked while the bias went uncompensated: its walk back
                 # is a transient the integrals must not charge on
                 for law in (self.law, getattr(self.fallback, "law", None)):
                     if law is not None:
                         law.restart_settle()
+            correct = getattr(self.identifier, "correct_outputs", None)
+            for f in new if correct is not None else ():
+                # the identifier has had the biased readings since the onset
+                offset = np.zeros(self._meas_obs.size)
+                offset[self._rate_rows[f["axis"]]] = f["value"]
+                correct(offset, round(f["onset_s"] / self.dt))
             self.stats["faults"] = sorted(found, key=lambda f: f["detected_s"])
 
     def _watch_events(self) -> None:

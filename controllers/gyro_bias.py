@@ -21,7 +21,11 @@ when the estimate leaves its noise band (:data:`DETECTION_SIGMAS` of its current
 standard deviations, and at least :data:`SMALLEST_BIAS`) for :data:`CONFIRM_STEPS` samples,
 reports it (a :class:`FaultWarning` naming the axis, the onset estimate and the
 value; ``faults``) and from then on subtracts the estimate from that axis's gyro
-reading before any filter, identifier or law sees it. Until then the readings
+reading before any filter, identifier or law sees it. A declared bias is taken for a
+step: its onset is dated by the least-squares hinge of the star tracker's attitude less
+the gyro's integral, and the estimate is run again from there with its prior
+uncertainty (the random walk's gain, tuned for a drift, takes about 20 s to follow a
+step: at its declaration the estimate is about a quarter of the bias). Until then the readings
 pass untouched, so a loop with no fault flies as without the monitor.
 """
 
@@ -52,6 +56,8 @@ ONSET_MEMORY_S = 120.0
 #: The bias's prior standard deviation at the first sample, rad/s (0.05 deg/s): the
 #: estimate's own uncertainty, not a steady state, judges it while it converges.
 PRIOR_BIAS_STD = np.deg2rad(0.05)
+#: Seconds before the estimate's last quiet sample searched for a declared bias's onset.
+DATING_LOOKBACK_S = 10.0
 
 
 class FaultWarning(UserWarning):
@@ -81,8 +87,8 @@ class GyroBiasMonitor:
         The axes whose bias has been declared (and is subtracted).
     faults : list of dict
         One entry per declared bias: ``kind`` ("gyro bias"), ``axis``, ``onset_s``
-        (the last time before detection the estimate was within 3 sigma of 0),
-        ``detected_s`` and ``value`` (rad/s, the estimate at detection).
+        (the step's dated onset), ``detected_s`` and ``value`` (rad/s, the estimate
+        at detection, run again from the onset).
 
     Examples
     --------
@@ -122,6 +128,9 @@ class GyroBiasMonitor:
         posterior = prior - np.outer(gain[:, 0], prior[0])
         self.bias_std = float(np.sqrt(posterior[1, 1]))
         self._history = deque(maxlen=max(1, round(ONSET_MEMORY_S / dt)))
+        # per sample: the estimate before its update (attitude, bias, gyro) and the raw
+        # readings (attitude, gyro, held), to run it again from a declared bias's onset
+        self._replay: deque = deque(maxlen=self._history.maxlen)
         self.reset()
 
     def reset(self) -> None:
@@ -135,6 +144,7 @@ class GyroBiasMonitor:
         self.compensated = np.zeros(3, dtype=bool)
         self.faults: list[dict[str, Any]] = []
         self._history.clear()
+        self._replay.clear()
         self._k = 0
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
@@ -161,7 +171,10 @@ class GyroBiasMonitor:
         if self._theta is None:
             self._theta = np.where(np.isfinite(theta), theta, 0.0)
             self._gyro = np.where(np.isfinite(gyro), gyro, 0.0)
+            self._replay.append(None)
         else:
+            self._replay.append((self._theta.copy(), self.bias.copy(), self._gyro.copy(),
+                                 theta.copy(), gyro.copy(), held.copy()))
             gyro_now = np.where(np.isfinite(gyro), gyro, self._gyro)
             predicted = self._theta + 0.5 * self.dt * (self._gyro + gyro_now) - self.dt * self.bias
             self._gyro = gyro_now
@@ -190,7 +203,9 @@ class GyroBiasMonitor:
             quiet = np.flatnonzero(np.abs(past) <= 3.0 * std[axis])
             # the samples in the history before this one: the onset is after the last quiet
             start = self._k - len(past) + 1
-            onset = (start + (quiet[-1] + 1 if quiet.size else 0)) * self.dt
+            onset = self._date_step(axis, (start + (quiet[-1] + 1 if quiet.size else 0))
+                                    * self.dt)
+            self._restep(axis, onset)
             fault = {"kind": "gyro bias", "axis": int(axis), "onset_s": float(onset),
                      "detected_s": float(self._k * self.dt),
                      "value": float(self.bias[axis])}
@@ -199,3 +214,60 @@ class GyroBiasMonitor:
                 f"gyro bias on axis {axis}: {np.rad2deg(fault['value']):.4g} deg/s from about "
                 f"{onset:.1f} s (declared at {fault['detected_s']:.1f} s); its estimate is "
                 "subtracted from that gyro from now on", FaultWarning, stacklevel=3)
+
+    def _readings(self, axis: int, onset_s: float) -> tuple[int, list] | None:
+        """The index in the replay of the sample at ``onset_s`` and the replay, or None
+        where it does not reach back that far."""
+        first = len(self._replay) - 1 - (self._k - round(onset_s / self.dt))
+        if first < 0 or any(item is None for item in list(self._replay)[first:]):
+            return None
+        return first, list(self._replay)
+
+    def _date_step(self, axis: int, onset_s: float) -> float:
+        """The onset, s, of a step in ``axis``'s bias: the least-squares hinge of the star
+        tracker's attitude less the gyro's integral, searched from
+        :data:`DATING_LOOKBACK_S` before ``onset_s`` (the estimate's last quiet sample,
+        which lags a step by the estimate's convergence) to :data:`CONFIRM_STEPS` before
+        now; ``onset_s`` where the replay does not reach back."""
+        found = self._readings(axis, onset_s - DATING_LOOKBACK_S)
+        if found is None:
+            return onset_s
+        first, replay = found
+        _, _, previous, theta, gyro, held = (np.array([item[i][axis] for item in replay[first:]])
+                                             for i in range(6))
+        gyro = np.where(np.isfinite(gyro), gyro, previous)
+        drift = theta - np.cumsum(0.5 * self.dt * (previous + gyro))
+        use = np.isfinite(drift) & ~held
+        t = (self._k - drift.size + 1 + np.arange(drift.size)) * self.dt
+        best, best_sse = onset_s, np.inf
+        for start in t[:drift.size - CONFIRM_STEPS]:
+            x = np.column_stack([np.ones(drift.size), -np.maximum(t - start, 0.0)])[use]
+            coef, *_ = np.linalg.lstsq(x, drift[use], rcond=None)
+            sse = float(np.sum((drift[use] - x @ coef) ** 2))
+            if sse < best_sse:
+                best, best_sse = float(start), sse
+        return best
+
+    def _restep(self, axis: int, onset_s: float) -> None:
+        """Run ``axis``'s estimate again over the samples since ``onset_s``, the bias's
+        covariance opened to its prior there: a step, given its onset, is a constant."""
+        found = self._readings(axis, onset_s)
+        if found is None:
+            return
+        first, replay = found
+        theta_hat, bias, gyro_prev = (float(replay[first][i][axis]) for i in range(3))
+        p = self._prior.copy()
+        for _, _, _, theta, gyro, held in replay[first:]:
+            gyro_now = gyro[axis] if np.isfinite(gyro[axis]) else gyro_prev
+            predicted = theta_hat + 0.5 * self.dt * (gyro_prev + gyro_now) - self.dt * bias
+            gyro_prev = gyro_now
+            p = self._a @ p @ self._a.T + self._q
+            if np.isfinite(theta[axis]) and not held[axis]:
+                gain = p[:, 0] / (p[0, 0] + self._r)
+                innovation = theta[axis] - predicted
+                theta_hat, bias = predicted + gain[0] * innovation, bias + gain[1] * innovation
+                p = p - np.outer(gain, p[0])
+                p = 0.5 * (p + p.T)
+            else:
+                theta_hat = predicted
+        self._theta[axis], self.bias[axis], self._p[axis] = theta_hat, bias, p

@@ -21,15 +21,15 @@ from numpy.typing import ArrayLike
 from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rigid_gain import RigidGainEstimate
+from identifiers.physical.output_correction import OutputCorrection
 from identifiers.physical.physical_fit import fit_physical_model
 from identifiers.physical.physical_model import simulate
-from identifiers.physical.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["PhysicalFitIdentifier"]
 
 
-class PhysicalFitIdentifier(WarmupFit, OnlineIdentifier):
+class PhysicalFitIdentifier(OutputCorrection, OnlineIdentifier):
     """A physical rigid-flexible model fitted to the warm-up by output error, then held.
 
     Parameters

@@ -26,13 +26,13 @@ from identifiers.core.checks import positive_float, positive_int
 from identifiers.core.model_sequence import ModelSequence
 from identifiers.core.online import OnlineIdentifier
 from identifiers.core.rigid_gain import RigidGainEstimate
+from identifiers.physical.output_correction import OutputCorrection
 from identifiers.physical.scheduled_fit import fit_scheduled_model
 from identifiers.physical.scheduled_information import (
     held_misfit,
     predicted_gain_covariance,
 )
 from identifiers.physical.scheduled_simulation import simulate_scheduled
-from identifiers.physical.warmup_fit import WarmupFit
 from spacecraft_conventions import NOMINAL_TORQUE, STANDARD_OUTPUTS, OutputLayout
 
 __all__ = ["EXPORT_RESOLUTION", "SCREEN_MARGIN", "ScheduledPhysicalIdentifier"]
@@ -56,7 +56,7 @@ EXPORT_RESOLUTION = np.deg2rad(0.5)
 SCREEN_MARGIN = 2.0
 
 
-class ScheduledPhysicalIdentifier(WarmupFit, OnlineIdentifier):
+class ScheduledPhysicalIdentifier(OutputCorrection, OnlineIdentifier):
     """Hub-plus-appendage model scheduled on a drive angle, fitted to the warm-up and
     again as the record grows (``accumulate``) or changes.
 
