@@ -52,7 +52,7 @@ from spacecraft_lab.training import (
     residual_scale,
 )
 
-__all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "evaluate_agent",
+__all__ = ["AGENT_DIRECTORY", "HELD_OUT_SEEDS", "SHIPPED_AGENTS", "SHIPPED_SEEDS", "evaluate_agent",
            "evaluation_table", "load_agent", "paired_ratio"]
 
 #: Episodes :func:`evaluate_agent` scores by default: disjoint from the training seeds
@@ -65,10 +65,18 @@ SHIPPED_AGENTS = {
     "residual-scheduled-family":
         AGENT_DIRECTORY / "residual-scheduled-family" / "ppo-residual-scheduled-seed0.zip",
     "ars-averaged-family":
-        AGENT_DIRECTORY / "ars-averaged-family" / "ars-attitude-error-averaged-seed1.zip",
+        AGENT_DIRECTORY / "ars-averaged-family" / "seed1" / "ars-attitude-error-averaged-seed1.zip",
     "ars-residual-scheduled-family":
         AGENT_DIRECTORY / "ars-residual-scheduled-family"
         / "ars-residual-scheduled-averaged-seed1.zip",
+}
+#: The shipped agents trained on several seeds: name -> every seed's model (``spacecraft
+#: evaluate NAME`` scores them together; :func:`load_agent` loads the one of
+#: :data:`SHIPPED_AGENTS`).
+SHIPPED_SEEDS = {
+    "ars-averaged-family": tuple(
+        AGENT_DIRECTORY / "ars-averaged-family" / f"seed{k}"
+        / f"ars-attitude-error-averaged-seed{k}.zip" for k in range(3)),
 }
 #: Training settings an agent's ``metrics.json`` must hold.
 _SETTINGS = ("algo", "features", "scenario", "randomize", "reward", "repeat")
@@ -209,7 +217,8 @@ def evaluate_agent(agent: str | Path | Sequence[str | Path],
     agent : str, Path or sequence of them
         See :func:`load_agent`; several: the training seeds of one setting (the same
         algorithm, observations, scenario, reward and environment), scored together by
-        the protocol (a ``(training seeds, draws)`` matrix).
+        the protocol (a ``(training seeds, draws)`` matrix). A name of
+        :data:`SHIPPED_SEEDS` stands for every seed it ships.
     seeds : tuple of int
         Episode seeds (default :data:`HELD_OUT_SEEDS`), all >= 0.
     workers : int, optional
@@ -245,6 +254,8 @@ def evaluate_agent(agent: str | Path | Sequence[str | Path],
     if not seeds or min(seeds) < 0:
         raise ValueError(f"seeds must be one or more integers >= 0, got {seeds}")
     agents = [agent] if isinstance(agent, str | Path) else list(agent)
+    # a shipped agent trained on several seeds stands for all of them
+    agents = [path for a in agents for path in SHIPPED_SEEDS.get(str(a), (a,))]
     if not agents:
         raise ValueError("agent must name at least one saved model")
     loaded = [load_agent(a) for a in agents]
