@@ -720,9 +720,10 @@ class AdaptiveLQG(_LQGController):
         self._commit(info)
         obs = self._observation(obs)
         if self.actuator_monitor is not None:
-            # reports only; on the raw readings: a gyro bias's compensation, converging
-            # while its estimate does, would read as a torque
-            self.actuator_monitor(obs, info)
+            # reports only; on the raw readings (a gyro bias's compensation, converging
+            # while its estimate does, would read as a torque) and the torque of the last
+            # step: the env's report, else the loop's own (SB3's predict gives no info)
+            self.actuator_monitor(obs, {"torque": self._applied_torque(info)})
         if self.gyro_monitor is not None:
             obs = self.gyro_monitor(obs)     # a declared gyro bias subtracted
         self._collect_faults()

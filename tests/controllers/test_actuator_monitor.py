@@ -185,3 +185,19 @@ def test_the_verdict_says_why_when_an_axis_is_lost():
     clean = episode_metrics(run_episode(healthy, _MonitoredPD(healthy), seed=0),
                             healthy.unwrapped.model)
     assert clean["verdict"] == "stable" and clean["verdict_reason"] is None
+
+
+def test_the_loop_without_infos_monitors_its_own_torque():
+    """Flown through SB3's ``predict`` (no ``info``: the torque the env applied is not
+    reported), the loop's monitor balances the momentum against the torque it commanded
+    itself: a healthy slew declares nothing."""
+    env = gym.make(env_id("paddle_rotation"), task="slew", max_episode_steps=400)
+    ctrl = AdaptiveLQG(env)
+    obs, _ = env.reset(seed=0)
+    ctrl.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FaultWarning)
+        for _ in range(400):
+            obs, *_ = env.step(ctrl.act(obs))
+    assert ctrl.stats["faults"] == []
+    env.close()
