@@ -24,9 +24,9 @@ value; ``faults``) and from then on subtracts the estimate from that axis's gyro
 reading before any filter, identifier or law sees it. A declared bias is taken for a
 step: its onset is dated by the least-squares hinge of the star tracker's attitude less
 the gyro's integral, and the estimate is run again from there with its prior
-uncertainty (the random walk's gain, tuned for a drift, takes about 20 s to follow a
-step: at its declaration the estimate is about a quarter of the bias). Until then the readings
-pass untouched, so a loop with no fault flies as without the monitor.
+uncertainty (the random walk's gain, meant for a drift, takes about 20 s to follow a
+step: at its declaration the running estimate is about a quarter of the bias). Until
+then the readings pass untouched, so a loop with no fault flies as without the monitor.
 """
 
 from __future__ import annotations
@@ -215,7 +215,7 @@ class GyroBiasMonitor:
                 f"{onset:.1f} s (declared at {fault['detected_s']:.1f} s); its estimate is "
                 "subtracted from that gyro from now on", FaultWarning, stacklevel=3)
 
-    def _readings(self, axis: int, onset_s: float) -> tuple[int, list] | None:
+    def _readings(self, onset_s: float) -> tuple[int, list] | None:
         """The index in the replay of the sample at ``onset_s`` and the replay, or None
         where it does not reach back that far."""
         first = len(self._replay) - 1 - (self._k - round(onset_s / self.dt))
@@ -229,7 +229,7 @@ class GyroBiasMonitor:
         :data:`DATING_LOOKBACK_S` before ``onset_s`` (the estimate's last quiet sample,
         which lags a step by the estimate's convergence) to :data:`CONFIRM_STEPS` before
         now; ``onset_s`` where the replay does not reach back."""
-        found = self._readings(axis, onset_s - DATING_LOOKBACK_S)
+        found = self._readings(onset_s - DATING_LOOKBACK_S)
         if found is None:
             return onset_s
         first, replay = found
@@ -251,7 +251,7 @@ class GyroBiasMonitor:
     def _restep(self, axis: int, onset_s: float) -> None:
         """Run ``axis``'s estimate again over the samples since ``onset_s``, the bias's
         covariance opened to its prior there: a step, given its onset, is a constant."""
-        found = self._readings(axis, onset_s)
+        found = self._readings(onset_s)
         if found is None:
             return
         first, replay = found
