@@ -190,9 +190,12 @@ def test_the_verdict_says_why_when_an_axis_is_lost():
 def test_the_loop_without_infos_monitors_its_own_torque():
     """Flown through SB3's ``predict`` (no ``info``: the torque the env applied is not
     reported), the loop's monitor balances the momentum against the torque it commanded
-    itself: a healthy slew declares nothing."""
+    itself: a healthy slew declares nothing. (The loop on the fast identifier, the one
+    flown as an SB3 policy: the scheduled fit needs the drive's angle from ``info``.)"""
+    from controllers import fast_identifier
+
     env = gym.make(env_id("paddle_rotation"), task="slew", max_episode_steps=400)
-    ctrl = AdaptiveLQG(env)
+    ctrl = AdaptiveLQG(env, identifier=fast_identifier(env))
     obs, _ = env.reset(seed=0)
     ctrl.reset(seed=0)
     with warnings.catch_warnings():
