@@ -694,12 +694,12 @@ class AdaptiveLQG(_LQGController):
                 for law in (self.law, getattr(self.fallback, "law", None)):
                     if law is not None:
                         law.restart_settle()
-            correct = getattr(self.identifier, "correct_outputs", None)
-            for f in new if correct is not None else ():
                 # the identifier has had the biased readings since the onset
-                offset = np.zeros(self._meas_obs.size)
-                offset[self._rate_rows[f["axis"]]] = f["value"]
-                correct(offset, round(f["onset_s"] / self.dt))
+                correct = getattr(self.identifier, "correct_outputs", None)
+                for f in new if correct is not None else ():
+                    offset = np.zeros(self._meas_obs.size)
+                    offset[self._rate_rows[f["axis"]]] = f["value"]
+                    correct(offset, round(f["onset_s"] / self.dt))
             self.stats["faults"] = sorted(found, key=lambda f: f["detected_s"])
 
     def _watch_events(self) -> None:

@@ -175,23 +175,31 @@ class GyroBiasMonitor:
         else:
             self._replay.append((self._theta.copy(), self.bias.copy(), self._gyro.copy(),
                                  theta.copy(), gyro.copy(), held.copy()))
-            gyro_now = np.where(np.isfinite(gyro), gyro, self._gyro)
-            predicted = self._theta + 0.5 * self.dt * (self._gyro + gyro_now) - self.dt * self.bias
-            self._gyro = gyro_now
-            p = self._a @ self._p @ self._a.T + self._q          # (3, 2, 2), per axis
-            seen = np.isfinite(theta) & ~held
-            gain = p[:, :, 0] / (p[:, 0, 0] + self._r)[:, None]   # (3, 2)
-            gain[~seen] = 0.0                                    # a missing sample: predict
-            innovation = np.where(seen, theta - predicted, 0.0)
-            self._theta = predicted + gain[:, 0] * innovation
-            self.bias = self.bias + gain[:, 1] * innovation
-            p = p - gain[:, :, None] * p[:, None, 0, :]
-            self._p = 0.5 * (p + np.swapaxes(p, 1, 2))
+            self._theta, self.bias, self._gyro, self._p = self._advance(
+                self._theta, self.bias, self._gyro, self._p, theta, gyro, held)
         self._history.append(self.bias.copy())
         self._declare()
         self._k += 1
         obs[self._rate] = gyro - np.where(self.compensated, self.bias, 0.0)
         return obs
+
+    def _advance(self, theta_hat: np.ndarray, bias: np.ndarray, gyro_prev: np.ndarray,
+                 p: np.ndarray, theta: np.ndarray, gyro: np.ndarray, held: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One sample of the two-state filter of the axes given (arrays over them: the
+        estimates, the last gyro reading, the covariances ``(k, 2, 2)``, this sample's
+        readings): the new estimates, gyro reading and covariances. A missing or held
+        attitude predicts only; a missing gyro reading is taken as the last."""
+        gyro_now = np.where(np.isfinite(gyro), gyro, gyro_prev)
+        predicted = theta_hat + 0.5 * self.dt * (gyro_prev + gyro_now) - self.dt * bias
+        p = self._a @ p @ self._a.T + self._q                   # (k, 2, 2), per axis
+        seen = np.isfinite(theta) & ~held
+        gain = p[:, :, 0] / (p[:, 0, 0] + self._r)[:, None]     # (k, 2)
+        gain[~seen] = 0.0                                      # a missing sample: predict
+        innovation = np.where(seen, theta - predicted, 0.0)
+        p = p - gain[:, :, None] * p[:, None, 0, :]
+        return (predicted + gain[:, 0] * innovation, bias + gain[:, 1] * innovation, gyro_now,
+                0.5 * (p + np.swapaxes(p, 1, 2)))
 
     def _declare(self) -> None:
         std = np.sqrt(self._p[:, 1, 1])
@@ -255,19 +263,10 @@ class GyroBiasMonitor:
         if found is None:
             return
         first, replay = found
-        theta_hat, bias, gyro_prev = (float(replay[first][i][axis]) for i in range(3))
-        p = self._prior.copy()
-        for _, _, _, theta, gyro, held in replay[first:]:
-            gyro_now = gyro[axis] if np.isfinite(gyro[axis]) else gyro_prev
-            predicted = theta_hat + 0.5 * self.dt * (gyro_prev + gyro_now) - self.dt * bias
-            gyro_prev = gyro_now
-            p = self._a @ p @ self._a.T + self._q
-            if np.isfinite(theta[axis]) and not held[axis]:
-                gain = p[:, 0] / (p[0, 0] + self._r)
-                innovation = theta[axis] - predicted
-                theta_hat, bias = predicted + gain[0] * innovation, bias + gain[1] * innovation
-                p = p - np.outer(gain, p[0])
-                p = 0.5 * (p + p.T)
-            else:
-                theta_hat = predicted
-        self._theta[axis], self.bias[axis], self._p[axis] = theta_hat, bias, p
+        one = [axis]                                     # the filter's arrays, this axis
+        theta_hat, bias, gyro_prev = (replay[first][i][one] for i in range(3))
+        p = self._prior[None].copy()
+        for *_, theta, gyro, held in replay[first:]:
+            theta_hat, bias, gyro_prev, p = self._advance(theta_hat, bias, gyro_prev, p,
+                                                          theta[one], gyro[one], held[one])
+        self._theta[axis], self.bias[axis], self._p[axis] = theta_hat[0], bias[0], p[0]
