@@ -42,7 +42,6 @@ from identifiers import (
     KalmanPredictor,
     ModelSequence,
     OnlineIdentifier,
-    ScheduledPhysicalIdentifier,
     default_identifier,
     h_step_predictions,
     persistence_predictions,
@@ -51,6 +50,7 @@ from identifiers import (
 )
 from spacecraft_conventions import STANDARD_OUTPUTS, single_threaded_blas
 from spacecraft_lab.identification import drive_angles, env_record
+from spacecraft_lab.identification import make_identifier as identification_method
 from spacecraft_lab.sweeps.backends import map_in_order
 
 #: Index of the tracked mode among the truth's sorted modal frequencies.
@@ -95,9 +95,7 @@ def make_identifier(kind: str, model, **options) -> OnlineIdentifier:
     the appendages' description the environments give it); ``options`` go to it."""
     if kind == "default":
         return default_identifier(**options)
-    return ScheduledPhysicalIdentifier(turning=model.appendage_turns,
-                                       sensor_appendage=model.sensor_appendage,
-                                       drive_axis=model.drive_axis, dt=model.dt, **options)
+    return identification_method("scheduled-physical", model, **options)
 
 
 def run(ident: OnlineIdentifier, u: np.ndarray, y: np.ndarray,

@@ -281,7 +281,9 @@ def write_pages(pages: Sequence[str] = PAGES, run: bool = False,
                 continue
             if run:
                 print(f"{page}: {len(block.commands)} command(s) of block {i + 1}", flush=True)
-                for command in block.commands:
+                # a block's --markdown command is its rendering: run once, by render()
+                flown = block.commands[:-1] if block.kind == "markdown" else block.commands
+                for command in flown:
                     print(f"  $ {command}", flush=True)
                     _run(command)
                 _keep(block)
